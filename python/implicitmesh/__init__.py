@@ -1,0 +1,17 @@
+"""implicitmesh: implicit surfaces to triangle meshes, with a Rust core.
+
+Fields (negative inside, positive outside):
+
+- :class:`VariationalSurface` — RBF surfaces fitted to points with normals or to a mesh.
+- any Python callable taking (N, 3) float64 points and returning (N,) values.
+
+Polygonizers: :func:`polygonize` with ``method="dense"`` (plain marching cubes, the reference).
+Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are.
+"""
+
+from ._core import VariationalSurface, __version__
+from .mesh import Mesh, compare
+from .polygonize import METHODS, Ambiguity, polygonize
+from . import shapes
+
+__all__ = ["VariationalSurface", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "__version__"]

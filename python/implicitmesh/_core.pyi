@@ -1,0 +1,74 @@
+"""Type stubs for the Rust extension module."""
+
+from typing import Any, Callable, Literal, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+ArrayLike = npt.ArrayLike
+Kernel = Literal["triharmonic", "biharmonic", "thin_plate"]
+
+class VariationalSurface:
+    @staticmethod
+    def fit(
+        points: ArrayLike,
+        normals: ArrayLike,
+        *,
+        d: float | None = None,
+        w: float | None = None,
+        kernel: Kernel = "triharmonic",
+        smoothing: float = 0.0,
+        memory_limit: int | None = None,
+    ) -> VariationalSurface: ...
+    @staticmethod
+    def from_mesh(
+        vertices: ArrayLike,
+        faces: ArrayLike,
+        *,
+        d: float | None = None,
+        w: float | None = None,
+        kernel: Kernel = "triharmonic",
+        smoothing: float = 0.0,
+        memory_limit: int | None = None,
+    ) -> VariationalSurface: ...
+    @staticmethod
+    def interpolate(
+        points: ArrayLike,
+        values: ArrayLike,
+        *,
+        kernel: Kernel = "triharmonic",
+        smoothing: float = 0.0,
+        memory_limit: int | None = None,
+    ) -> VariationalSurface: ...
+    def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __call__(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __len__(self) -> int: ...
+    @property
+    def centers(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def weights(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def polynomial(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def constraints(self) -> dict[str, Any]: ...
+    @property
+    def kernel(self) -> str: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def bounds(self) -> npt.NDArray[np.float64]: ...
+
+def polygonize(
+    field: VariationalSurface | Callable[[npt.NDArray[np.float64]], ArrayLike],
+    bounds: ArrayLike,
+    resolution: int | Sequence[int],
+    *,
+    method: str = "dense",
+    ambiguity: str = "separate",
+    normals: bool = True,
+    batch_size: int = 262144,
+    memory_limit: int | None = None,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...

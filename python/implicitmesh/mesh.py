@@ -1,0 +1,156 @@
+"""The :class:`Mesh` every polygonizer returns, and its conversions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from os import PathLike
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Mesh", "compare"]
+
+
+@dataclass
+class Mesh:
+    """A triangle mesh made by a polygonizer.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float64
+        Vertex positions.
+    faces : (F, 3) int64
+        Vertex indices of each triangle, counter-clockwise seen from outside (outward normals).
+    normals : (V, 3) float64
+        Unit vertex normals from the field's gradient; shape (0, 3) when not computed.
+    stats : dict
+        What the polygonizer did: ``evaluations`` (field values computed, exact),
+        ``lattice_points`` (what plain marching cubes evaluates), ``evaluation_percent``,
+        ``normal_evaluations``, ``cells_visited``, ``cells_crossed``, ``cells_per_level``,
+        ``seconds`` (per phase and ``total``), ``resolution``, ``method``.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float64).reshape(-1, 3)
+        self.faces = np.ascontiguousarray(self.faces, dtype=np.int64).reshape(-1, 3)
+        self.normals = np.ascontiguousarray(self.normals, dtype=np.float64).reshape(-1, 3)
+
+    def __repr__(self) -> str:
+        return f"Mesh(vertices={len(self.vertices)}, faces={len(self.faces)})"
+
+    @property
+    def area(self) -> float:
+        """Total surface area."""
+        a, b, c = (self.vertices[self.faces[:, k]] for k in range(3))
+        return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+    @property
+    def volume(self) -> float:
+        """Signed enclosed volume (positive for a closed mesh oriented outward)."""
+        a, b, c = (self.vertices[self.faces[:, k]] for k in range(3))
+        return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+    @property
+    def euler_number(self) -> int:
+        """V − E + F over the vertices used by faces (2 for a sphere, 0 for a torus)."""
+        f = self.faces
+        if len(f) == 0:
+            return 0
+        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        n_edges = len(np.unique(e, axis=0))
+        return int(len(np.unique(f)) - n_edges + len(f))
+
+    def to_trimesh(self, process: bool = False):
+        """The mesh as a :class:`trimesh.Trimesh` (vertex normals kept; ``process=False`` keeps
+        vertices and faces exactly as they are)."""
+        import trimesh
+
+        kwargs = {}
+        if len(self.normals) == len(self.vertices) and len(self.vertices):
+            kwargs["vertex_normals"] = self.normals
+        return trimesh.Trimesh(self.vertices, self.faces, process=process, **kwargs)
+
+    def to_pyvista(self):
+        """The mesh as a :class:`pyvista.PolyData` with point data ``"Normals"`` (needs the
+        ``viz`` extra)."""
+        import pyvista as pv
+
+        cells = np.hstack([np.full((len(self.faces), 1), 3, dtype=np.int64), self.faces]).ravel()
+        poly = pv.PolyData(self.vertices.copy(), cells)
+        if len(self.normals) == len(self.vertices):
+            poly.point_data["Normals"] = self.normals
+        return poly
+
+    def save(self, path: str | PathLike[str]) -> None:
+        """Writes the mesh; the format follows the suffix (``.ply``, ``.obj``, ``.stl``, ``.off``,
+        ``.glb`` … anything trimesh writes)."""
+        self.to_trimesh().export(str(path))
+
+    def quality(self) -> dict[str, np.ndarray | float]:
+        """Triangle quality: ``min_angle`` (F,) degrees, ``aspect_ratio`` (F,) (longest edge over
+        2√3 × inradius; 1 for equilateral), and their means and 5th percentiles."""
+        a, b, c = (self.vertices[self.faces[:, k]] for k in range(3))
+        la = np.linalg.norm(b - c, axis=1)
+        lb = np.linalg.norm(c - a, axis=1)
+        lc = np.linalg.norm(a - b, axis=1)
+
+        def angle(opp, s1, s2):
+            with np.errstate(invalid="ignore", divide="ignore"):
+                cos = (s1**2 + s2**2 - opp**2) / (2 * s1 * s2)
+            return np.degrees(np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1, 1)))
+
+        min_angle = np.minimum(np.minimum(angle(la, lb, lc), angle(lb, lc, la)), angle(lc, la, lb))
+        area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        s = 0.5 * (la + lb + lc)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            aspect = np.maximum(np.maximum(la, lb), lc) / (2 * np.sqrt(3) * area / s)
+        return {
+            "min_angle": min_angle,
+            "aspect_ratio": aspect,
+            "min_angle_mean": float(min_angle.mean()) if len(min_angle) else float("nan"),
+            "min_angle_p5": float(np.percentile(min_angle, 5)) if len(min_angle) else float("nan"),
+            "aspect_ratio_mean": float(aspect.mean()) if len(aspect) else float("nan"),
+        }
+
+
+def _canonical_triangles(ids: np.ndarray) -> np.ndarray:
+    """Rotates each row (a triangle's corner ids) so its smallest id comes first, keeping the
+    cyclic order (the orientation)."""
+    m = np.argmin(ids, axis=1)
+    rows = np.arange(len(ids))[:, None]
+    cols = (m[:, None] + np.arange(3)[None, :]) % 3
+    return np.ascontiguousarray(ids[rows, cols])
+
+
+def compare(a: Mesh, b: Mesh) -> dict[str, int]:
+    """Compares two meshes triangle by triangle, by exact vertex coordinates and orientation.
+
+    Vertices are matched by their exact float64 coordinates, so meshes made by different
+    polygonizers on the same lattice compare equal when they contain the same triangles, in
+    whatever order and with whatever vertex numbering.
+
+    Parameters
+    ----------
+    a, b : Mesh
+
+    Returns
+    -------
+    dict
+        ``missing``: triangles of ``a`` not in ``b`` (holes in ``b`` when ``a`` is the dense
+        reference); ``extra``: triangles of ``b`` not in ``a``; ``common``: triangles in both.
+    """
+    corners = np.concatenate([a.vertices[a.faces].reshape(-1, 3), b.vertices[b.faces].reshape(-1, 3)])
+    _, ids = np.unique(corners.view(np.uint64), axis=0, return_inverse=True)
+    ids = ids.reshape(-1, 3)
+    ta = _canonical_triangles(ids[: len(a.faces)])
+    tb = _canonical_triangles(ids[len(a.faces) :])
+    dt = np.dtype((np.void, ta.dtype.itemsize * 3))
+    sa = np.unique(ta.view(dt).ravel())
+    sb = np.unique(tb.view(dt).ravel())
+    common = len(np.intersect1d(sa, sb, assume_unique=True))
+    return {"missing": len(sa) - common, "extra": len(sb) - common, "common": common}

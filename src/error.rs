@@ -1,0 +1,66 @@
+//! The one error type of the core. The Python layer maps every variant to a Python exception
+//! (`ValueError` for bad input) in one place, `src/python/errors.rs`.
+
+/// Everything that can go wrong in the core. Messages name the argument at fault so that they can
+/// be shown to a user as they are.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum Error {
+    /// An argument has a value the function cannot use (the message says which and why).
+    #[error("{name}: {reason}")]
+    InvalidArgument { name: &'static str, reason: String },
+    /// A coordinate or value that must be finite is NaN or infinite.
+    #[error("{name}: entry {index} is not finite (NaN or infinity)")]
+    NotFinite { name: &'static str, index: usize },
+    /// Two input points coincide (or nearly), which makes an interpolation problem singular.
+    #[error(
+        "{name}: points {first} and {second} coincide (distance {distance:.3e}); remove duplicates"
+    )]
+    DuplicatePoints {
+        name: &'static str,
+        first: usize,
+        second: usize,
+        distance: f64,
+    },
+    /// A request whose memory estimate exceeds the allowed limit.
+    #[error("{name}: this needs about {needed_mib} MiB, over the limit of {limit_mib} MiB; lower it or raise `memory_limit`")]
+    TooMuchMemory {
+        name: &'static str,
+        needed_mib: u64,
+        limit_mib: u64,
+    },
+    /// The interpolation system could not be solved to the required accuracy.
+    #[error("the interpolation system is singular or too ill-conditioned (residual {residual:.3e}); check for near-duplicate or degenerate points")]
+    SingularSystem { residual: f64 },
+    /// A field returned NaN or infinity at a point the polygonizer needed.
+    #[error("field: returned a non-finite value at point ({x}, {y}, {z})")]
+    FieldNotFinite { x: f64, y: f64, z: f64 },
+}
+
+/// Result with the core's [`Error`].
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// Shorthand for [`Error::InvalidArgument`].
+    pub fn invalid(name: &'static str, reason: impl Into<String>) -> Self {
+        Error::InvalidArgument {
+            name,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Checks that every coordinate of `points` is finite.
+pub fn check_finite_points(name: &'static str, points: &[glam::DVec3]) -> Result<()> {
+    match points.iter().position(|p| !p.is_finite()) {
+        Some(index) => Err(Error::NotFinite { name, index }),
+        None => Ok(()),
+    }
+}
+
+/// Checks that every value is finite.
+pub fn check_finite_values(name: &'static str, values: &[f64]) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(index) => Err(Error::NotFinite { name, index }),
+        None => Ok(()),
+    }
+}

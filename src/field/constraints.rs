@@ -1,0 +1,386 @@
+//! Constraint placement for variational surfaces (Cuno et al. §4.1, Turk & O'Brien): every data
+//! point `q_i` is a boundary constraint (value 0) and `q_i + d_i n_i` a normal constraint (value
+//! `w_i`), with `d_i` shrunk until no other data point is closer to the normal constraint than
+//! `q_i` itself. Also the checks on the data (count, finiteness, duplicates, coplanarity) and
+//! vertex normals of triangle meshes.
+
+use crate::error::{check_finite_points, Error, Result};
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// How constraint points are placed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Offset of normal constraints along the normal. `None`: 0.015 for data whose bounding box has
+    /// largest side 2 (the papers' [-1, 1]³), scaled with the data (0.0075 × the largest side).
+    pub d: Option<f64>,
+    /// Value at normal constraints. `None`: `w_over_d × d`.
+    pub w: Option<f64>,
+    /// Ratio w/d used when `w` is `None` (Cuno: 3/4).
+    pub w_over_d: f64,
+    /// Apply Cuno's rule: shrink `d_i` until no other data point is nearer to the normal constraint.
+    pub shrink: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            d: None,
+            w: None,
+            w_over_d: 0.75,
+            shrink: true,
+        }
+    }
+}
+
+/// Constraint points and values: the first `boundary` entries are the data points (value 0), the
+/// rest the normal constraints, in the same order.
+#[derive(Clone, Debug, Default)]
+pub struct Constraints {
+    pub points: Vec<DVec3>,
+    pub values: Vec<f64>,
+    /// The offset `d_i` used for each data point (after shrinking).
+    pub offsets: Vec<f64>,
+    /// Number of boundary constraints (= data points).
+    pub boundary: usize,
+}
+
+/// Largest side of the axis-aligned bounding box.
+pub fn largest_side(points: &[DVec3]) -> f64 {
+    let (lo, hi) = bounding_box(points);
+    (hi - lo).max_element()
+}
+
+/// Axis-aligned bounding box (min, max).
+pub fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    )
+}
+
+/// Checks a point set for interpolation: at least 4 points, all finite, not all in one plane.
+pub fn check_points(name: &'static str, points: &[DVec3]) -> Result<()> {
+    if points.len() < 4 {
+        return Err(Error::invalid(
+            name,
+            format!("need at least 4 points, got {}", points.len()),
+        ));
+    }
+    check_finite_points(name, points)?;
+    let extent = largest_side(points);
+    if extent == 0.0 {
+        return Err(Error::invalid(name, "all points coincide"));
+    }
+    // Plane through three well-spread points; all points within a tiny distance of it = coplanar.
+    let p0 = points[0];
+    let far = |from: &dyn Fn(DVec3) -> f64| {
+        points
+            .iter()
+            .copied()
+            .max_by(|a, b| from(*a).total_cmp(&from(*b)))
+            .unwrap()
+    };
+    let p1 = far(&|p| (p - p0).length_squared());
+    let axis = (p1 - p0).normalize();
+    let p2 = far(&|p| (p - p0).reject_from_normalized(axis).length_squared());
+    let normal = (p1 - p0).cross(p2 - p0);
+    let tol = 1e-9 * extent;
+    if normal.length() <= tol * extent {
+        return Err(Error::invalid(name, "all points lie on one line"));
+    }
+    let normal = normal.normalize();
+    let off_plane = points
+        .iter()
+        .map(|p| (*p - p0).dot(normal).abs())
+        .fold(0.0, f64::max);
+    if off_plane <= tol {
+        return Err(Error::invalid(
+            name,
+            "all points lie in one plane; a closed surface needs points spanning 3-D",
+        ));
+    }
+    Ok(())
+}
+
+/// For each point, the indices of the other points within `radius` (brute force, parallel).
+fn neighbours_within(points: &[DVec3], radius: f64) -> Vec<Vec<u32>> {
+    let r2 = radius * radius;
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            points
+                .iter()
+                .enumerate()
+                .filter(|(j, q)| *j != i && (**q - *p).length_squared() <= r2)
+                .map(|(j, _)| j as u32)
+                .collect()
+        })
+        .collect()
+}
+
+/// Errors on the first pair of points closer than `tol`.
+pub fn check_duplicates(name: &'static str, points: &[DVec3], tol: f64) -> Result<()> {
+    let found = points.par_iter().enumerate().find_map_first(|(i, p)| {
+        points[i + 1..]
+            .iter()
+            .position(|q| (*q - *p).length() <= tol)
+            .map(|k| (i, i + 1 + k, (points[i + 1 + k] - *p).length()))
+    });
+    match found {
+        Some((first, second, distance)) => Err(Error::DuplicatePoints {
+            name,
+            first,
+            second,
+            distance,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Unit normals from `normals`, refusing non-finite or zero-length ones.
+pub fn unit_normals(name: &'static str, normals: &[DVec3]) -> Result<Vec<DVec3>> {
+    check_finite_points(name, normals)?;
+    normals
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let l = n.length();
+            if l < 1e-300 {
+                Err(Error::invalid(name, format!("normal {i} has zero length")))
+            } else {
+                Ok(*n / l)
+            }
+        })
+        .collect()
+}
+
+/// Places boundary and normal constraints for `points` with `normals` (one per point, any
+/// non-zero length).
+pub fn place(points: &[DVec3], normals: &[DVec3], settings: &Settings) -> Result<Constraints> {
+    check_points("points", points)?;
+    if normals.len() != points.len() {
+        return Err(Error::invalid(
+            "normals",
+            format!(
+                "need one normal per point: {} normals for {} points",
+                normals.len(),
+                points.len()
+            ),
+        ));
+    }
+    let normals = unit_normals("normals", normals)?;
+    let extent = largest_side(points);
+    check_duplicates("points", points, 1e-9 * extent)?;
+    let d = settings.d.unwrap_or(0.0075 * extent);
+    if !(d.is_finite() && d > 0.0) {
+        return Err(Error::invalid(
+            "d",
+            format!("must be positive and finite, got {d}"),
+        ));
+    }
+    let w = match settings.w {
+        Some(w) => w,
+        None => settings.w_over_d * d,
+    };
+    if !(w.is_finite() && w != 0.0) {
+        return Err(Error::invalid(
+            "w",
+            format!("must be finite and non-zero, got {w}"),
+        ));
+    }
+    let ratio = w / d;
+
+    let mut offsets = vec![d; points.len()];
+    if settings.shrink {
+        // Only points within 2d of q_i can be nearer than d_i ≤ d to q_i + d_i n_i.
+        let near = neighbours_within(points, 2.0 * d);
+        offsets.par_iter_mut().enumerate().for_each(|(i, di)| {
+            for _ in 0..60 {
+                let p = points[i] + normals[i] * *di;
+                let ok = near[i]
+                    .iter()
+                    .all(|&j| (points[j as usize] - p).length() >= *di);
+                if ok {
+                    break;
+                }
+                *di *= 0.5;
+            }
+        });
+    }
+
+    let n = points.len();
+    let mut cpoints = Vec::with_capacity(2 * n);
+    let mut values = Vec::with_capacity(2 * n);
+    cpoints.extend_from_slice(points);
+    values.extend(std::iter::repeat_n(0.0, n));
+    for i in 0..n {
+        cpoints.push(points[i] + normals[i] * offsets[i]);
+        values.push(ratio * offsets[i]);
+    }
+    Ok(Constraints {
+        points: cpoints,
+        values,
+        offsets,
+        boundary: n,
+    })
+}
+
+/// Checks a triangle mesh and returns its vertices with exact duplicates merged, the faces
+/// re-indexed, and area-weighted vertex normals (the average of the adjacent faces' normals,
+/// weighted by area). Errors on out-of-range or repeated indices and on vertices that no face uses.
+pub fn mesh_vertices_normals(
+    vertices: &[DVec3],
+    faces: &[[u32; 3]],
+) -> Result<(Vec<DVec3>, Vec<[u32; 3]>, Vec<DVec3>)> {
+    check_finite_points("vertices", vertices)?;
+    if faces.is_empty() {
+        return Err(Error::invalid("faces", "the mesh has no faces"));
+    }
+    for (k, f) in faces.iter().enumerate() {
+        if let Some(&bad) = f.iter().find(|&&v| v as usize >= vertices.len()) {
+            return Err(Error::invalid(
+                "faces",
+                format!(
+                    "face {k} refers to vertex {bad}, but there are {} vertices",
+                    vertices.len()
+                ),
+            ));
+        }
+        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+            return Err(Error::invalid(
+                "faces",
+                format!("face {k} repeats a vertex: {f:?}"),
+            ));
+        }
+    }
+    // Merge vertices with identical coordinates (seams of meshes read from STL/OBJ files).
+    let mut order: Vec<u32> = (0..vertices.len() as u32).collect();
+    let key = |i: u32| {
+        let p = vertices[i as usize];
+        [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+    };
+    order.sort_unstable_by_key(|&i| key(i));
+    let mut remap = vec![0u32; vertices.len()];
+    let mut merged: Vec<DVec3> = Vec::with_capacity(vertices.len());
+    let mut first_of: Vec<u32> = Vec::with_capacity(vertices.len());
+    for (pos, &i) in order.iter().enumerate() {
+        if pos == 0 || key(order[pos - 1]) != key(i) {
+            merged.push(vertices[i as usize]);
+            first_of.push(i);
+        }
+        remap[i as usize] = (merged.len() - 1) as u32;
+    }
+    // Keep the original order of first occurrence for the merged vertices.
+    let mut by_first: Vec<u32> = (0..merged.len() as u32).collect();
+    by_first.sort_unstable_by_key(|&m| first_of[m as usize]);
+    let mut rank = vec![0u32; merged.len()];
+    for (r, &m) in by_first.iter().enumerate() {
+        rank[m as usize] = r as u32;
+    }
+    let out_vertices: Vec<DVec3> = by_first.iter().map(|&m| merged[m as usize]).collect();
+    let out_faces: Vec<[u32; 3]> = faces
+        .iter()
+        .map(|f| f.map(|v| rank[remap[v as usize] as usize]))
+        .collect();
+    if let Some(k) = out_faces
+        .iter()
+        .position(|f| f[0] == f[1] || f[1] == f[2] || f[0] == f[2])
+    {
+        return Err(Error::invalid(
+            "faces",
+            format!("face {k} has two corners at the same position"),
+        ));
+    }
+    let mut normals = vec![DVec3::ZERO; out_vertices.len()];
+    let mut used = vec![false; out_vertices.len()];
+    for f in &out_faces {
+        let [a, b, c] = f.map(|v| out_vertices[v as usize]);
+        let n = (b - a).cross(c - a); // length = twice the area: area weighting
+        for &v in f {
+            normals[v as usize] += n;
+            used[v as usize] = true;
+        }
+    }
+    if let Some(i) = used.iter().position(|u| !u) {
+        let original = by_first[i];
+        return Err(Error::invalid(
+            "vertices",
+            format!(
+                "vertex {} is not used by any face",
+                first_of[original as usize]
+            ),
+        ));
+    }
+    for (i, n) in normals.iter_mut().enumerate() {
+        let l = n.length();
+        if !(l > 0.0) {
+            return Err(Error::invalid(
+                "faces",
+                format!("the faces around vertex {i} cancel out: its normal is undefined"),
+            ));
+        }
+        *n /= l;
+    }
+    Ok((out_vertices, out_faces, normals))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube_points() -> Vec<DVec3> {
+        (0..8)
+            .map(|k| DVec3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64))
+            .collect()
+    }
+
+    #[test]
+    fn refuses_bad_point_sets() {
+        assert!(check_points("points", &cube_points()[..3]).is_err());
+        let flat: Vec<DVec3> = (0..10)
+            .map(|i| DVec3::new(i as f64, (i * i) as f64, 0.0))
+            .collect();
+        assert!(check_points("points", &flat).is_err());
+        assert!(check_points("points", &cube_points()).is_ok());
+        let mut dup = cube_points();
+        dup.push(dup[3]);
+        assert!(matches!(
+            check_duplicates("points", &dup, 1e-12),
+            Err(Error::DuplicatePoints {
+                first: 3,
+                second: 8,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn shrinks_offsets_near_other_points() {
+        let mut pts = cube_points();
+        let mut normals: Vec<DVec3> = pts.iter().map(|p| *p - DVec3::splat(0.5)).collect();
+        // A point right above point 0's normal constraint forces its d to shrink.
+        pts.push(DVec3::new(-0.02, -0.02, -0.02));
+        normals.push(DVec3::ONE);
+        let c = place(
+            &pts,
+            &normals,
+            &Settings {
+                d: Some(0.05),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(c.offsets[0] < 0.05);
+        for i in 0..pts.len() {
+            let p = c.points[pts.len() + i];
+            for (j, q) in pts.iter().enumerate() {
+                if j != i {
+                    assert!((*q - p).length() >= c.offsets[i]);
+                }
+            }
+            assert!((c.values[pts.len() + i] - 0.75 * c.offsets[i]).abs() < 1e-15);
+        }
+    }
+}

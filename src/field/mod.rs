@@ -1,0 +1,209 @@
+//! Scalar fields whose zero set is the surface: negative inside, positive outside.
+//!
+//! Every polygonizer takes a [`Field`]. Batched evaluation ([`Field::values`]) is the hot path: the
+//! polygonizers gather the points they need into batches and call it from the thread that called
+//! them (never from inside a rayon worker), so a field may itself split a batch over rayon — and a
+//! field backed by a foreign runtime (the Python binding's callable field) may lock that runtime.
+
+pub mod analytic;
+pub mod constraints;
+pub mod kernel;
+pub mod rbf;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Points per rayon task in the default batched implementations.
+pub const PAR_CHUNK: usize = 512;
+
+/// A scalar field over 3-D space, negative inside the surface and positive outside.
+pub trait Field: Sync {
+    /// Value at one point.
+    fn value(&self, p: DVec3) -> f64;
+
+    /// Gradient at one point. The default uses central differences with step [`Field::fd_step`].
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        let h = self.fd_step();
+        let d = |e: DVec3| (self.value(p + e * h) - self.value(p - e * h)) / (2.0 * h);
+        DVec3::new(d(DVec3::X), d(DVec3::Y), d(DVec3::Z))
+    }
+
+    /// Step used by finite-difference gradients.
+    fn fd_step(&self) -> f64 {
+        1e-6
+    }
+
+    /// Values at many points: `out[i] = value(points[i])`. The default splits the batch over rayon.
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        assert_eq!(points.len(), out.len());
+        points
+            .par_chunks(PAR_CHUNK)
+            .zip(out.par_chunks_mut(PAR_CHUNK))
+            .for_each(|(p, o)| {
+                for (pi, oi) in p.iter().zip(o.iter_mut()) {
+                    *oi = self.value(*pi);
+                }
+            });
+    }
+
+    /// Gradients at many points. The default splits the batch over rayon.
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        assert_eq!(points.len(), out.len());
+        points
+            .par_chunks(PAR_CHUNK)
+            .zip(out.par_chunks_mut(PAR_CHUNK))
+            .for_each(|(p, o)| {
+                for (pi, oi) in p.iter().zip(o.iter_mut()) {
+                    *oi = self.gradient(*pi);
+                }
+            });
+    }
+}
+
+impl<F: Field + ?Sized> Field for &F {
+    fn value(&self, p: DVec3) -> f64 {
+        (**self).value(p)
+    }
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        (**self).gradient(p)
+    }
+    fn fd_step(&self) -> f64 {
+        (**self).fd_step()
+    }
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        (**self).values(points, out)
+    }
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        (**self).gradients(points, out)
+    }
+}
+
+/// Gradients by central differences using only batched [`Field::values`] calls: one batch of
+/// `6 × points.len()` evaluations. For fields that only have batched values (such as a Python
+/// callable).
+pub fn gradients_by_differences<F: Field + ?Sized>(
+    field: &F,
+    points: &[DVec3],
+    h: f64,
+    out: &mut [DVec3],
+) {
+    let mut probes = Vec::with_capacity(points.len() * 6);
+    for &p in points {
+        for e in [DVec3::X, DVec3::Y, DVec3::Z] {
+            probes.push(p + e * h);
+            probes.push(p - e * h);
+        }
+    }
+    let mut v = vec![0.0; probes.len()];
+    field.values(&probes, &mut v);
+    for (i, o) in out.iter_mut().enumerate() {
+        let s = &v[6 * i..6 * i + 6];
+        *o = DVec3::new(s[0] - s[1], s[2] - s[3], s[4] - s[5]) / (2.0 * h);
+    }
+}
+
+/// A field shifted by an iso level: `value(p) = inner(p) - level`. The surface becomes
+/// `inner = level`.
+pub struct IsoLevel<F> {
+    pub inner: F,
+    pub level: f64,
+}
+
+impl<F: Field> Field for IsoLevel<F> {
+    fn value(&self, p: DVec3) -> f64 {
+        self.inner.value(p) - self.level
+    }
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        self.inner.gradient(p)
+    }
+    fn fd_step(&self) -> f64 {
+        self.inner.fd_step()
+    }
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        self.inner.values(points, out);
+        out.iter_mut().for_each(|v| *v -= self.level);
+    }
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        self.inner.gradients(points, out)
+    }
+}
+
+/// A field that counts the points it is asked to evaluate (values only), for tests and stats.
+pub struct Counting<F> {
+    pub inner: F,
+    pub count: std::sync::atomic::AtomicU64,
+}
+
+impl<F> Counting<F> {
+    pub fn new(inner: F) -> Self {
+        Counting {
+            inner,
+            count: std::sync::atomic::AtomicU64::new(0),
+        }
+    }
+    /// Points evaluated so far.
+    pub fn evaluations(&self) -> u64 {
+        self.count.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+impl<F: Field> Field for Counting<F> {
+    fn value(&self, p: DVec3) -> f64 {
+        self.count
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.inner.value(p)
+    }
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        self.inner.gradient(p)
+    }
+    fn fd_step(&self) -> f64 {
+        self.inner.fd_step()
+    }
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        self.count
+            .fetch_add(points.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        self.inner.values(points, out)
+    }
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        self.inner.gradients(points, out)
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod testing {
+    use super::*;
+
+    /// Largest relative difference between a field's analytic gradient and central differences
+    /// at the given points.
+    pub fn gradient_error<F: Field>(field: &F, points: &[DVec3], h: f64) -> f64 {
+        let mut worst: f64 = 0.0;
+        for &p in points {
+            let g = field.gradient(p);
+            let d = |e: DVec3| (field.value(p + e * h) - field.value(p - e * h)) / (2.0 * h);
+            let fd = DVec3::new(d(DVec3::X), d(DVec3::Y), d(DVec3::Z));
+            let err = (g - fd).length() / g.length().max(1.0);
+            worst = worst.max(err);
+        }
+        worst
+    }
+
+    /// Deterministic pseudo-random points in a box (xorshift), for tests.
+    pub fn random_points(n: usize, lo: f64, hi: f64, seed: u64) -> Vec<DVec3> {
+        let mut s = seed.max(1);
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..n)
+            .map(|_| {
+                DVec3::new(
+                    lo + (hi - lo) * next(),
+                    lo + (hi - lo) * next(),
+                    lo + (hi - lo) * next(),
+                )
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,532 @@
+//! Variational implicit surfaces (Turk & O'Brien; Cuno et al. §3–4.2; Jin et al. §2):
+//! f(x) = Σ_j λ_j φ(|x − c_j|) + a + b·x, fitted so that f(c_i) = v_i exactly.
+//!
+//! The fit works in normalised coordinates (data centred on its bounding box and scaled so its
+//! largest half-side is 1), which keeps the system's entries of order one whatever the units of
+//! the data; the interpolant is similarity-equivariant, so this changes nothing but the rounding.
+
+use super::constraints::{self, bounding_box, Constraints};
+use super::kernel::{
+    block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel, ThinPlate,
+    Triharmonic, LANES,
+};
+use super::Field;
+use crate::error::{check_finite_values, Error, Result};
+use faer::linalg::solvers::{Lblt, SolveCore};
+use faer::{Conj, Mat, MatRef, Side};
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// How a variational surface is fitted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    pub kernel: Kernel,
+    /// Added to the diagonal of the kernel block: 0 interpolates exactly, > 0 smooths noisy data.
+    pub smoothing: f64,
+    /// Refuse systems whose dense matrix would need more than this many bytes.
+    pub memory_limit: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            kernel: Kernel::Triharmonic,
+            smoothing: 0.0,
+            memory_limit: 8 << 30,
+        }
+    }
+}
+
+/// A fitted variational implicit surface: negative inside, positive outside (when the normals
+/// given point out of the solid).
+#[derive(Clone, Debug)]
+pub struct VariationalSurface {
+    kernel: Kernel,
+    /// Centres in the caller's coordinates.
+    centers: Vec<DVec3>,
+    /// Weights λ_j in the caller's coordinates.
+    weights: Vec<f64>,
+    /// Linear polynomial a + b·x in the caller's coordinates: [a, bx, by, bz].
+    poly: [f64; 4],
+    /// Normalisation x' = (x − shift) · scale.
+    shift: DVec3,
+    scale: f64,
+    /// Centres (normalised) and weights (of the normalised problem) for evaluation.
+    soa: Centres,
+    /// Polynomial of the normalised problem.
+    npoly: [f64; 4],
+    constraints: Constraints,
+    residual: f64,
+}
+
+fn dispatch_values(kernel: Kernel, c: &Centres, blocks: &[Block], out: &mut [[f64; LANES]]) {
+    match kernel {
+        Kernel::Triharmonic => block_values::<Triharmonic>(c, blocks, out),
+        Kernel::Biharmonic => block_values::<Biharmonic>(c, blocks, out),
+        Kernel::ThinPlate => block_values::<ThinPlate>(c, blocks, out),
+    }
+}
+
+fn dispatch_values_gradients(
+    kernel: Kernel,
+    c: &Centres,
+    blocks: &[Block],
+    out: &mut [[[f64; LANES]; 4]],
+) {
+    match kernel {
+        Kernel::Triharmonic => block_values_gradients::<Triharmonic>(c, blocks, out),
+        Kernel::Biharmonic => block_values_gradients::<Biharmonic>(c, blocks, out),
+        Kernel::ThinPlate => block_values_gradients::<ThinPlate>(c, blocks, out),
+    }
+}
+
+/// Points per rayon task when evaluating (a multiple of LANES).
+const EVAL_CHUNK: usize = 256;
+
+impl VariationalSurface {
+    /// Fits a surface to `points` with outward `normals` (Cuno §4.1): boundary constraints at the
+    /// points, normal constraints at `q + d n`.
+    pub fn fit(
+        points: &[DVec3],
+        normals: &[DVec3],
+        placement: &constraints::Settings,
+        settings: &Settings,
+    ) -> Result<Self> {
+        check_system_memory(2 * points.len(), settings.memory_limit)?;
+        let c = constraints::place(points, normals, placement)?;
+        Self::solve(c, settings)
+    }
+
+    /// Fits a surface to the vertices of a triangle mesh, with area-weighted vertex normals
+    /// (faces counter-clockwise seen from outside). Exact duplicate vertices are merged first.
+    pub fn from_mesh(
+        vertices: &[DVec3],
+        faces: &[[u32; 3]],
+        placement: &constraints::Settings,
+        settings: &Settings,
+    ) -> Result<Self> {
+        let (v, _, n) = constraints::mesh_vertices_normals(vertices, faces)?;
+        Self::fit(&v, &n, placement, settings)
+    }
+
+    /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
+    pub fn interpolate(points: &[DVec3], values: &[f64], settings: &Settings) -> Result<Self> {
+        constraints::check_points("points", points)?;
+        if values.len() != points.len() {
+            return Err(Error::invalid(
+                "values",
+                format!(
+                    "need one value per point: {} values, {} points",
+                    values.len(),
+                    points.len()
+                ),
+            ));
+        }
+        check_finite_values("values", values)?;
+        check_system_memory(points.len(), settings.memory_limit)?;
+        constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
+        let c = Constraints {
+            points: points.to_vec(),
+            values: values.to_vec(),
+            offsets: vec![],
+            boundary: points.len(),
+        };
+        Self::solve(c, settings)
+    }
+
+    fn solve(c: Constraints, settings: &Settings) -> Result<Self> {
+        if !(settings.smoothing.is_finite() && settings.smoothing >= 0.0) {
+            return Err(Error::invalid(
+                "smoothing",
+                format!(
+                    "must be finite and non-negative, got {}",
+                    settings.smoothing
+                ),
+            ));
+        }
+        let kernel = settings.kernel;
+        let (lo, hi) = bounding_box(&c.points);
+        let shift = (lo + hi) * 0.5;
+        let half = 0.5 * (hi - lo).max_element();
+        let scale = 1.0 / half;
+        let np: Vec<DVec3> = c.points.iter().map(|p| (*p - shift) * scale).collect();
+        let n = np.len();
+        let m = n + 4;
+
+        // The matrix [[Φ + sI, P], [Pᵀ, 0]] is symmetric but indefinite: Φ is only conditionally
+        // positive definite (on vectors orthogonal to the polynomials) and the 4×4 block is zero,
+        // so Cholesky (LLᵀ) and LDLᵀ without pivoting break down. LU with partial pivoting would
+        // work but ignores the symmetry (twice the flops and memory traffic). The Bunch–Kaufman
+        // LBLᵀ factorisation with symmetric pivoting is the standard stable choice for symmetric
+        // indefinite systems: it uses the symmetry (n³/3 flops) and handles the zero block with
+        // 2×2 pivots. Iterative refinement below recovers full accuracy in our own evaluator.
+        let mut a = vec![0.0f64; m * m];
+        let smoothing = settings.smoothing * scale.powi(kernel.degree());
+        a.par_chunks_mut(m).enumerate().for_each(|(j, col)| {
+            if j < n {
+                let cj = np[j];
+                for i in j..n {
+                    col[i] = kernel.phi((np[i] - cj).length());
+                }
+                col[j] += smoothing;
+                col[n] = 1.0;
+                col[n + 1] = cj.x;
+                col[n + 2] = cj.y;
+                col[n + 3] = cj.z;
+            }
+        });
+        let amat = MatRef::from_column_major_slice(&a, m, m);
+        let lblt = Lblt::new(amat, Side::Lower);
+        drop(a);
+
+        let mut rhs = Mat::<f64>::zeros(m, 1);
+        for (i, v) in c.values.iter().enumerate() {
+            rhs[(i, 0)] = *v;
+        }
+        let mut x = rhs.clone();
+        lblt.solve_in_place_with_conj(Conj::No, x.as_mut());
+
+        let mut s = VariationalSurface {
+            kernel,
+            centers: c.points.clone(),
+            weights: vec![],
+            poly: [0.0; 4],
+            shift,
+            scale,
+            soa: Centres {
+                x: np.iter().map(|p| p.x).collect(),
+                y: np.iter().map(|p| p.y).collect(),
+                z: np.iter().map(|p| p.z).collect(),
+                w: vec![0.0; n],
+            },
+            npoly: [0.0; 4],
+            constraints: c,
+            residual: f64::INFINITY,
+        };
+        let target = 1e-13
+            * s.constraints
+                .values
+                .iter()
+                .fold(1.0, |a: f64, v| a.max(v.abs()));
+        let mut best: Option<(f64, Mat<f64>)> = None;
+        for _ in 0..4 {
+            s.set_solution(&x);
+            // Residual of the system measured with our own evaluator (what users will see).
+            let mut fvals = vec![0.0; n];
+            s.values_normalised(&np, &mut fvals);
+            let mut r = Mat::<f64>::zeros(m, 1);
+            let mut worst: f64 = 0.0;
+            for i in 0..n {
+                let wi = s.soa.w[i];
+                let ri = s.constraints.values[i] - fvals[i] - smoothing * wi;
+                r[(i, 0)] = ri;
+                worst = worst.max(ri.abs());
+            }
+            let (mut s0, mut sx, mut sy, mut sz) = (0.0, 0.0, 0.0, 0.0);
+            for i in 0..n {
+                let w = s.soa.w[i];
+                s0 += w;
+                sx += w * np[i].x;
+                sy += w * np[i].y;
+                sz += w * np[i].z;
+            }
+            r[(n, 0)] = -s0;
+            r[(n + 1, 0)] = -sx;
+            r[(n + 2, 0)] = -sy;
+            r[(n + 3, 0)] = -sz;
+            if !worst.is_finite() {
+                break;
+            }
+            if best.as_ref().is_none_or(|(b, _)| worst < *b) {
+                best = Some((worst, x.clone()));
+            }
+            if worst <= target {
+                break;
+            }
+            lblt.solve_in_place_with_conj(Conj::No, r.as_mut());
+            for i in 0..m {
+                x[(i, 0)] += r[(i, 0)];
+            }
+        }
+        let (residual, xbest) = best.ok_or(Error::SingularSystem {
+            residual: f64::INFINITY,
+        })?;
+        s.set_solution(&xbest);
+        s.residual = residual;
+        let vscale = s
+            .constraints
+            .values
+            .iter()
+            .fold(0.0, |a: f64, v| a.max(v.abs()));
+        if settings.smoothing == 0.0 && residual > 1e-6 * vscale.max(1e-300) {
+            return Err(Error::SingularSystem { residual });
+        }
+        Ok(s)
+    }
+
+    fn set_solution(&mut self, x: &Mat<f64>) {
+        let n = self.soa.w.len();
+        for i in 0..n {
+            self.soa.w[i] = x[(i, 0)];
+        }
+        self.npoly = [x[(n, 0)], x[(n + 1, 0)], x[(n + 2, 0)], x[(n + 3, 0)]];
+        // Back to the caller's coordinates: φ(|x − c|) = φ(|x' − c'|/scale) = scale^-k φ(...)
+        // (plus, for the thin plate, terms that cancel by the orthogonality conditions).
+        let k = self.kernel.degree();
+        let s = self.scale;
+        self.weights = self.soa.w.iter().map(|w| w * s.powi(k)).collect();
+        let [a, bx, by, bz] = self.npoly;
+        // p(x') = a + b·(x − shift)·scale.
+        let b = DVec3::new(bx, by, bz) * s;
+        let mut a0 = a - b.dot(self.shift);
+        if self.kernel == Kernel::ThinPlate {
+            // r'² log r' = s²(r² log r + r² log s): the extra Σλ_j' s² r_j² log s is the quadratic
+            // Σλ' s² log s (|x|² − 2x·c_j + |c_j|²) whose |x|² and x terms vanish by orthogonality.
+            let c: f64 = self
+                .soa
+                .w
+                .iter()
+                .zip(&self.centers)
+                .map(|(w, cj)| w * cj.length_squared())
+                .sum();
+            a0 += c * s * s * s.ln();
+        }
+        self.poly = [a0, b.x, b.y, b.z];
+    }
+
+    /// Values at points already in normalised coordinates.
+    fn values_normalised(&self, points: &[DVec3], out: &mut [f64]) {
+        self.eval_chunks(points, out, |p| p);
+    }
+
+    fn eval_chunks(
+        &self,
+        points: &[DVec3],
+        out: &mut [f64],
+        to_norm: impl Fn(DVec3) -> DVec3 + Sync,
+    ) {
+        assert_eq!(points.len(), out.len());
+        let [a, bx, by, bz] = self.npoly;
+        points
+            .par_chunks(EVAL_CHUNK)
+            .zip(out.par_chunks_mut(EVAL_CHUNK))
+            .for_each(|(p, o)| {
+                let nb = p.len().div_ceil(LANES);
+                let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
+                for (k, b) in blocks[..nb].iter_mut().enumerate() {
+                    for l in 0..LANES {
+                        let q = to_norm(p[(k * LANES + l).min(p.len() - 1)]);
+                        b.x[l] = q.x;
+                        b.y[l] = q.y;
+                        b.z[l] = q.z;
+                    }
+                }
+                let mut sums = [[0.0; LANES]; EVAL_CHUNK / LANES];
+                dispatch_values(self.kernel, &self.soa, &blocks[..nb], &mut sums[..nb]);
+                for (i, oi) in o.iter_mut().enumerate() {
+                    let (k, l) = (i / LANES, i % LANES);
+                    let b = &blocks[k];
+                    *oi = sums[k][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
+                }
+            });
+    }
+
+    /// Values and gradients at many points (gradients in the caller's coordinates).
+    pub fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
+        assert_eq!(points.len(), values.len());
+        assert_eq!(points.len(), gradients.len());
+        let [a, bx, by, bz] = self.npoly;
+        let (shift, scale) = (self.shift, self.scale);
+        points
+            .par_chunks(EVAL_CHUNK)
+            .zip(values.par_chunks_mut(EVAL_CHUNK))
+            .zip(gradients.par_chunks_mut(EVAL_CHUNK))
+            .for_each(|((p, v), g)| {
+                let nb = p.len().div_ceil(LANES);
+                let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
+                for (k, b) in blocks[..nb].iter_mut().enumerate() {
+                    for l in 0..LANES {
+                        let q = (p[(k * LANES + l).min(p.len() - 1)] - shift) * scale;
+                        b.x[l] = q.x;
+                        b.y[l] = q.y;
+                        b.z[l] = q.z;
+                    }
+                }
+                let mut sums = [[[0.0; LANES]; 4]; EVAL_CHUNK / LANES];
+                dispatch_values_gradients(self.kernel, &self.soa, &blocks[..nb], &mut sums[..nb]);
+                for i in 0..p.len() {
+                    let (k, l) = (i / LANES, i % LANES);
+                    let b = &blocks[k];
+                    let s = &sums[k];
+                    v[i] = s[0][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
+                    g[i] = DVec3::new(s[1][l] + bx, s[2][l] + by, s[3][l] + bz) * scale;
+                }
+            });
+    }
+
+    /// The kernel.
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
+    }
+    /// Centres c_j (the constraint points), in the caller's coordinates.
+    pub fn centers(&self) -> &[DVec3] {
+        &self.centers
+    }
+    /// Weights λ_j, in the caller's coordinates.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+    /// Linear polynomial [a, bx, by, bz] of f(x) = Σ λ_j φ(|x − c_j|) + a + b·x.
+    pub fn polynomial(&self) -> [f64; 4] {
+        self.poly
+    }
+    /// The constraints the surface interpolates.
+    pub fn constraints(&self) -> &Constraints {
+        &self.constraints
+    }
+    /// Largest |f(c_i) − v_i| at the constraints, as measured after the fit.
+    pub fn residual(&self) -> f64 {
+        self.residual
+    }
+    /// Bounding box of the centres.
+    pub fn bounding_box(&self) -> (DVec3, DVec3) {
+        bounding_box(&self.centers)
+    }
+    /// Bounding box of the boundary constraints (the data points).
+    pub fn data_bounding_box(&self) -> (DVec3, DVec3) {
+        bounding_box(&self.centers[..self.constraints.boundary])
+    }
+}
+
+/// Errors when the dense system for `n` constraints would exceed `limit` bytes.
+fn check_system_memory(n: usize, limit: u64) -> Result<()> {
+    let m = n as u64 + 4;
+    // The assembled matrix and the factor's copy.
+    let bytes = 2 * m * m * 8;
+    if bytes > limit {
+        return Err(Error::TooMuchMemory {
+            name: "points",
+            needed_mib: bytes >> 20,
+            limit_mib: limit >> 20,
+        });
+    }
+    Ok(())
+}
+
+impl Field for VariationalSurface {
+    fn value(&self, p: DVec3) -> f64 {
+        let mut out = [0.0];
+        self.values(&[p], &mut out);
+        out[0]
+    }
+
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        let mut v = [0.0];
+        let mut g = [DVec3::ZERO];
+        self.values_gradients(&[p], &mut v, &mut g);
+        g[0]
+    }
+
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        let (shift, scale) = (self.shift, self.scale);
+        self.eval_chunks(points, out, move |p| (p - shift) * scale);
+    }
+
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        let mut v = vec![0.0; points.len()];
+        self.values_gradients(points, &mut v, out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::*;
+    use super::*;
+
+    fn sphere_data(n: usize) -> (Vec<DVec3>, Vec<DVec3>) {
+        // Fibonacci sphere.
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let pts: Vec<DVec3> = (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - y * y).sqrt();
+                let t = golden * i as f64;
+                DVec3::new(r * t.cos(), y, r * t.sin()) * 0.8
+            })
+            .collect();
+        let normals = pts.iter().map(|p| p.normalize()).collect();
+        (pts, normals)
+    }
+
+    #[test]
+    fn interpolates_exactly_all_kernels() {
+        let (p, n) = sphere_data(300);
+        for kernel in [Kernel::Triharmonic, Kernel::Biharmonic, Kernel::ThinPlate] {
+            let s = VariationalSurface::fit(
+                &p,
+                &n,
+                &Default::default(),
+                &Settings {
+                    kernel,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let c = s.constraints();
+            let mut v = vec![0.0; c.points.len()];
+            s.values(&c.points, &mut v);
+            let err = v
+                .iter()
+                .zip(&c.values)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(err < 1e-11, "{kernel:?}: {err}");
+            // Inside negative, outside positive.
+            assert!(s.value(DVec3::ZERO) < 0.0);
+            assert!(s.value(DVec3::splat(0.9)) > 0.0);
+            // Value via the caller-coordinate weights equals the fast path.
+            let q = DVec3::new(0.3, -0.1, 0.2);
+            let [a, bx, by, bz] = s.polynomial();
+            let direct: f64 = s
+                .centers()
+                .iter()
+                .zip(s.weights())
+                .map(|(c, w)| w * kernel.phi((q - *c).length()))
+                .sum::<f64>()
+                + a
+                + bx * q.x
+                + by * q.y
+                + bz * q.z;
+            assert!((direct - s.value(q)).abs() < 1e-9, "{kernel:?}");
+            let pts = random_points(100, -1.0, 1.0, 3);
+            assert!(gradient_error(&s, &pts, 1e-6) < 1e-5, "{kernel:?}");
+        }
+    }
+
+    #[test]
+    fn scale_equivariant() {
+        let (p, n) = sphere_data(100);
+        let s1 = VariationalSurface::fit(&p, &n, &Default::default(), &Default::default()).unwrap();
+        let p10: Vec<DVec3> = p.iter().map(|x| *x * 10.0 + DVec3::splat(5.0)).collect();
+        let s10 =
+            VariationalSurface::fit(&p10, &n, &Default::default(), &Default::default()).unwrap();
+        let q = DVec3::new(0.2, 0.5, -0.4);
+        assert!((s10.value(q * 10.0 + DVec3::splat(5.0)) - 10.0 * s1.value(q)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn memory_limit_refuses() {
+        let (p, n) = sphere_data(100);
+        let err = VariationalSurface::fit(
+            &p,
+            &n,
+            &Default::default(),
+            &Settings {
+                memory_limit: 1000,
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
+        assert!(matches!(err, Error::TooMuchMemory { .. }));
+    }
+}

@@ -1,0 +1,158 @@
+//! The lattice every polygonizer works on: an axis-aligned box split into `cells[0] × cells[1] ×
+//! cells[2]` cells. Lattice points are addressed by integer coordinates `[i, j, k]` with
+//! `0 ≤ i ≤ cells[0]` and so on, and packed into one `u64` key. All polygonizers compute the position
+//! of a lattice point and of an edge vertex with the same arithmetic, so that they produce
+//! bit-identical vertices for the same field and lattice.
+
+use crate::error::{Error, Result};
+use glam::DVec3;
+
+/// Largest number of cells per axis accepted (keys pack three 21-bit coordinates).
+pub const MAX_CELLS_PER_AXIS: u32 = (1 << 20) - 1;
+
+/// Axis-aligned box with a regular grid of cells.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lattice {
+    /// Corner of the box with the smallest coordinates (lattice point `[0, 0, 0]`).
+    pub origin: DVec3,
+    /// Size of one cell along each axis.
+    pub cell: DVec3,
+    /// Number of cells along each axis.
+    pub cells: [u32; 3],
+}
+
+impl Lattice {
+    /// A lattice over the box `min..max` with `cells` cells per axis.
+    ///
+    /// Errors when the box is empty or not finite, or a cell count is zero or too large.
+    pub fn new(min: DVec3, max: DVec3, cells: [u32; 3]) -> Result<Self> {
+        if !min.is_finite() || !max.is_finite() {
+            return Err(Error::invalid("bounds", "must be finite"));
+        }
+        if !(max.cmpgt(min).all()) {
+            return Err(Error::invalid(
+                "bounds",
+                format!("max {max:?} must exceed min {min:?} on every axis"),
+            ));
+        }
+        for &c in &cells {
+            if c == 0 || c > MAX_CELLS_PER_AXIS {
+                return Err(Error::invalid(
+                    "resolution",
+                    format!("cells per axis must be in 1..={MAX_CELLS_PER_AXIS}, got {c}"),
+                ));
+            }
+        }
+        let n = DVec3::new(cells[0] as f64, cells[1] as f64, cells[2] as f64);
+        Ok(Lattice {
+            origin: min,
+            cell: (max - min) / n,
+            cells,
+        })
+    }
+
+    /// Lattice points per axis (cells + 1).
+    #[inline]
+    pub fn points_per_axis(&self) -> [u32; 3] {
+        [self.cells[0] + 1, self.cells[1] + 1, self.cells[2] + 1]
+    }
+
+    /// Total number of lattice points, the number of evaluations plain marching cubes needs.
+    pub fn num_points(&self) -> u64 {
+        let p = self.points_per_axis();
+        p[0] as u64 * p[1] as u64 * p[2] as u64
+    }
+
+    /// Total number of cells.
+    pub fn num_cells(&self) -> u64 {
+        self.cells[0] as u64 * self.cells[1] as u64 * self.cells[2] as u64
+    }
+
+    /// Upper corner of the box.
+    pub fn max(&self) -> DVec3 {
+        self.point([self.cells[0], self.cells[1], self.cells[2]])
+    }
+
+    /// Position of the lattice point with integer coordinates `i`.
+    #[inline]
+    pub fn point(&self, i: [u32; 3]) -> DVec3 {
+        DVec3::new(
+            self.origin.x + i[0] as f64 * self.cell.x,
+            self.origin.y + i[1] as f64 * self.cell.y,
+            self.origin.z + i[2] as f64 * self.cell.z,
+        )
+    }
+
+    /// Packs integer coordinates (each below 2²¹) into one key.
+    #[inline]
+    pub fn key(i: [u32; 3]) -> u64 {
+        (i[0] as u64) | ((i[1] as u64) << 21) | ((i[2] as u64) << 42)
+    }
+
+    /// Inverse of [`Lattice::key`].
+    #[inline]
+    pub fn unkey(key: u64) -> [u32; 3] {
+        let m = (1u64 << 21) - 1;
+        [
+            (key & m) as u32,
+            ((key >> 21) & m) as u32,
+            ((key >> 42) & m) as u32,
+        ]
+    }
+
+    /// Key of the lattice edge that starts at lattice point `i` and runs along `axis` (0, 1, 2).
+    #[inline]
+    pub fn edge_key(i: [u32; 3], axis: u8) -> u64 {
+        (Self::key(i) << 2) | axis as u64
+    }
+
+    /// Half the diagonal of a block of `n × n × n` cells: the circumradius of such a cube.
+    pub fn block_radius(&self, n: u32) -> f64 {
+        0.5 * (self.cell * n as f64).length()
+    }
+}
+
+/// Position of the surface crossing on the lattice edge from `a` (value `fa`) to `b` (value `fb`),
+/// where `a` is the lower end of the edge. Linear interpolation; callers pass the ends in lattice
+/// order so that every polygonizer gets the same bits.
+#[inline]
+pub fn edge_crossing(a: DVec3, b: DVec3, fa: f64, fb: f64) -> DVec3 {
+    let t = (fa / (fa - fb)).clamp(0.0, 1.0);
+    a + (b - a) * t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_round_trip() {
+        for i in [
+            [0, 0, 0],
+            [1, 2, 3],
+            [MAX_CELLS_PER_AXIS, 7, MAX_CELLS_PER_AXIS],
+        ] {
+            assert_eq!(Lattice::unkey(Lattice::key(i)), i);
+        }
+        assert_ne!(
+            Lattice::edge_key([1, 0, 0], 0),
+            Lattice::edge_key([1, 0, 0], 1)
+        );
+    }
+
+    #[test]
+    fn rejects_bad_boxes() {
+        assert!(Lattice::new(DVec3::ZERO, DVec3::ONE, [0, 1, 1]).is_err());
+        assert!(Lattice::new(DVec3::ONE, DVec3::ZERO, [1, 1, 1]).is_err());
+        assert!(Lattice::new(DVec3::ZERO, DVec3::new(1.0, f64::NAN, 1.0), [1, 1, 1]).is_err());
+        let l = Lattice::new(-DVec3::ONE, DVec3::ONE, [4, 4, 4]).unwrap();
+        assert_eq!(l.num_points(), 125);
+        assert_eq!(l.point([2, 2, 2]), DVec3::ZERO);
+    }
+
+    #[test]
+    fn crossing_is_on_the_edge() {
+        let p = edge_crossing(DVec3::ZERO, DVec3::X, -1.0, 3.0);
+        assert!((p - DVec3::new(0.25, 0.0, 0.0)).length() < 1e-15);
+    }
+}

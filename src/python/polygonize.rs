@@ -1,0 +1,173 @@
+//! `_core.polygonize`: argument checks, the GIL released around the polygonizer, numpy out.
+
+use super::convert::{points, points_to_py, triangles_to_py};
+use super::errors::value_error;
+use super::field::FieldArg;
+use crate::lattice::Lattice;
+use crate::polygonize::{dense, Ambiguity, Settings, Stats};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyTuple};
+
+pub fn parse_ambiguity(s: &str) -> PyResult<Ambiguity> {
+    match s.to_ascii_lowercase().as_str() {
+        "separate" => Ok(Ambiguity::Separate),
+        "join" => Ok(Ambiguity::Join),
+        _ => Err(value_error(
+            "ambiguity",
+            format!("expected \"separate\" or \"join\", got {s:?}"),
+        )),
+    }
+}
+
+/// Cells per axis from an int or a sequence of three ints.
+pub fn parse_resolution(obj: &Bound<'_, PyAny>) -> PyResult<[u32; 3]> {
+    let one = |o: &Bound<'_, PyAny>| -> PyResult<u32> {
+        if o.is_instance_of::<PyBool>() {
+            return Err(value_error("resolution", "must be an integer, got a bool"));
+        }
+        let v: i128 = o.extract().map_err(|_| {
+            value_error(
+                "resolution",
+                format!("must be an integer or three integers, got {o}"),
+            )
+        })?;
+        if v <= 0 {
+            return Err(value_error(
+                "resolution",
+                format!("must be positive, got {v}"),
+            ));
+        }
+        if v > crate::lattice::MAX_CELLS_PER_AXIS as i128 {
+            return Err(value_error(
+                "resolution",
+                format!(
+                    "{v} cells per axis is over the maximum of {}",
+                    crate::lattice::MAX_CELLS_PER_AXIS
+                ),
+            ));
+        }
+        Ok(v as u32)
+    };
+    if let Ok(v) = one(obj) {
+        return Ok([v; 3]);
+    }
+    if obj.is_instance_of::<pyo3::types::PyString>() {
+        return Err(value_error(
+            "resolution",
+            "must be an integer or three integers",
+        ));
+    }
+    let items: Vec<Bound<'_, PyAny>> = match obj.try_iter() {
+        Ok(it) => it.collect::<PyResult<_>>()?,
+        Err(_) => return one(obj).map(|v| [v; 3]),
+    };
+    if items.len() != 3 {
+        return Err(value_error(
+            "resolution",
+            format!("expected one integer or three, got {} values", items.len()),
+        ));
+    }
+    Ok([one(&items[0])?, one(&items[1])?, one(&items[2])?])
+}
+
+pub fn parse_lattice(
+    bounds: &Bound<'_, PyAny>,
+    resolution: &Bound<'_, PyAny>,
+) -> PyResult<Lattice> {
+    let b = points(bounds, "bounds").map_err(|_| {
+        value_error(
+            "bounds",
+            "expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] (shape (2, 3))",
+        )
+    })?;
+    if b.len() != 2 {
+        return Err(value_error(
+            "bounds",
+            format!("expected shape (2, 3), got ({}, 3)", b.len()),
+        ));
+    }
+    let cells = parse_resolution(resolution)?;
+    Ok(Lattice::new(b[0], b[1], cells)?)
+}
+
+pub fn stats_to_py<'py>(
+    py: Python<'py>,
+    s: &Stats,
+    lattice: &Lattice,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("evaluations", s.evaluations)?;
+    d.set_item("normal_evaluations", s.normal_evaluations)?;
+    d.set_item("lattice_points", s.lattice_points)?;
+    d.set_item("evaluation_percent", s.evaluation_percent())?;
+    d.set_item("cells_visited", s.cells_visited)?;
+    d.set_item("cells_crossed", s.cells_crossed)?;
+    d.set_item("cells_per_level", s.cells_per_level.clone())?;
+    let secs = PyDict::new(py);
+    for (k, v) in &s.seconds {
+        secs.set_item(*k, *v)?;
+    }
+    secs.set_item("total", s.total_seconds())?;
+    d.set_item("seconds", secs)?;
+    d.set_item("resolution", PyTuple::new(py, lattice.cells)?)?;
+    Ok(d)
+}
+
+/// Low-level polygonizer entry point; use :func:`implicitmesh.polygonize`.
+///
+/// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
+/// stats dict)``.
+#[pyfunction]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn polygonize<'py>(
+    py: Python<'py>,
+    field: &Bound<'py, PyAny>,
+    bounds: &Bound<'py, PyAny>,
+    resolution: &Bound<'py, PyAny>,
+    method: &str,
+    ambiguity: &str,
+    normals: bool,
+    batch_size: usize,
+    memory_limit: Option<u64>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let field = FieldArg::extract(field)?;
+    let lattice = parse_lattice(bounds, resolution)?;
+    if batch_size == 0 {
+        return Err(value_error("batch_size", "must be positive"));
+    }
+    let defaults = Settings::default();
+    let settings = Settings {
+        ambiguity: parse_ambiguity(ambiguity)?,
+        normals,
+        batch: batch_size,
+        memory_limit: memory_limit.unwrap_or(defaults.memory_limit),
+        difference_gradients: if field.is_callable() {
+            Some(1e-3)
+        } else {
+            None
+        },
+    };
+    let method = method.to_ascii_lowercase();
+    let run: fn(&dyn crate::field::Field, &Lattice, &Settings) -> crate::Result<_> =
+        match method.as_str() {
+            "dense" => |f, l, s| dense::polygonize(f, l, s),
+            _ => {
+                return Err(value_error(
+                    "method",
+                    format!("unknown method {method:?}; available: \"dense\""),
+                ))
+            }
+        };
+    let result = py.detach(|| field.with(|f| run(f, &lattice, &settings)));
+    if let Some(e) = field.take_error() {
+        return Err(e);
+    }
+    let (mesh, stats) = result?;
+    let stats_py = stats_to_py(py, &stats, &lattice)?;
+    stats_py.set_item("method", method)?;
+    let v = points_to_py(py, mesh.vertices)?;
+    let f = triangles_to_py(py, &mesh.triangles)?;
+    let n = points_to_py(py, mesh.normals)?;
+    PyTuple::new(py, [v, f, n, stats_py.into_any()])
+}
