@@ -66,6 +66,15 @@ impl Kernel {
         }
     }
 
+    /// +1 when φ is conditionally positive definite (r³, r² log r: order 2), −1 when −φ is (r:
+    /// order 1). Decides the sign of the null-space system in `saddle.rs`.
+    pub fn cpd_sign(self) -> f64 {
+        match self {
+            Kernel::Biharmonic => -1.0,
+            _ => 1.0,
+        }
+    }
+
     /// φ(s·r) = s^k φ(r) (+ lower-order terms for the thin plate): the power k.
     pub fn degree(self) -> i32 {
         match self {
@@ -211,11 +220,6 @@ macro_rules! dispatch {
 }
 
 dispatch!(sum_values, values_avx2, [f64; LANES]);
-dispatch!(
-    sum_values_gradients,
-    values_gradients_avx2,
-    [[f64; LANES]; 4]
-);
 
 fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]

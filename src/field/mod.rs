@@ -9,6 +9,7 @@ pub mod analytic;
 pub mod constraints;
 pub mod kernel;
 pub mod rbf;
+pub mod saddle;
 
 use glam::DVec3;
 use rayon::prelude::*;

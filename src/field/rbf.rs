@@ -10,10 +10,9 @@ use super::kernel::{
     block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel, ThinPlate,
     Triharmonic, LANES,
 };
+use super::saddle::SaddleSolver;
 use super::Field;
 use crate::error::{check_finite_values, Error, Result};
-use faer::linalg::solvers::{Lblt, SolveCore};
-use faer::{Conj, Mat, MatRef, Side};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -57,6 +56,7 @@ pub struct VariationalSurface {
     npoly: [f64; 4],
     constraints: Constraints,
     residual: f64,
+    factorization: &'static str,
 }
 
 fn dispatch_values(kernel: Kernel, c: &Centres, blocks: &[Block], out: &mut [[f64; LANES]]) {
@@ -151,40 +151,13 @@ impl VariationalSurface {
         let scale = 1.0 / half;
         let np: Vec<DVec3> = c.points.iter().map(|p| (*p - shift) * scale).collect();
         let n = np.len();
-        let m = n + 4;
 
-        // The matrix [[Φ + sI, P], [Pᵀ, 0]] is symmetric but indefinite: Φ is only conditionally
-        // positive definite (on vectors orthogonal to the polynomials) and the 4×4 block is zero,
-        // so Cholesky (LLᵀ) and LDLᵀ without pivoting break down. LU with partial pivoting would
-        // work but ignores the symmetry (twice the flops and memory traffic). The Bunch–Kaufman
-        // LBLᵀ factorisation with symmetric pivoting is the standard stable choice for symmetric
-        // indefinite systems: it uses the symmetry (n³/3 flops) and handles the zero block with
-        // 2×2 pivots. Iterative refinement below recovers full accuracy in our own evaluator.
-        let mut a = vec![0.0f64; m * m];
+        // Symmetric indefinite saddle-point system: see `saddle.rs` for the factorization
+        // (null-space Cholesky, falling back to Bunch–Kaufman LBLᵀ) and why.
         let smoothing = settings.smoothing * scale.powi(kernel.degree());
-        a.par_chunks_mut(m).enumerate().for_each(|(j, col)| {
-            if j < n {
-                let cj = np[j];
-                for i in j..n {
-                    col[i] = kernel.phi((np[i] - cj).length());
-                }
-                col[j] += smoothing;
-                col[n] = 1.0;
-                col[n + 1] = cj.x;
-                col[n + 2] = cj.y;
-                col[n + 3] = cj.z;
-            }
-        });
-        let amat = MatRef::from_column_major_slice(&a, m, m);
-        let lblt = Lblt::new(amat, Side::Lower);
-        drop(a);
-
-        let mut rhs = Mat::<f64>::zeros(m, 1);
-        for (i, v) in c.values.iter().enumerate() {
-            rhs[(i, 0)] = *v;
-        }
-        let mut x = rhs.clone();
-        lblt.solve_in_place_with_conj(Conj::No, x.as_mut());
+        let solver = SaddleSolver::new(&np, move |r| kernel.phi(r), smoothing, kernel.cpd_sign());
+        let (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
+        let mut x = (lam0, a0);
 
         let mut s = VariationalSurface {
             kernel,
@@ -202,38 +175,31 @@ impl VariationalSurface {
             npoly: [0.0; 4],
             constraints: c,
             residual: f64::INFINITY,
+            factorization: "",
         };
         let target = 1e-13
             * s.constraints
                 .values
                 .iter()
                 .fold(1.0, |a: f64, v| a.max(v.abs()));
-        let mut best: Option<(f64, Mat<f64>)> = None;
+        let mut best: Option<(f64, (Vec<f64>, [f64; 4]))> = None;
         for _ in 0..4 {
-            s.set_solution(&x);
+            s.set_solution(&x.0, x.1);
             // Residual of the system measured with our own evaluator (what users will see).
             let mut fvals = vec![0.0; n];
             s.values_normalised(&np, &mut fvals);
-            let mut r = Mat::<f64>::zeros(m, 1);
-            let mut worst: f64 = 0.0;
-            for i in 0..n {
-                let wi = s.soa.w[i];
-                let ri = s.constraints.values[i] - fvals[i] - smoothing * wi;
-                r[(i, 0)] = ri;
-                worst = worst.max(ri.abs());
-            }
-            let (mut s0, mut sx, mut sy, mut sz) = (0.0, 0.0, 0.0, 0.0);
+            let rf: Vec<f64> = (0..n)
+                .map(|i| s.constraints.values[i] - fvals[i] - smoothing * s.soa.w[i])
+                .collect();
+            let worst = rf.iter().fold(0.0, |a: f64, r| a.max(r.abs()));
+            let mut rg = [0.0; 4];
             for i in 0..n {
                 let w = s.soa.w[i];
-                s0 += w;
-                sx += w * np[i].x;
-                sy += w * np[i].y;
-                sz += w * np[i].z;
+                rg[0] -= w;
+                rg[1] -= w * np[i].x;
+                rg[2] -= w * np[i].y;
+                rg[3] -= w * np[i].z;
             }
-            r[(n, 0)] = -s0;
-            r[(n + 1, 0)] = -sx;
-            r[(n + 2, 0)] = -sy;
-            r[(n + 3, 0)] = -sz;
             if !worst.is_finite() {
                 break;
             }
@@ -243,16 +209,20 @@ impl VariationalSurface {
             if worst <= target {
                 break;
             }
-            lblt.solve_in_place_with_conj(Conj::No, r.as_mut());
-            for i in 0..m {
-                x[(i, 0)] += r[(i, 0)];
+            let (dl, da) = solver.solve(&rf, rg);
+            for (xi, d) in x.0.iter_mut().zip(&dl) {
+                *xi += d;
+            }
+            for k in 0..4 {
+                x.1[k] += da[k];
             }
         }
         let (residual, xbest) = best.ok_or(Error::SingularSystem {
             residual: f64::INFINITY,
         })?;
-        s.set_solution(&xbest);
+        s.set_solution(&xbest.0, xbest.1);
         s.residual = residual;
+        s.factorization = solver.method();
         let vscale = s
             .constraints
             .values
@@ -264,12 +234,9 @@ impl VariationalSurface {
         Ok(s)
     }
 
-    fn set_solution(&mut self, x: &Mat<f64>) {
-        let n = self.soa.w.len();
-        for i in 0..n {
-            self.soa.w[i] = x[(i, 0)];
-        }
-        self.npoly = [x[(n, 0)], x[(n + 1, 0)], x[(n + 2, 0)], x[(n + 3, 0)]];
+    fn set_solution(&mut self, lam: &[f64], a: [f64; 4]) {
+        self.soa.w.copy_from_slice(lam);
+        self.npoly = a;
         // Back to the caller's coordinates: φ(|x − c|) = φ(|x' − c'|/scale) = scale^-k φ(...)
         // (plus, for the thin plate, terms that cancel by the orthogonality conditions).
         let k = self.kernel.degree();
@@ -387,6 +354,10 @@ impl VariationalSurface {
     /// Largest |f(c_i) − v_i| at the constraints, as measured after the fit.
     pub fn residual(&self) -> f64 {
         self.residual
+    }
+    /// The factorization the fit used: `"cholesky"` (null space) or `"lblt"` (see `saddle.rs`).
+    pub fn factorization(&self) -> &'static str {
+        self.factorization
     }
     /// Bounding box of the centres.
     pub fn bounding_box(&self) -> (DVec3, DVec3) {

@@ -1,0 +1,245 @@
+"""Small helpers shared by the ``bench_*.py`` scripts: timing, machine facts, markdown tables and
+running a peer in a subprocess under another BLAS thread setting.
+
+Nothing here imports numpy at module level, so a subprocess can set ``OPENBLAS_NUM_THREADS``
+before numpy (and so OpenBLAS) is loaded.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import glob
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+__all__ = [
+    "Timing",
+    "timeit_median",
+    "loadavg",
+    "cpu_model",
+    "openblas_threads",
+    "machine_info",
+    "machine_markdown",
+    "md_table",
+    "fmt_s",
+    "fmt_ratio",
+    "run_worker",
+    "blas_env",
+]
+
+
+@dataclass
+class Timing:
+    """Wall-clock seconds of ``runs`` timed calls (after ``warmup`` untimed ones)."""
+
+    times: list[float]
+    warmup: int
+    result: Any = field(default=None, repr=False)  # what the last call returned
+    cpu_times: list[float] = field(default_factory=list)  # process CPU seconds (all threads) per run
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.times)
+
+    @property
+    def min(self) -> float:
+        return min(self.times)
+
+    @property
+    def runs(self) -> int:
+        return len(self.times)
+
+    @property
+    def cpu_per_wall(self) -> float | None:
+        """Median over runs of CPU seconds / wall seconds: about the number of busy threads."""
+        if not self.cpu_times:
+            return None
+        return statistics.median(c / w for c, w in zip(self.cpu_times, self.times) if w > 0)
+
+    def to_json(self) -> dict:
+        return {
+            "times": self.times,
+            "cpu_times": self.cpu_times,
+            "warmup": self.warmup,
+            "median": self.median,
+            "runs": self.runs,
+            "cpu_per_wall": self.cpu_per_wall,
+        }
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Timing":
+        return cls(list(d["times"]), int(d["warmup"]), None, list(d.get("cpu_times", [])))
+
+
+def timeit_median(fn: Callable[[], Any], runs: int = 5, warmup: int = 1) -> Timing:
+    """Calls ``fn()`` ``warmup`` times untimed, then ``runs`` times timed with
+    :func:`time.perf_counter`; returns a :class:`Timing` (``.median``, ``.times``, ``.result``)."""
+    if runs < 1:
+        raise ValueError("runs must be >= 1")
+    result = None
+    for _ in range(warmup):
+        result = fn()
+    times, cpu = [], []
+    for _ in range(runs):
+        c0 = time.process_time()
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return Timing(times, warmup, result, cpu)
+
+
+def loadavg() -> tuple[float, float, float]:
+    """The 1, 5 and 15 minute load averages from /proc/loadavg."""
+    try:
+        with open("/proc/loadavg") as f:
+            a, b, c = f.read().split()[:3]
+        return float(a), float(b), float(c)
+    except OSError:
+        return os.getloadavg()
+
+
+def cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def openblas_threads() -> dict[str, int]:
+    """Threads the OpenBLAS libraries bundled with numpy and scipy will use (read with ctypes, as
+    threadpoolctl would; {} when the libraries are not found). Loads numpy."""
+    import numpy
+
+    site = os.path.dirname(os.path.dirname(numpy.__file__))
+    out: dict[str, int] = {}
+    for label, pattern in (("numpy", "numpy.libs/lib*openblas*.so*"), ("scipy", "scipy.libs/lib*openblas*.so*")):
+        for path in glob.glob(os.path.join(site, pattern)):
+            try:
+                lib = ctypes.CDLL(path)
+            except OSError:
+                continue
+            for sym in (
+                "scipy_openblas_get_num_threads64_",
+                "scipy_openblas_get_num_threads",
+                "openblas_get_num_threads64_",
+                "openblas_get_num_threads",
+            ):
+                if hasattr(lib, sym):
+                    out[label] = int(getattr(lib, sym)())
+                    break
+    return out
+
+
+def _version(module: str) -> str:
+    try:
+        from importlib.metadata import version
+
+        return version(module)
+    except Exception:  # noqa: BLE001
+        return "not installed"
+
+
+def machine_info(packages: Sequence[str] = ("numpy", "scipy")) -> dict[str, Any]:
+    """Facts about this machine and the Python stack, for a benchmark's header."""
+    info: dict[str, Any] = {
+        "cpu": cpu_model(),
+        "cores": os.cpu_count(),
+        "affinity": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset (OpenBLAS default)"),
+        "loadavg": loadavg(),
+    }
+    for p in packages:
+        info[p] = _version(p)
+    try:
+        with open("/proc/meminfo") as f:
+            kb = int(f.readline().split()[1])
+        info["memory_gib"] = round(kb / 2**20, 1)
+    except (OSError, ValueError, IndexError):
+        pass
+    return info
+
+
+def machine_markdown(info: dict[str, Any], extra: dict[str, str] | None = None) -> str:
+    """A bullet list of :func:`machine_info` (plus ``extra`` lines)."""
+    lines = [
+        f"- CPU: {info['cpu']}, {info['cores']} logical cores"
+        + (f" ({info['affinity']} usable)" if info.get("affinity") not in (None, info["cores"]) else "")
+        + (f", {info['memory_gib']} GiB RAM" if "memory_gib" in info else ""),
+        f"- Python {info['python']} on {info['platform']}",
+    ]
+    skip = {"cpu", "cores", "affinity", "python", "platform", "OPENBLAS_NUM_THREADS", "loadavg", "memory_gib"}
+    versions = ", ".join(f"{k} {v}" for k, v in info.items() if k not in skip)
+    if versions:
+        lines.append(f"- {versions}")
+    lines.append(f"- OPENBLAS_NUM_THREADS in the main process: {info['OPENBLAS_NUM_THREADS']}")
+    for k, v in (extra or {}).items():
+        lines.append(f"- {k}: {v}")
+    return "\n".join(lines)
+
+
+def md_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], align: str | None = None) -> str:
+    """A GitHub markdown table; ``align`` is one letter per column (l, r, c)."""
+    align = align or "l" + "r" * (len(headers) - 1)
+    sep = {"l": "---", "r": "---:", "c": ":---:"}
+    out = ["| " + " | ".join(map(str, headers)) + " |", "|" + "|".join(sep[a] for a in align) + "|"]
+    for r in rows:
+        out.append("| " + " | ".join("" if c is None else str(c) for c in r) + " |")
+    return "\n".join(out)
+
+
+def fmt_s(seconds: float | None) -> str:
+    if seconds is None:
+        return "—"
+    if seconds >= 100:
+        return f"{seconds:.0f}"
+    if seconds >= 10:
+        return f"{seconds:.1f}"
+    if seconds >= 1:
+        return f"{seconds:.2f}"
+    if seconds >= 0.01:
+        return f"{seconds:.3f}"
+    return f"{seconds:.4f}"
+
+
+def fmt_ratio(peer: float | None, ours: float | None) -> str:
+    if not peer or not ours:
+        return "—"
+    r = peer / ours
+    return f"{r:.2f}×" if r < 10 else f"{r:.1f}×" if r < 100 else f"{r:.0f}×"
+
+
+def blas_env(threads: int | None) -> dict[str, str]:
+    """A copy of os.environ with ``OPENBLAS_NUM_THREADS`` set to ``threads``, or removed when
+    ``threads`` is None (OpenBLAS then uses its default: one thread per core)."""
+    env = dict(os.environ)
+    if threads is None:
+        env.pop("OPENBLAS_NUM_THREADS", None)
+    else:
+        env["OPENBLAS_NUM_THREADS"] = str(threads)
+    return env
+
+
+def run_worker(script: str, args: Sequence[str], threads: int | None, timeout: float | None = None) -> dict:
+    """Runs ``python script *args --json-out FILE`` in a subprocess with the given OpenBLAS thread
+    setting and returns the JSON it wrote. The worker's stderr passes through (progress)."""
+    with tempfile.TemporaryDirectory(prefix="bench_") as tmp:
+        out = os.path.join(tmp, "result.json")
+        cmd = [sys.executable, script, *args, "--json-out", out]
+        subprocess.run(cmd, env=blas_env(threads), check=True, timeout=timeout, stdout=sys.stderr)
+        with open(out) as f:
+            return json.load(f)

@@ -1,0 +1,119 @@
+"""The command line: ``python -m implicitmesh demo`` and ``reconstruct``."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+from conftest import genus_of, vertex_normals_area_weighted
+
+
+def run_cli(*args, cwd):
+    env = dict(os.environ, MPLBACKEND="Agg")
+    return subprocess.run(
+        [sys.executable, "-m", "implicitmesh", *map(str, args)],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def table_value(stdout: str, key: str) -> str:
+    m = re.search(rf"^\s*{key}\s+(.+?)\s*$", stdout, flags=re.MULTILINE)
+    assert m, f"no '{key}' row in the printed table:\n{stdout}"
+    return m.group(1)
+
+
+def load_closed(path):
+    m = trimesh.load(path, process=False)
+    assert isinstance(m, trimesh.Trimesh)
+    assert len(m.faces) > 0
+    assert m.is_watertight
+    assert m.is_winding_consistent
+    assert m.volume > 0
+    return m
+
+
+def test_demo(tmp_path):
+    out = tmp_path / "demo"
+    r = run_cli("demo", "-o", out, "--resolution", 48, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    ply, png = out / "knot.ply", out / "knot.png"
+    assert ply.is_file() and ply.stat().st_size > 0
+    assert png.is_file() and png.stat().st_size > 0
+    # The table.
+    assert table_value(r.stdout, "watertight") == "yes"
+    assert table_value(r.stdout, "genus") == "1"
+    assert "48x48x48" in table_value(r.stdout, "method")
+    # The PLY is the mesh the table describes: closed, genus 1 (the knot), same triangle count.
+    m = load_closed(ply)
+    assert genus_of(m.euler_number) == 1
+    assert int(table_value(r.stdout, "triangles").replace(",", "")) == len(m.faces)
+    # The PNG is a real picture, not a blank canvas.
+    import matplotlib.image
+
+    img = matplotlib.image.imread(png)
+    assert img.ndim == 3 and img.shape[2] in (3, 4)
+    assert img.shape[0] > 100 and img.shape[1] > 100
+    assert np.asarray(img[..., :3], dtype=float).std() > 0.01
+    # Nothing was written outside the output folder.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo"]
+
+
+def test_reconstruct_mesh_ply(mesh_dir, tmp_path):
+    src = mesh_dir / "torus2_800.ply"
+    out = tmp_path / "torus2_out.ply"
+    r = run_cli("reconstruct", src, "-o", out, "--resolution", 48, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert table_value(r.stdout, "watertight") == "yes"
+    m = load_closed(out)
+    assert m.body_count == 1
+    assert genus_of(m.euler_number) == 2
+    assert table_value(r.stdout, "genus") == "2"
+    # The reconstruction lies where the input is.
+    src_mesh = trimesh.load(src, process=False)
+    np.testing.assert_allclose(m.bounds, src_mesh.bounds, atol=0.05)
+
+
+def test_reconstruct_xyz_points_with_normals(mesh_dir, tmp_path):
+    src = trimesh.load(mesh_dir / "star_800.ply", process=False)
+    v, f = np.asarray(src.vertices), np.asarray(src.faces)
+    xyz = tmp_path / "star.xyz"
+    np.savetxt(xyz, np.hstack([v, vertex_normals_area_weighted(v, f)]))
+    out = tmp_path / "star_out.ply"
+    r = run_cli("reconstruct", xyz, "-o", out, "--resolution", 40, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert table_value(r.stdout, "watertight") == "yes"
+    m = load_closed(out)
+    assert genus_of(m.euler_number) == 0
+    np.testing.assert_allclose(m.bounds, src.bounds, atol=0.05)
+
+
+def test_missing_input_file(tmp_path):
+    missing = tmp_path / "no_such_mesh.ply"
+    out = tmp_path / "out.ply"
+    r = run_cli("reconstruct", missing, "-o", out, "--resolution", 16, cwd=tmp_path)
+    assert r.returncode == 2
+    assert "error" in r.stderr.lower()
+    assert "no_such_mesh" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert not out.exists()
+
+
+def test_xyz_with_too_few_columns(tmp_path):
+    xyz = tmp_path / "bad.xyz"
+    np.savetxt(xyz, np.random.default_rng(0).normal(size=(20, 5)))
+    out = tmp_path / "out.ply"
+    r = run_cli("reconstruct", xyz, "-o", out, "--resolution", 16, cwd=tmp_path)
+    assert r.returncode == 2
+    assert "error" in r.stderr.lower() and "6 columns" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert not out.exists()
