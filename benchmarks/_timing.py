@@ -23,6 +23,8 @@ from typing import Any, Callable, Sequence
 __all__ = [
     "Timing",
     "timeit_median",
+    "cpu_snapshot",
+    "foreign_load",
     "loadavg",
     "cpu_model",
     "openblas_threads",
@@ -44,6 +46,7 @@ class Timing:
     warmup: int
     result: Any = field(default=None, repr=False)  # what the last call returned
     cpu_times: list[float] = field(default_factory=list)  # process CPU seconds (all threads) per run
+    foreign_load: float | None = None  # cores busy with other processes during the timed runs
 
     @property
     def median(self) -> float:
@@ -72,11 +75,12 @@ class Timing:
             "median": self.median,
             "runs": self.runs,
             "cpu_per_wall": self.cpu_per_wall,
+            "foreign_load": self.foreign_load,
         }
 
     @classmethod
     def from_json(cls, d: dict) -> "Timing":
-        return cls(list(d["times"]), int(d["warmup"]), None, list(d.get("cpu_times", [])))
+        return cls(list(d["times"]), int(d["warmup"]), None, list(d.get("cpu_times", [])), d.get("foreign_load"))
 
 
 def timeit_median(fn: Callable[[], Any], runs: int = 5, warmup: int = 1) -> Timing:
@@ -88,13 +92,38 @@ def timeit_median(fn: Callable[[], Any], runs: int = 5, warmup: int = 1) -> Timi
     for _ in range(warmup):
         result = fn()
     times, cpu = [], []
+    s0 = cpu_snapshot()
     for _ in range(runs):
         c0 = time.process_time()
         t0 = time.perf_counter()
         result = fn()
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
-    return Timing(times, warmup, result, cpu)
+    return Timing(times, warmup, result, cpu, foreign_load(s0, cpu_snapshot()))
+
+
+def cpu_snapshot() -> tuple[float, float, float] | None:
+    """(wall, CPU seconds busy on the whole machine, CPU seconds of this process and its waited-for
+    children) — for :func:`foreign_load`. None where /proc/stat is missing."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(x) for x in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    tick = os.sysconf("SC_CLK_TCK")
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    busy = (sum(fields[:8]) - idle) / tick  # user nice system idle iowait irq softirq steal
+    t = os.times()
+    own = t.user + t.system + t.children_user + t.children_system
+    return time.monotonic(), busy, own
+
+
+def foreign_load(a, b) -> float | None:
+    """Average number of cores other processes kept busy between two :func:`cpu_snapshot` calls
+    (machine-wide busy CPU time minus our own, over the wall time; ±0.1 from tick granularity)."""
+    if a is None or b is None or b[0] - a[0] <= 0:
+        return None
+    return max(0.0, ((b[1] - a[1]) - (b[2] - a[2])) / (b[0] - a[0]))
 
 
 def loadavg() -> tuple[float, float, float]:

@@ -32,6 +32,8 @@ sys.path.insert(0, str(HERE))
 
 from _timing import (  # noqa: E402  (no numpy at import time: workers set OPENBLAS_NUM_THREADS first)
     Timing,
+    cpu_snapshot,
+    foreign_load,
     fmt_ratio,
     fmt_s,
     loadavg,
@@ -171,6 +173,8 @@ def bench(a: argparse.Namespace) -> str:
     R_GRID = 1 if quick else 2  # runs of the slow scipy grid pipeline (no warm-up)
     script = str(Path(__file__).resolve())
     load_before = loadavg()
+    snap_before = cpu_snapshot()
+    core_built = _mtime(implicitmesh._core.__file__)  # before the run: the build being measured
     started = _dt.datetime.now().astimezone()
     log(f"load average before: {load_before}")
 
@@ -293,7 +297,11 @@ def bench(a: argparse.Namespace) -> str:
     f_iso2_tris = int(np.asarray(f_iso2.facets).shape[0])
 
     load_after = loadavg()
-    log(f"load average after: {load_after}")
+    run_foreign = foreign_load(snap_before, cpu_snapshot())
+    if _mtime(implicitmesh._core.__file__) != core_built:
+        warnings.append("implicitmesh's extension was rebuilt during this run (another engineer?): "
+                        "numbers are for the build loaded at the start.")
+    log(f"load average after: {load_after}; other processes used {run_foreign} cores on average")
     tmp.cleanup()
 
     # ---------------------------------------------------------------- markdown
@@ -315,9 +323,13 @@ def bench(a: argparse.Namespace) -> str:
     )
     L.append("")
     L.append(machine_markdown(info, {
-        "implicitmesh": f"{implicitmesh.__version__} (Rust core, its own threads; OpenBLAS not used)",
+        "implicitmesh": f"{implicitmesh.__version__} (Rust core, its own threads; OpenBLAS not used; "
+        f"extension built {core_built})",
         "scipy runs (subprocesses)": "; ".join(f"{k}: {v}" for k, v in threads_note.items()),
         "load average (1/5/15 min) before → after": f"{load_before} → {load_after}",
+        "other processes during the run": "—" if run_foreign is None else
+        f"{run_foreign:.2f} of {os.cpu_count()} cores on average (machine busy time from /proc/stat minus this "
+        "run's own CPU time; column *other load* gives the same per case, over its timed runs)",
     }))
     L.append("")
 
@@ -327,22 +339,22 @@ def bench(a: argparse.Namespace) -> str:
     fi, fm = t_interp.median, t_from_mesh.median
     rows = [
         ["ours `from_mesh` (normals + constraint placement + solve)", fmt_s(fm), t_from_mesh.runs,
-         _cpw(t_from_mesh), "—", "—", f"{surface.residual:.1e}"],
-        ["ours `interpolate(points, values)`", fmt_s(fi), t_interp.runs, _cpw(t_interp), "—", "—",
+         _cpw(t_from_mesh), _fl(t_from_mesh), "—", "—", f"{surface.residual:.1e}"],
+        ["ours `interpolate(points, values)`", fmt_s(fi), t_interp.runs, _cpw(t_interp), _fl(t_interp), "—", "—",
          f"{ours_fit_resid:.1e}"],
     ]
     for label in sc_fit:
         t = sc_fit[label]
         mark = " **(faster, reported)**" if label == best_fit else ""
         rows.append([f"scipy `RBFInterpolator(kernel='cubic', degree=1)`, {label}{mark}", fmt_s(t.median), t.runs,
-                     _cpw(t), fmt_ratio(t.median, fi), fmt_ratio(t.median, fm),
+                     _cpw(t), _fl(t), fmt_ratio(t.median, fi), fmt_ratio(t.median, fm),
                      f"{scipy_runs[label]['fit_residual']:.1e}"])
     for name, desc in (("default", "defaults (FGMRES + DDM, rel. tol 1e-6)"),
                        ("direct", "direct solve (`naive_solve_threshold=4096`)")):
         t = ferreus_fit[name]
-        rows.append([f"ferreus-rbf Cubic + Linear drift, {desc}", fmt_s(t.median), t.runs, _cpw(t),
+        rows.append([f"ferreus-rbf Cubic + Linear drift, {desc}", fmt_s(t.median), t.runs, _cpw(t), _fl(t),
                      fmt_ratio(t.median, fi), fmt_ratio(t.median, fm), f"{ferreus_resid[name]:.1e}"])
-    L.append(md_table(["case", "s", "runs", "CPU/wall", "ratio vs ours interpolate", "ratio vs ours from_mesh",
+    L.append(md_table(["case", "s", "runs", "CPU/wall", "other load", "ratio vs ours interpolate", "ratio vs ours from_mesh",
                        "max residual at constraints"], rows))
     L.append("")
 
@@ -350,23 +362,23 @@ def bench(a: argparse.Namespace) -> str:
     L.append(f"### 2. Evaluation of {n_points:,} random points in [-1, 1]³, {len(P):,} centres")
     L.append("")
     te = t_eval.median
-    rows = [["ours `surface.evaluate`", fmt_s(te), t_eval.runs, _cpw(t_eval), "—", "0 (reference)"]]
+    rows = [["ours `surface.evaluate`", fmt_s(te), t_eval.runs, _cpw(t_eval), _fl(t_eval), "—", "0 (reference)"]]
     for label in sc_eval:
         t = sc_eval[label]
         mark = " **(faster, reported)**" if label == best_eval else ""
         d = f"{diff_scipy:.1e}" if label == best_eval else "(same code)"
-        rows.append([f"scipy `RBFInterpolator.__call__`, {label}{mark}", fmt_s(t.median), t.runs, _cpw(t),
+        rows.append([f"scipy `RBFInterpolator.__call__`, {label}{mark}", fmt_s(t.median), t.runs, _cpw(t), _fl(t),
                      fmt_ratio(t.median, te), d])
     rows.append(["ferreus-rbf direct, one-shot `evaluate`", fmt_s(t_f_direct.median), t_f_direct.runs,
-                 _cpw(t_f_direct), fmt_ratio(t_f_direct.median, te), f"{diff_f_direct:.1e}"])
+                 _cpw(t_f_direct), _fl(t_f_direct), fmt_ratio(t_f_direct.median, te), f"{diff_f_direct:.1e}"])
     rows.append(["ferreus-rbf FMM, one-shot `evaluate` (builds the FMM tree)", fmt_s(t_f_fmm.median), t_f_fmm.runs,
-                 _cpw(t_f_fmm), fmt_ratio(t_f_fmm.median, te), f"{diff_f_fmm:.1e}"])
+                 _cpw(t_f_fmm), _fl(t_f_fmm), fmt_ratio(t_f_fmm.median, te), f"{diff_f_fmm:.1e}"])
     rows.append(["ferreus-rbf FMM, `evaluate_targets` with a prebuilt evaluator", fmt_s(t_f_fmm_targets.median),
-                 t_f_fmm_targets.runs, _cpw(t_f_fmm_targets), fmt_ratio(t_f_fmm_targets.median, te),
+                 t_f_fmm_targets.runs, _cpw(t_f_fmm_targets), _fl(t_f_fmm_targets), fmt_ratio(t_f_fmm_targets.median, te),
                  f"{diff_f_fmm_targets:.1e}"])
     rows.append(["(ferreus-rbf FMM `build_evaluator` alone, no warm-up)", fmt_s(t_f_fmm_build.median),
-                 t_f_fmm_build.runs, _cpw(t_f_fmm_build), "", ""])
-    L.append(md_table(["case", "s", "runs", "CPU/wall", "ratio peer/ours", "max abs diff vs ours interpolate"], rows))
+                 t_f_fmm_build.runs, _cpw(t_f_fmm_build), _fl(t_f_fmm_build), "", ""])
+    L.append(md_table(["case", "s", "runs", "CPU/wall", "other load", "ratio peer/ours", "max abs diff vs ours interpolate"], rows))
     L.append("")
     verdict = "OK" if rel_scipy <= REL_TOL else "**WARNING: above tolerance**"
     L.append(
@@ -384,21 +396,21 @@ def bench(a: argparse.Namespace) -> str:
     ge, gm = sc_grid["grid_eval_times"], sc_grid["grid_mc_times"]
     rows = [
         ["ours `polygonize(surface, resolution=%d, method='dense')` (with normals)" % res, fmt_s(tp), t_poly.runs,
-         _cpw(t_poly), "—", f"{mesh.stats['evaluations']:,} (+{mesh.stats['normal_evaluations']:,} gradients)",
+         _cpw(t_poly), _fl(t_poly), "—", f"{mesh.stats['evaluations']:,} (+{mesh.stats['normal_evaluations']:,} gradients)",
          f"{len(mesh.faces):,}", f"{len(mesh.vertices):,}"],
-        ["ours, `normals=False`", fmt_s(t_poly_nn.median), t_poly_nn.runs, _cpw(t_poly_nn),
+        ["ours, `normals=False`", fmt_s(t_poly_nn.median), t_poly_nn.runs, _cpw(t_poly_nn), _fl(t_poly_nn),
          fmt_ratio(t_poly_nn.median, tp) + " (of ours with normals)", f"{t_poly_nn.result.stats['evaluations']:,}",
          f"{len(t_poly_nn.result.faces):,}", f"{len(t_poly_nn.result.vertices):,}"],
         [f"scipy grid evaluation + skimage `marching_cubes` ({grid_label}; no warm-up)", fmt_s(t_sc_grid.median),
-         t_sc_grid.runs, _cpw(t_sc_grid), fmt_ratio(t_sc_grid.median, tp), f"{sc_grid['grid_evaluations']:,}",
+         t_sc_grid.runs, _cpw(t_sc_grid), _fl(t_sc_grid), fmt_ratio(t_sc_grid.median, tp), f"{sc_grid['grid_evaluations']:,}",
          f"{sc_grid['grid_triangles']:,}", f"{sc_grid['grid_vertices']:,}"],
-        ["  of which scipy grid evaluation", fmt_s(_median(ge)), len(ge), "", fmt_ratio(_median(ge), tp), "", "", ""],
+        ["  of which scipy grid evaluation", fmt_s(_median(ge)), len(ge), "", "", fmt_ratio(_median(ge), tp), "", "", ""],
         ["  of which skimage marching_cubes (Lewiner)", fmt_s(_median(gm)), len(gm), "", "", "", "", ""],
         [f"ferreus-rbf `build_isosurface(extents, resolution={h_iso:.5f}, isovalue=0.0)` (marching tetrahedra, "
-         "seeded)", fmt_s(t_f_iso.median), t_f_iso.runs, _cpw(t_f_iso), fmt_ratio(t_f_iso.median, tp),
+         "seeded)", fmt_s(t_f_iso.median), t_f_iso.runs, _cpw(t_f_iso), _fl(t_f_iso), fmt_ratio(t_f_iso.median, tp),
          f"{counter['points']:,} ({counter['calls']} batches)†", f"{f_iso_tris:,}", f"{f_iso_verts:,}"],
     ]
-    L.append(md_table(["case", "s", "runs", "CPU/wall", "ratio peer/ours", "field evaluations (exact)",
+    L.append(md_table(["case", "s", "runs", "CPU/wall", "other load", "ratio peer/ours", "field evaluations (exact)",
                        "triangles", "vertices"], rows))
     L.append("")
     L.append(
@@ -432,10 +444,21 @@ def _command() -> str:
     return " ".join(["python", *out])
 
 
+def _mtime(path: str) -> str:
+    try:
+        return _dt.datetime.fromtimestamp(os.path.getmtime(path)).astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    except OSError:
+        return "unknown"
+
+
 def _median(xs):
     import statistics
 
     return statistics.median(xs) if xs else None
+
+
+def _fl(t: Timing) -> str:
+    return "—" if t.foreign_load is None else f"{t.foreign_load:.1f}"
 
 
 def _cpw(t: Timing) -> str:

@@ -25,7 +25,23 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from _timing import loadavg, machine_info, machine_markdown  # noqa: E402
+from _timing import cpu_snapshot, foreign_load, loadavg, machine_info, machine_markdown  # noqa: E402
+
+
+def wait_idle(max_seconds: float, threshold: float = 0.3, window: float = 20.0) -> str:
+    """Waits (up to ``max_seconds``) until other processes have used under ``threshold`` cores over
+    ``window`` seconds; returns what happened, for the header."""
+    t0 = time.monotonic()
+    while True:
+        a = cpu_snapshot()
+        time.sleep(window)
+        load = foreign_load(a, cpu_snapshot())
+        waited = time.monotonic() - t0
+        if load is None or load < threshold:
+            return f"machine idle (other processes {load if load is None else round(load, 2)} cores) after {waited:.0f} s"
+        if waited >= max_seconds:
+            return f"gave up waiting for an idle machine after {waited:.0f} s (other processes {load:.2f} cores)"
+        print(f"[run_all] other processes use {load:.2f} cores; waiting", file=sys.stderr, flush=True)
 
 
 def git_describe() -> str:
@@ -44,6 +60,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="pass --quick to every bench (smoke test)")
     p.add_argument("--only", nargs="*", default=None, help="bench names to run (bench_NAME.py), default all")
     p.add_argument("--output", default=str(ROOT / "BENCHMARKS.md"), help="combined markdown (default BENCHMARKS.md)")
+    p.add_argument("--wait-idle", type=float, default=0.0, metavar="SECONDS",
+                   help="before each bench, wait up to SECONDS for other processes to use < 0.3 cores")
     a = p.parse_args(argv)
 
     scripts = sorted(HERE.glob("bench_*.py"))
@@ -57,12 +75,15 @@ def main(argv=None) -> int:
 
     started = _dt.datetime.now().astimezone()
     load_before = loadavg()
+    snap = cpu_snapshot()
     t0 = time.perf_counter()
-    sections, summary = [], []
+    sections, summary, waits = [], [], []
     for script in scripts:
         name = script.stem[len("bench_"):]
         out = results / f"{name}.md"
         cmd = [sys.executable, str(script), "--output", str(out)] + (["--quick"] if a.quick else [])
+        if a.wait_idle > 0:
+            waits.append(f"`{script.name}`: {wait_idle(a.wait_idle)}")
         print(f"[run_all] {' '.join(cmd)}", file=sys.stderr, flush=True)
         s0 = time.perf_counter()
         proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
@@ -75,6 +96,7 @@ def main(argv=None) -> int:
             summary.append(f"`{script.name}` {dt:.0f} s")
     total = time.perf_counter() - t0
     load_after = loadavg()
+    other = foreign_load(snap, cpu_snapshot())
 
     info = machine_info(("numpy", "scipy", "scikit-image", "ferreus_rbf", "implicitmesh"))
     argv = [os.path.relpath(x, ROOT) if x.startswith(str(ROOT) + os.sep) else x for x in sys.argv]
@@ -90,9 +112,14 @@ def main(argv=None) -> int:
         f"- Commit: {git_describe()}",
         machine_markdown(info),
         f"- Load average (1/5/15 min) before → after all runs: {load_before} → {load_after}",
+        f"- Other processes during all runs: "
+        + ("unknown" if other is None else f"{other:.2f} of {os.cpu_count()} cores on average")
+        + " (machine busy time from /proc/stat minus the benchmarks' own CPU time)",
         f"- Sections: {', '.join(summary)}; total {total:.0f} s",
-        "",
     ]
+    if waits:
+        header.append(f"- Waiting for an idle machine: {'; '.join(waits)}")
+    header.append("")
     text = "\n".join(header) + "\n" + "\n".join(s.rstrip() + "\n" for s in sections)
     Path(a.output).write_text(text)
     sys.stdout.write(text)

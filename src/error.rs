@@ -22,7 +22,7 @@ pub enum Error {
         distance: f64,
     },
     /// A request whose memory estimate exceeds the allowed limit.
-    #[error("{name}: this needs about {needed_mib} MiB, over the limit of {limit_mib} MiB; lower it or raise `memory_limit`")]
+    #[error("{name}: this needs about {needed_mib} MiB, over the limit of {limit_mib} MiB (memory_limit); lower it or raise `memory_limit`")]
     TooMuchMemory {
         name: &'static str,
         needed_mib: u64,

@@ -51,6 +51,29 @@ impl Lattice {
         })
     }
 
+    /// A lattice of cubic cells with `n` cells along the longest side of `min..max`; the other
+    /// sides get the whole number of cells that covers them, and grow symmetrically to it.
+    pub fn cubic(min: DVec3, max: DVec3, n: u32) -> Result<Self> {
+        // Validate the box and n first with the general constructor.
+        Lattice::new(min, max, [n, n, n])?;
+        let extent = max - min;
+        let h = extent.max_element() / n as f64;
+        let mut cells = [n; 3];
+        let mut lo = min;
+        let mut hi = max;
+        for k in 0..3 {
+            let c = ((extent[k] / h) * (1.0 - 1e-12)).ceil().max(1.0) as u32;
+            cells[k] = c.min(n);
+            let centre = 0.5 * (min[k] + max[k]);
+            let half = 0.5 * cells[k] as f64 * h;
+            if cells[k] != n {
+                lo[k] = centre - half;
+                hi[k] = centre + half;
+            }
+        }
+        Lattice::new(lo, hi, cells)
+    }
+
     /// Lattice points per axis (cells + 1).
     #[inline]
     pub fn points_per_axis(&self) -> [u32; 3] {
@@ -112,6 +135,34 @@ impl Lattice {
     }
 }
 
+/// Hasher for packed lattice keys (splitmix64 finaliser): keys are already unique integers, they
+/// only need their bits mixed so that both ends of the hash are well spread.
+#[derive(Default, Clone, Copy)]
+pub struct KeyHasher(u64);
+
+impl std::hash::Hasher for KeyHasher {
+    #[inline]
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(self.0 ^ b as u64);
+        }
+    }
+    #[inline]
+    fn write_u64(&mut self, i: u64) {
+        let mut z = i.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        self.0 = z ^ (z >> 31);
+    }
+}
+
+/// Hash map keyed by packed lattice keys.
+pub type KeyMap<V> = std::collections::HashMap<u64, V, std::hash::BuildHasherDefault<KeyHasher>>;
+
 /// Position of the surface crossing on the lattice edge from `a` (value `fa`) to `b` (value `fb`),
 /// where `a` is the lower end of the edge. Linear interpolation; callers pass the ends in lattice
 /// order so that every polygonizer gets the same bits.
@@ -148,6 +199,15 @@ mod tests {
         let l = Lattice::new(-DVec3::ONE, DVec3::ONE, [4, 4, 4]).unwrap();
         assert_eq!(l.num_points(), 125);
         assert_eq!(l.point([2, 2, 2]), DVec3::ZERO);
+    }
+
+    #[test]
+    fn cubic_cells() {
+        let l =
+            Lattice::cubic(DVec3::new(-1.0, -0.5, -0.1), DVec3::new(1.0, 0.5, 0.1), 64).unwrap();
+        assert_eq!(l.cells, [64, 32, 7]);
+        assert!((l.cell.x - l.cell.y).abs() < 1e-15 && (l.cell.x - l.cell.z).abs() < 1e-15);
+        assert!(l.origin.z <= -0.1 && l.max().z >= 0.1);
     }
 
     #[test]

@@ -126,6 +126,52 @@ impl Mesh {
     }
 }
 
+/// Triangle-by-triangle comparison of two meshes (see [`Mesh::compare`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Comparison {
+    /// Triangles of the first mesh missing from the second.
+    pub missing: usize,
+    /// Triangles of the second mesh not in the first.
+    pub extra: usize,
+    /// Triangles in both.
+    pub common: usize,
+}
+
+impl Mesh {
+    /// Each triangle as the exact bits of its corners, rotated so the smallest corner comes first
+    /// (orientation kept): equal for equal triangles whatever the vertex numbering.
+    fn triangle_keys(&self) -> std::collections::HashSet<[u64; 9]> {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let c = t.map(|i| {
+                    let p = self.vertices[i as usize];
+                    [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+                });
+                let m = (0..3).min_by_key(|&k| c[k]).unwrap();
+                let mut key = [0u64; 9];
+                for k in 0..3 {
+                    key[3 * k..3 * k + 3].copy_from_slice(&c[(m + k) % 3]);
+                }
+                key
+            })
+            .collect()
+    }
+
+    /// Compares triangles by exact vertex coordinates and orientation: `missing` counts the
+    /// triangles of `self` that `other` lacks (holes, when `self` is the dense reference).
+    pub fn compare(&self, other: &Mesh) -> Comparison {
+        let a = self.triangle_keys();
+        let b = other.triangle_keys();
+        let common = a.intersection(&b).count();
+        Comparison {
+            missing: a.len() - common,
+            extra: b.len() - common,
+            common,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

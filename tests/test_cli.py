@@ -117,3 +117,50 @@ def test_xyz_with_too_few_columns(tmp_path):
     assert "error" in r.stderr.lower() and "6 columns" in r.stderr
     assert "Traceback" not in r.stderr
     assert not out.exists()
+
+
+def write_point_ply(path, points, normals=None, binary=False):
+    """A PLY point set (vertices only) with float x y z and, if given, nx ny nz."""
+    names = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else [])
+    cols = np.hstack([points] + ([normals] if normals is not None else [])).astype(np.float32)
+    header = (
+        f"ply\nformat {'binary_little_endian' if binary else 'ascii'} 1.0\nelement vertex {len(cols)}\n"
+        + "".join(f"property float {k}\n" for k in names)
+        + "end_header\n"
+    )
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        if binary:
+            f.write(cols.astype("<f4").tobytes())
+        else:
+            f.write("".join(" ".join(repr(float(x)) for x in row) + "\n" for row in cols).encode("ascii"))
+
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_reconstruct_ply_point_set_with_normals(mesh_dir, tmp_path, capsys, binary):
+    """The documented input 'a PLY point set with nx ny nz', in both PLY encodings (run in-process
+    to keep the suite fast)."""
+    from implicitmesh.cli import main
+
+    src = trimesh.load(mesh_dir / "star_800.ply", process=False)
+    v, f = np.asarray(src.vertices), np.asarray(src.faces)
+    ply = tmp_path / "points.ply"
+    write_point_ply(ply, v, vertex_normals_area_weighted(v, f), binary=binary)
+    out = tmp_path / "out.ply"
+    code = main(["reconstruct", str(ply), "-o", str(out), "--resolution", "32"])
+    assert code == 0
+    assert table_value(capsys.readouterr().out, "watertight") == "yes"
+    m = load_closed(out)
+    assert genus_of(m.euler_number) == 0
+
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_ply_point_set_without_normals_is_a_clean_error(tmp_path, capsys, binary):
+    from implicitmesh.cli import main
+
+    ply = tmp_path / "points.ply"
+    write_point_ply(ply, np.random.default_rng(0).normal(size=(50, 3)), binary=binary)
+    code = main(["reconstruct", str(ply), "-o", str(tmp_path / "out.ply"), "--resolution", "16"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "error" in err and "normals" in err

@@ -288,6 +288,37 @@ def test_ambiguity_choices_on_one_ambiguous_face():
     assert compare(default, sep)["missing"] == 0 and compare(default, sep)["extra"] == 0
 
 
+CUBE_CORNERS = np.array([[c & 1, (c >> 1) & 1, (c >> 2) & 1] for c in range(8)])
+
+
+def components(inside_corners: np.ndarray, max_manhattan: int) -> int:
+    """Connected groups of the given cube corners, two corners being adjacent when they differ in
+    at most `max_manhattan` coordinates (1: along a cube edge; 2: also across a face diagonal)."""
+    from scipy.sparse.csgraph import connected_components
+
+    c = CUBE_CORNERS[inside_corners]
+    adjacent = np.abs(c[:, None, :] - c[None, :, :]).sum(axis=2) <= max_manhattan
+    return connected_components(adjacent, directed=False)[0]
+
+
+def test_every_cube_configuration_both_choices():
+    """All 254 non-trivial inside/outside patterns of one cube (the cube in the middle of a 3³-cell
+    lattice, every other lattice point outside): both choices give closed outward surfaces;
+    SEPARATE gives one piece per group of inside corners connected along cube edges, JOIN one per
+    group connected along edges or face diagonals."""
+    for case in range(1, 255):
+        inside = np.array([(case >> c) & 1 for c in range(8)], dtype=bool)
+        values = np.ones((4, 4, 4))
+        for c in np.flatnonzero(inside):
+            values[tuple(1 + CUBE_CORNERS[c])] = -1.0
+        field = lattice_field(values)
+        for ambiguity, reach in ((Ambiguity.SEPARATE, 1), (Ambiguity.JOIN, 2)):
+            mesh = polygonize(field, bounds=BOX, resolution=3, ambiguity=ambiguity, normals=False)
+            tm = mesh.to_trimesh()
+            assert tm.is_watertight and tm.is_winding_consistent and mesh.volume > 0, (case, ambiguity)
+            assert tm.body_count == components(inside, reach), (case, ambiguity)
+
+
 def random_sign_lattice(n=12, seed=3):
     rng = np.random.default_rng(seed)
     values = rng.choice([-1.0, 1.0], size=(n + 1,) * 3) * rng.uniform(0.5, 1.5, size=(n + 1,) * 3)

@@ -71,4 +71,7 @@ def polygonize(
     normals: bool = True,
     batch_size: int = 262144,
     memory_limit: int | None = None,
+    start_level: int | None = None,
+    safety: float | None = None,
+    corner_test: bool | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...

@@ -69,8 +69,10 @@ def _read_input(path: Path):
         return "mesh", np.asarray(loaded.vertices), np.asarray(loaded.faces)
     if isinstance(loaded, trimesh.PointCloud):
         raw = loaded.metadata.get("_ply_raw", {}).get("vertex", {}).get("data")
-        if raw is not None and all(k in raw.dtype.names for k in ("nx", "ny", "nz")):
-            normals = np.stack([raw["nx"], raw["ny"], raw["nz"]], axis=1).astype(np.float64)
+        # Binary PLY gives a structured array, ASCII PLY a dict of columns.
+        names = raw.dtype.names if hasattr(raw, "dtype") else (list(raw) if isinstance(raw, dict) else [])
+        if raw is not None and names and all(k in names for k in ("nx", "ny", "nz")):
+            normals = np.stack([np.asarray(raw[k]).ravel() for k in ("nx", "ny", "nz")], axis=1).astype(np.float64)
             return "points", np.asarray(loaded.vertices), normals
         raise ValueError(f"{path}: a point set needs normals (PLY properties nx, ny, nz)")
     raise ValueError(f"{path}: neither a triangle mesh nor a point set with normals")

@@ -59,7 +59,7 @@ def render_png(
     ax.set_xlim(c[0] - r, c[0] + r)
     ax.set_ylim(c[1] - r, c[1] + r)
     ax.set_zlim(c[2] - r, c[2] + r)
-    ax.set_box_aspect((1, 1, 1))
+    ax.set_box_aspect((1, 1, 1), zoom=1.45)
     ax.view_init(elev=elev, azim=azim)
     ax.set_axis_off()
     if title:

@@ -13,7 +13,7 @@ from .mesh import Mesh
 __all__ = ["Ambiguity", "polygonize", "METHODS"]
 
 #: Polygonizers available to :func:`polygonize`.
-METHODS = ("dense",)
+METHODS = ("dense", "octree")
 
 
 class Ambiguity(str, enum.Enum):
@@ -42,6 +42,9 @@ def polygonize(
     normals: bool = True,
     batch_size: int = 262144,
     memory_limit: int | None = None,
+    start_level: int | None = None,
+    safety: float | None = None,
+    corner_test: bool | None = None,
 ) -> Mesh:
     """Triangulates the zero set of a field (negative inside, positive outside).
 
@@ -56,9 +59,17 @@ def polygonize(
         field's ``bounds`` attribute (a :class:`VariationalSurface` has one); required for
         callables without it.
     resolution : int or (3,) ints
-        Cells per axis (one int for all three axes). Default 64.
-    method : {"dense"}
+        One int: cells along the longest side of ``bounds``, with cubic cells (the shorter sides
+        get the whole number of cells that covers them and grow symmetrically to fit). Three
+        ints: cells per axis exactly over ``bounds``. Default 64.
+    method : {"dense", "octree"}
         ``"dense"``: plain marching cubes over every cell of the lattice (the reference).
+        ``"octree"``: hierarchical sampling (Cuno et al.): a block of cells is skipped when
+        ``|f(centre)| > safety × circumradius``, so only blocks near the surface are refined; the
+        leaves get the same marching cubes, so the mesh equals the dense one wherever no block is
+        rejected wrongly. Safe for fields with ``|f| ≤ distance to the surface`` near it: exact
+        signed distances, and variational surfaces with w < d (the defaults). For other fields
+        (e.g. ``3 × distance``) raise ``safety`` or check with :func:`compare`.
     ambiguity : Ambiguity or {"separate", "join"}
         How ambiguous cube faces are split. Default ``SEPARATE``.
     normals : bool
@@ -67,6 +78,15 @@ def polygonize(
         Points per batched field call.
     memory_limit : int, optional
         Refuse lattices whose memory estimate exceeds this many bytes (default 8 GiB).
+    start_level : int, optional
+        Octree only: level of the first rejection test; 1 (default) tests the root's eight
+        octants (the paper's r = √3/2 when the root is [-1, 1]³), each further level halves r.
+    safety : float, optional
+        Octree only: factor on the circumradius in the rejection test (default 1.0).
+    corner_test : bool, optional
+        Octree only: also reject leaf cells by the value at their corner shared with the parent
+        block (same test, radius = the cell's diagonal) before evaluating their other corners.
+        Default True; False samples exactly as Cuno et al. §4.3.
 
     Returns
     -------
@@ -114,6 +134,9 @@ def polygonize(
         normals=normals,
         batch_size=batch_size,
         memory_limit=memory_limit,
+        start_level=start_level,
+        safety=safety,
+        corner_test=corner_test,
     )
     stats["triangles"] = len(f)
     stats["vertices"] = len(v)

@@ -30,7 +30,7 @@ class Sphere:
 
     @property
     def bounds(self) -> np.ndarray:
-        """(2, 3) float64: a box 10 % larger than the sphere."""
+        """(2, 3) float64: a cube 10 % larger than the sphere."""
         c = np.asarray(self.center, dtype=float)
         r = 1.1 * self.radius
         return np.stack([c - r, c + r])
@@ -67,11 +67,10 @@ class Torus:
 
     @property
     def bounds(self) -> np.ndarray:
-        """(2, 3) float64: a box 10 % larger than the torus."""
+        """(2, 3) float64: a cube 10 % larger than the torus."""
         c = np.asarray(self.center, dtype=float)
         r = 1.1 * (self.major + self.minor)
-        h = 1.1 * self.minor
-        return np.stack([c - [r, r, h], c + [r, r, h]])
+        return np.stack([c - r, c + r])
 
     @property
     def area(self) -> float:

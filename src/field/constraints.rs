@@ -159,6 +159,16 @@ pub fn unit_normals(name: &'static str, normals: &[DVec3]) -> Result<Vec<DVec3>>
 /// Places boundary and normal constraints for `points` with `normals` (one per point, any
 /// non-zero length).
 pub fn place(points: &[DVec3], normals: &[DVec3], settings: &Settings) -> Result<Constraints> {
+    place_capped(points, normals, settings, None)
+}
+
+/// As [`place`], with an optional per-point cap on w_i/d_i (see [`crease_caps`]).
+pub fn place_capped(
+    points: &[DVec3],
+    normals: &[DVec3],
+    settings: &Settings,
+    caps: Option<&[f64]>,
+) -> Result<Constraints> {
     check_points("points", points)?;
     if normals.len() != points.len() {
         return Err(Error::invalid(
@@ -217,7 +227,11 @@ pub fn place(points: &[DVec3], normals: &[DVec3], settings: &Settings) -> Result
     values.extend(std::iter::repeat_n(0.0, n));
     for i in 0..n {
         cpoints.push(points[i] + normals[i] * offsets[i]);
-        values.push(ratio * offsets[i]);
+        let r = match caps {
+            Some(c) if ratio > 0.0 => ratio.min(c[i]),
+            _ => ratio,
+        };
+        values.push(r * offsets[i]);
     }
     Ok(Constraints {
         points: cpoints,
@@ -225,6 +239,28 @@ pub fn place(points: &[DVec3], normals: &[DVec3], settings: &Settings) -> Result
         offsets,
         boundary: n,
     })
+}
+
+/// Per-vertex caps on w_i/d_i for a mesh: 0.9 × the smallest cosine between the vertex normal
+/// and the normals of the faces around it, at least 0.5 (lower caps at the corners of a CAD part
+/// made the fitted field negative far from the data).
+///
+/// The normal constraint q + d n lies only d·cos θ from the plane of an adjacent face whose
+/// normal makes the angle θ with n. On smooth meshes cos θ ≈ 1 and the cap (≈ 0.9) is above
+/// Cuno's w/d = 3/4, so nothing changes; at a sharp crease (fandisk) w = 0.75 d would exceed the
+/// distance to the surface and break the pseudo-distance property |f| ≤ distance that the octree
+/// polygonizer relies on, so w is lowered there.
+pub fn crease_caps(vertices: &[DVec3], faces: &[[u32; 3]], normals: &[DVec3]) -> Vec<f64> {
+    let mut cmin = vec![1.0f64; vertices.len()];
+    for f in faces {
+        let [a, b, c] = f.map(|v| vertices[v as usize]);
+        let nf = (b - a).cross(c - a).normalize_or_zero();
+        for &v in f {
+            let v = v as usize;
+            cmin[v] = cmin[v].min(normals[v].dot(nf));
+        }
+    }
+    cmin.iter().map(|c| (0.9 * c).max(0.5)).collect()
 }
 
 /// Checks a triangle mesh and returns its vertices with exact duplicates merged, the faces
@@ -259,7 +295,12 @@ pub fn mesh_vertices_normals(
     let mut order: Vec<u32> = (0..vertices.len() as u32).collect();
     let key = |i: u32| {
         let p = vertices[i as usize];
-        [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+        // + 0.0 turns -0.0 into 0.0, so the two zeros merge.
+        [
+            (p.x + 0.0).to_bits(),
+            (p.y + 0.0).to_bits(),
+            (p.z + 0.0).to_bits(),
+        ]
     };
     order.sort_unstable_by_key(|&i| key(i));
     let mut remap = vec![0u32; vertices.len()];

@@ -220,7 +220,11 @@ macro_rules! dispatch {
 }
 
 dispatch!(sum_values, values_avx2, [f64; LANES]);
-dispatch!(sum_values_gradients, values_gradients_avx2, [[f64; LANES]; 4]);
+dispatch!(
+    sum_values_gradients,
+    values_gradients_avx2,
+    [[f64; LANES]; 4]
+);
 
 fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]

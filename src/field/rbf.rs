@@ -105,8 +105,11 @@ impl VariationalSurface {
         placement: &constraints::Settings,
         settings: &Settings,
     ) -> Result<Self> {
-        let (v, _, n) = constraints::mesh_vertices_normals(vertices, faces)?;
-        Self::fit(&v, &n, placement, settings)
+        let (v, f, n) = constraints::mesh_vertices_normals(vertices, faces)?;
+        check_system_memory(2 * v.len(), settings.memory_limit)?;
+        let caps = constraints::crease_caps(&v, &f, &n);
+        let c = constraints::place_capped(&v, &n, placement, Some(&caps))?;
+        Self::solve(c, settings)
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
@@ -377,7 +380,7 @@ fn check_system_memory(n: usize, limit: u64) -> Result<()> {
     if bytes > limit {
         return Err(Error::TooMuchMemory {
             name: "points",
-            needed_mib: bytes >> 20,
+            needed_mib: bytes.div_ceil(1 << 20),
             limit_mib: limit >> 20,
         });
     }

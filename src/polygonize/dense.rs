@@ -176,7 +176,7 @@ pub fn polygonize<F: Field + ?Sized>(
     }
     stats.cells_visited = lattice.num_cells();
     debug_assert!(mesh.triangles.iter().flatten().all(|&v| v != NONE));
-    compute_normals(field, lattice, &mut mesh, settings, &mut stats);
+    compute_normals(field, lattice, &mut mesh, settings, &mut stats)?;
     Ok((mesh, stats))
 }
 

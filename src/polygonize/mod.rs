@@ -6,6 +6,7 @@
 
 pub mod cell;
 pub mod dense;
+pub mod octree;
 pub mod table;
 
 pub use table::{Ambiguity, CaseTable};
@@ -99,7 +100,7 @@ pub fn check_memory(bytes: u64, limit: u64) -> Result<()> {
     if bytes > limit {
         return Err(Error::TooMuchMemory {
             name: "resolution",
-            needed_mib: bytes >> 20,
+            needed_mib: bytes.div_ceil(1 << 20),
             limit_mib: limit >> 20,
         });
     }
@@ -137,11 +138,11 @@ pub fn compute_normals<F: Field + ?Sized>(
     mesh: &mut Mesh,
     settings: &Settings,
     stats: &mut Stats,
-) {
+) -> Result<()> {
     let t = Instant::now();
     if !settings.normals {
         mesh.normals.clear();
-        return;
+        return Ok(());
     }
     let mut g = vec![DVec3::ZERO; mesh.vertices.len()];
     let batch = settings.batch.max(1);
@@ -161,10 +162,18 @@ pub fn compute_normals<F: Field + ?Sized>(
             stats.normal_evaluations += mesh.vertices.len() as u64;
         }
     }
+    if let Some(i) = g.iter().position(|v| !v.is_finite()) {
+        let p = mesh.vertices[i];
+        return Err(Error::FieldNotFinite {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        });
+    }
     let mut fallback: Option<Vec<DVec3>> = None;
     for (i, gi) in g.iter_mut().enumerate() {
         let l = gi.length();
-        if l > 0.0 && l.is_finite() {
+        if l > 0.0 {
             *gi /= l;
         } else {
             let f = fallback.get_or_insert_with(|| mesh.face_normals_at_vertices());
@@ -173,4 +182,5 @@ pub fn compute_normals<F: Field + ?Sized>(
     }
     mesh.normals = g;
     stats.add_time("normals", t);
+    Ok(())
 }

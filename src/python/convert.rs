@@ -53,7 +53,31 @@ pub fn values(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<f64>> 
 
 /// An (F, 3) array of vertex indices, checked non-negative and below 2³².
 pub fn triangles(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[u32; 3]>> {
-    let arr = asarray(obj, "int64")
+    let py = obj.py();
+    let raw = py.import("numpy")?.call_method1("asarray", (obj,))?;
+    let kind: String = raw.getattr("dtype")?.getattr("kind")?.extract()?;
+    match kind.as_str() {
+        "i" | "u" => {}
+        "f" => {
+            let all_integral: bool = py
+                .import("numpy")?
+                .call_method1(
+                    "all",
+                    (raw.call_method1("__eq__", (raw.call_method0("round")?,))?,),
+                )?
+                .extract()?;
+            if !all_integral {
+                return Err(value_error(name, "vertex indices must be integers"));
+            }
+        }
+        _ => {
+            return Err(value_error(
+                name,
+                format!("vertex indices must be integers, got dtype kind {kind:?}"),
+            ))
+        }
+    }
+    let arr = asarray(&raw, "int64")
         .map_err(|e| value_error(name, format!("not convertible to an integer array ({e})")))?;
     let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
     if shape.len() != 2 || shape[1] != 3 {

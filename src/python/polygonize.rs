@@ -4,7 +4,7 @@ use super::convert::{points, points_to_py, triangles_to_py};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
-use crate::polygonize::{dense, Ambiguity, Settings, Stats};
+use crate::polygonize::{dense, octree, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
 
@@ -87,7 +87,13 @@ pub fn parse_lattice(
         ));
     }
     let cells = parse_resolution(resolution)?;
-    Ok(Lattice::new(b[0], b[1], cells)?)
+    let single =
+        resolution.is_instance_of::<pyo3::types::PyInt>() || resolution.extract::<i128>().is_ok();
+    if single {
+        Ok(Lattice::cubic(b[0], b[1], cells[0])?)
+    } else {
+        Ok(Lattice::new(b[0], b[1], cells)?)
+    }
 }
 
 pub fn stats_to_py<'py>(
@@ -110,6 +116,13 @@ pub fn stats_to_py<'py>(
     secs.set_item("total", s.total_seconds())?;
     d.set_item("seconds", secs)?;
     d.set_item("resolution", PyTuple::new(py, lattice.cells)?)?;
+    d.set_item(
+        "bounds",
+        [
+            [lattice.origin.x, lattice.origin.y, lattice.origin.z],
+            [lattice.max().x, lattice.max().y, lattice.max().z],
+        ],
+    )?;
     Ok(d)
 }
 
@@ -118,7 +131,7 @@ pub fn stats_to_py<'py>(
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
 /// stats dict)``.
 #[pyfunction]
-#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None))]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn polygonize<'py>(
     py: Python<'py>,
@@ -130,6 +143,9 @@ pub fn polygonize<'py>(
     normals: bool,
     batch_size: usize,
     memory_limit: Option<u64>,
+    start_level: Option<u32>,
+    safety: Option<f64>,
+    corner_test: Option<bool>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let lattice = parse_lattice(bounds, resolution)?;
@@ -149,17 +165,30 @@ pub fn polygonize<'py>(
         },
     };
     let method = method.to_ascii_lowercase();
-    let run: fn(&dyn crate::field::Field, &Lattice, &Settings) -> crate::Result<_> =
-        match method.as_str() {
-            "dense" => |f, l, s| dense::polygonize(f, l, s),
-            _ => {
-                return Err(value_error(
-                    "method",
-                    format!("unknown method {method:?}; available: \"dense\""),
-                ))
-            }
-        };
-    let result = py.detach(|| field.with(|f| run(f, &lattice, &settings)));
+    let od = octree::Settings::default();
+    let octree_settings = octree::Settings {
+        start_level: start_level.or(od.start_level),
+        safety: safety.unwrap_or(od.safety),
+        corner_test: corner_test.unwrap_or(od.corner_test),
+    };
+    if method != "octree" && (start_level.is_some() || safety.is_some() || corner_test.is_some()) {
+        return Err(value_error(
+            "start_level",
+            "start_level, safety and corner_test apply to method=\"octree\" only",
+        ));
+    }
+    let result = match method.as_str() {
+        "dense" => py.detach(|| field.with(|f| dense::polygonize(f, &lattice, &settings))),
+        "octree" => py.detach(|| {
+            field.with(|f| octree::polygonize(f, &lattice, &settings, &octree_settings))
+        }),
+        _ => {
+            return Err(value_error(
+                "method",
+                format!("unknown method {method:?}; available: \"dense\", \"octree\""),
+            ))
+        }
+    };
     if let Some(e) = field.take_error() {
         return Err(e);
     }

@@ -115,6 +115,10 @@ impl PyVariationalSurface {
     ///
     /// Vertex normals are the area-weighted average of the adjacent faces' normals (faces
     /// counter-clockwise seen from outside). Vertices at identical positions are merged first.
+    /// At sharp creases the normal constraint value is lowered to
+    /// ``w_i = d_i · min(w/d, 0.9 cos θ_i)``, θ_i the largest angle between the vertex normal and
+    /// an adjacent face's normal, so that |f| stays below the distance to the surface (needed by
+    /// the octree polygonizer); on smooth meshes this changes nothing.
     ///
     /// Parameters
     /// ----------
@@ -280,13 +284,15 @@ impl PyVariationalSurface {
         self.inner.residual()
     }
 
-    /// (2, 3) float64: a box holding the surface — the data's bounding box grown by 10 % of its
-    /// largest side on every side. The default ``bounds`` of :func:`implicitmesh.polygonize`.
+    /// (2, 3) float64: a cube holding the surface — centred on the data's bounding box, with
+    /// side 1.2 × its largest side (a 10 % margin). The default ``bounds`` of
+    /// :func:`implicitmesh.polygonize` (the papers place their models in a cube too).
     #[getter]
     fn bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let (lo, hi) = self.inner.data_bounding_box();
-        let pad = 0.1 * (hi - lo).max_element();
-        points_to_py(py, vec![lo - DVec3::splat(pad), hi + DVec3::splat(pad)])
+        let c = (lo + hi) * 0.5;
+        let half = DVec3::splat(0.6 * (hi - lo).max_element());
+        points_to_py(py, vec![c - half, c + half])
     }
 
     fn __len__(&self) -> usize {
