@@ -3,15 +3,18 @@
 Fields (negative inside, positive outside):
 
 - :class:`VariationalSurface` — RBF surfaces fitted to points with normals or to a mesh.
+- :class:`BlobField` — blobs of point primitives with compact kernels (Triquet et al.).
 - any Python callable taking (N, 3) float64 points and returning (N,) values.
 
-Polygonizers: :func:`polygonize` with ``method="dense"`` (plain marching cubes, the reference).
+Polygonizers: :func:`polygonize` with ``method="dense"`` (plain marching cubes, the reference),
+``"octree"`` (Cuno et al.) or ``"tracking"`` (Triquet et al.); :class:`Tessellator` keeps the
+tracking caches between calls for animation.
 Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are.
 """
 
-from ._core import VariationalSurface, __version__
+from ._core import BlobField, VariationalSurface, __version__
 from .mesh import Mesh, compare
-from .polygonize import METHODS, Ambiguity, polygonize
+from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
 
-__all__ = ["VariationalSurface", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "__version__"]

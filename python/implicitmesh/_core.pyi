@@ -61,8 +61,61 @@ class VariationalSurface:
     @property
     def bounds(self) -> npt.NDArray[np.float64]: ...
 
+class BlobField:
+    def __init__(
+        self,
+        centers: ArrayLike,
+        radii: float | ArrayLike,
+        strengths: float | ArrayLike | None = None,
+        threshold: float = 0.5,
+        *,
+        voxel_size: float | None = None,
+    ) -> None: ...
+    def update(
+        self,
+        centers: ArrayLike,
+        radii: float | ArrayLike | None = None,
+        strengths: float | ArrayLike | None = None,
+    ) -> None: ...
+    def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def potential(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __call__(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __len__(self) -> int: ...
+    @property
+    def centers(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def radii(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def strengths(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def threshold(self) -> float: ...
+    @property
+    def voxel_size(self) -> float: ...
+    @property
+    def voxel_dims(self) -> tuple[int, int, int]: ...
+    @property
+    def bounds(self) -> npt.NDArray[np.float64]: ...
+
+class Tessellator:
+    def __init__(self) -> None: ...
+    def polygonize(
+        self,
+        field: VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike],
+        bounds: ArrayLike,
+        resolution: int | Sequence[int],
+        *,
+        seeds: ArrayLike | None = None,
+        ambiguity: str = "separate",
+        normals: bool = True,
+        batch_size: int = 262144,
+        memory_limit: int | None = None,
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...
+    @property
+    def capacity_bytes(self) -> int: ...
+
 def polygonize(
-    field: VariationalSurface | Callable[[npt.NDArray[np.float64]], ArrayLike],
+    field: VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike],
     bounds: ArrayLike,
     resolution: int | Sequence[int],
     *,
@@ -74,4 +127,5 @@ def polygonize(
     start_level: int | None = None,
     safety: float | None = None,
     corner_test: bool | None = None,
+    seeds: ArrayLike | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...

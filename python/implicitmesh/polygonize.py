@@ -10,10 +10,10 @@ import numpy as np
 from . import _core
 from .mesh import Mesh
 
-__all__ = ["Ambiguity", "polygonize", "METHODS"]
+__all__ = ["Ambiguity", "polygonize", "Tessellator", "METHODS"]
 
 #: Polygonizers available to :func:`polygonize`.
-METHODS = ("dense", "octree")
+METHODS = ("dense", "octree", "tracking")
 
 
 class Ambiguity(str, enum.Enum):
@@ -29,7 +29,7 @@ class Ambiguity(str, enum.Enum):
     JOIN = "join"
 
 
-Field = Union["_core.VariationalSurface", Callable[[np.ndarray], np.ndarray]]
+Field = Union["_core.VariationalSurface", "_core.BlobField", Callable[[np.ndarray], np.ndarray]]
 
 
 def polygonize(
@@ -45,12 +45,13 @@ def polygonize(
     start_level: int | None = None,
     safety: float | None = None,
     corner_test: bool | None = None,
+    seeds: Any = None,
 ) -> Mesh:
     """Triangulates the zero set of a field (negative inside, positive outside).
 
     Parameters
     ----------
-    field : VariationalSurface or callable
+    field : VariationalSurface, BlobField or callable
         A field of this package, or any Python callable taking an (N, 3) float64 array of points
         and returning N values. A callable is called in batches of up to ``batch_size`` points
         (never point by point), always from the calling thread.
@@ -62,7 +63,7 @@ def polygonize(
         One int: cells along the longest side of ``bounds``, with cubic cells (the shorter sides
         get the whole number of cells that covers them and grow symmetrically to fit). Three
         ints: cells per axis exactly over ``bounds``. Default 64.
-    method : {"dense", "octree"}
+    method : {"dense", "octree", "tracking"}
         ``"dense"``: plain marching cubes over every cell of the lattice (the reference).
         ``"octree"``: hierarchical sampling (Cuno et al.): a block of cells is skipped when
         ``|f(centre)| > safety × circumradius``, so only blocks near the surface are refined; the
@@ -70,6 +71,11 @@ def polygonize(
         rejected wrongly. Safe for fields with ``|f| ≤ distance to the surface`` near it: exact
         signed distances, and variational surfaces with w < d (the defaults). For other fields
         (e.g. ``3 × distance``) raise ``safety`` or check with :func:`compare`.
+        ``"tracking"``: surface tracking (Triquet et al.): from seed cells, visit only the cells
+        the surface crosses; the mesh equals the dense mesh on every component that holds a seed.
+        Seeds are found by walking along +x from ``seeds`` (default: the primitives' centres
+        of a :class:`BlobField`, the data points of a :class:`VariationalSurface`; required for
+        callables) to the first cell the surface crosses.
     ambiguity : Ambiguity or {"separate", "join"}
         How ambiguous cube faces are split. Default ``SEPARATE``.
     normals : bool
@@ -87,6 +93,8 @@ def polygonize(
         Octree only: also reject leaf cells by the value at their corner shared with the parent
         block (same test, radius = the cell's diagonal) before evaluating their other corners.
         Default True; False samples exactly as Cuno et al. §4.3.
+    seeds : (K, 3) array_like, optional
+        Tracking only: points inside or on each component of the surface to start from.
 
     Returns
     -------
@@ -107,24 +115,9 @@ def polygonize(
     The mesh is watertight wherever the surface stays inside ``bounds``; where it leaves the box
     the mesh is open along the box.
     """
-    if bounds is None:
-        bounds = getattr(field, "bounds", None)
-        if bounds is None:
-            raise ValueError(
-                "bounds: required for a field without a `bounds` attribute, "
-                "e.g. bounds=[[-1, -1, -1], [1, 1, 1]]"
-            )
-    if isinstance(ambiguity, Ambiguity):
-        ambiguity = ambiguity.value
-    if not isinstance(ambiguity, str):
-        raise ValueError(f"ambiguity: expected Ambiguity.SEPARATE/JOIN or a string, got {ambiguity!r}")
+    bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
     if not isinstance(method, str):
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
-    for name, value in (("batch_size", batch_size), ("memory_limit", memory_limit)):
-        if value is None and name == "memory_limit":
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
-            raise ValueError(f"{name}: must be a positive integer, got {value!r}")
     v, f, n, stats = _core.polygonize(
         field,
         bounds,
@@ -137,7 +130,82 @@ def polygonize(
         start_level=start_level,
         safety=safety,
         corner_test=corner_test,
+        seeds=seeds,
     )
     stats["triangles"] = len(f)
     stats["vertices"] = len(v)
     return Mesh(v, f, n, stats)
+
+
+def _check_common(field, bounds, ambiguity, batch_size, memory_limit):
+    if bounds is None:
+        bounds = getattr(field, "bounds", None)
+        if bounds is None:
+            raise ValueError(
+                "bounds: required for a field without a `bounds` attribute, "
+                "e.g. bounds=[[-1, -1, -1], [1, 1, 1]]"
+            )
+    if isinstance(ambiguity, Ambiguity):
+        ambiguity = ambiguity.value
+    if not isinstance(ambiguity, str):
+        raise ValueError(f"ambiguity: expected Ambiguity.SEPARATE/JOIN or a string, got {ambiguity!r}")
+    for name, value in (("batch_size", batch_size), ("memory_limit", memory_limit)):
+        if value is None and name == "memory_limit":
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+            raise ValueError(f"{name}: must be a positive integer, got {value!r}")
+    return bounds, ambiguity
+
+
+class Tessellator:
+    """Surface tracking that keeps its caches and buffers between calls, for animation.
+
+    Move the field (e.g. :meth:`BlobField.update`) and call :meth:`polygonize` again: corner
+    values, edge vertices and visited marks are time-stamped, so nothing is cleared and, in
+    steady state, nothing is reallocated.
+
+    Examples
+    --------
+    >>> blobs = BlobField(centers, radii=0.25)
+    >>> tess = Tessellator()
+    >>> for frame in range(100):
+    ...     blobs.update(move(centers, frame))
+    ...     mesh = tess.polygonize(blobs, resolution=64)
+    """
+
+    def __init__(self) -> None:
+        self._core = _core.Tessellator()
+
+    def polygonize(
+        self,
+        field: Field,
+        *,
+        bounds: Any = None,
+        resolution: int | Sequence[int] = 64,
+        seeds: Any = None,
+        ambiguity: Ambiguity | str = Ambiguity.SEPARATE,
+        normals: bool = True,
+        batch_size: int = 262144,
+        memory_limit: int | None = None,
+    ) -> Mesh:
+        """Tracks the surface of ``field``; arguments as for :func:`polygonize` with
+        ``method="tracking"``. Returns a new :class:`Mesh` (its arrays are copies)."""
+        bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
+        v, f, n, stats = self._core.polygonize(
+            field,
+            bounds,
+            resolution,
+            seeds=seeds,
+            ambiguity=ambiguity,
+            normals=normals,
+            batch_size=batch_size,
+            memory_limit=memory_limit,
+        )
+        stats["triangles"] = len(f)
+        stats["vertices"] = len(v)
+        return Mesh(v, f, n, stats)
+
+    @property
+    def capacity_bytes(self) -> int:
+        """Bytes held by the caches and buffers (to check that memory stays flat)."""
+        return self._core.capacity_bytes

@@ -6,10 +6,12 @@
 //! field backed by a foreign runtime (the Python binding's callable field) may lock that runtime.
 
 pub mod analytic;
+pub mod blob;
 pub mod constraints;
 pub mod kernel;
 pub mod rbf;
 pub mod saddle;
+pub mod voxels;
 
 use glam::DVec3;
 use rayon::prelude::*;

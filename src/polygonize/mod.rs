@@ -8,6 +8,7 @@ pub mod cell;
 pub mod dense;
 pub mod octree;
 pub mod table;
+pub mod tracking;
 
 pub use table::{Ambiguity, CaseTable};
 

@@ -2,6 +2,7 @@
 //! (N, 3) float64 points and returning N values. A callable is only ever called from the thread
 //! that called the polygonizer (never from a rayon worker), with the GIL re-acquired for the call.
 
+use super::blob::PyBlobField;
 use super::variational::PyVariationalSurface;
 use crate::field::rbf::VariationalSurface;
 use crate::field::Field;
@@ -87,16 +88,21 @@ impl Field for CallableField {
     }
 }
 
-/// A field argument resolved to something the core can run with the GIL released.
-pub enum FieldArg {
+/// A field argument resolved to something the core can run with the GIL released: take
+/// [`FieldArg::as_field`] before `py.detach` and use only that reference inside.
+pub enum FieldArg<'py> {
     Variational(Arc<VariationalSurface>),
+    Blob(PyRef<'py, PyBlobField>),
     Callable(Arc<CallableField>),
 }
 
-impl FieldArg {
-    pub fn extract(obj: &Bound<'_, PyAny>) -> PyResult<Self> {
+impl<'py> FieldArg<'py> {
+    pub fn extract(obj: &Bound<'py, PyAny>) -> PyResult<Self> {
         if let Ok(v) = obj.cast::<PyVariationalSurface>() {
             return Ok(FieldArg::Variational(v.get().inner.clone()));
+        }
+        if let Ok(b) = obj.cast::<PyBlobField>() {
+            return Ok(FieldArg::Blob(b.try_borrow()?));
         }
         if obj.is_callable() {
             return Ok(FieldArg::Callable(Arc::new(CallableField::new(
@@ -104,16 +110,33 @@ impl FieldArg {
             ))));
         }
         Err(PyTypeError::new_err(format!(
-            "field: expected a VariationalSurface or a callable taking (N, 3) float64 points and returning (N,) values, got {}",
+            "field: expected a VariationalSurface, a BlobField or a callable taking (N, 3) float64 points and returning (N,) values, got {}",
             obj.get_type().name()?
         )))
     }
 
-    /// Runs `f` with the field as a `&dyn Field`.
-    pub fn with<R>(&self, f: impl FnOnce(&dyn Field) -> R) -> R {
+    /// The field as a core field (Sync, so the reference may cross `py.detach`).
+    pub fn as_field(&self) -> &(dyn Field + '_) {
         match self {
-            FieldArg::Variational(v) => f(v.as_ref()),
-            FieldArg::Callable(c) => f(c.as_ref()),
+            FieldArg::Variational(v) => v.as_ref(),
+            FieldArg::Blob(b) => &b.inner,
+            FieldArg::Callable(c) => c.as_ref(),
+        }
+    }
+
+    /// Where tracking starts walking when no seeds are given: blob centres, or the data points
+    /// of a variational surface; with the number of cells a walk may take (None: no default).
+    pub fn default_starts(&self, cell: f64) -> Option<(Vec<glam::DVec3>, u32)> {
+        match self {
+            FieldArg::Blob(b) => {
+                let rmax = b.inner.radii().iter().fold(0.0f64, |a, r| a.max(*r));
+                Some((b.inner.centers().to_vec(), (rmax / cell).ceil() as u32 + 2))
+            }
+            FieldArg::Variational(v) => {
+                let c = v.constraints();
+                Some((c.points[..c.boundary].to_vec(), 16))
+            }
+            FieldArg::Callable(_) => None,
         }
     }
 

@@ -2,6 +2,7 @@
 //! around the core, and maps core errors to Python exceptions (`errors.rs`). No algorithm lives
 //! here.
 
+mod blob;
 mod convert;
 mod errors;
 mod field;
@@ -14,6 +15,8 @@ use pyo3::prelude::*;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<variational::PyVariationalSurface>()?;
+    m.add_class::<blob::PyBlobField>()?;
+    m.add_class::<polygonize::PyTessellator>()?;
     m.add_function(wrap_pyfunction!(polygonize::polygonize, m)?)?;
     Ok(())
 }

@@ -4,7 +4,7 @@ use super::convert::{points, points_to_py, triangles_to_py};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
-use crate::polygonize::{dense, octree, Ambiguity, Settings, Stats};
+use crate::polygonize::{dense, octree, tracking, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
 
@@ -126,12 +126,73 @@ pub fn stats_to_py<'py>(
     Ok(d)
 }
 
+/// Settings shared by every method, from the Python arguments.
+fn shared_settings(
+    field: &FieldArg,
+    ambiguity: &str,
+    normals: bool,
+    batch_size: usize,
+    memory_limit: Option<u64>,
+) -> PyResult<Settings> {
+    if batch_size == 0 {
+        return Err(value_error("batch_size", "must be positive"));
+    }
+    let defaults = Settings::default();
+    Ok(Settings {
+        ambiguity: parse_ambiguity(ambiguity)?,
+        normals,
+        batch: batch_size,
+        memory_limit: memory_limit.unwrap_or(defaults.memory_limit),
+        difference_gradients: if field.is_callable() {
+            Some(1e-3)
+        } else {
+            None
+        },
+    })
+}
+
+/// Tracking starts: the given seed points (walk up to the whole lattice) or the field's own.
+fn tracking_starts(
+    field: &FieldArg,
+    seeds: Option<&Bound<'_, PyAny>>,
+    lattice: &Lattice,
+) -> PyResult<(Vec<glam::DVec3>, u32)> {
+    match seeds {
+        Some(s) => {
+            let p = points(s, "seeds")?;
+            crate::error::check_finite_points("seeds", &p)?;
+            Ok((p, *lattice.cells.iter().max().unwrap()))
+        }
+        None => field.default_starts(lattice.cell.min_element()).ok_or_else(|| {
+            value_error(
+                "seeds",
+                "method=\"tracking\" with a callable needs seeds: points inside or on each component of the surface",
+            )
+        }),
+    }
+}
+
+fn mesh_to_py<'py>(
+    py: Python<'py>,
+    mesh: &crate::mesh::Mesh,
+    stats: &Stats,
+    lattice: &Lattice,
+    method: &str,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let stats_py = stats_to_py(py, stats, lattice)?;
+    stats_py.set_item("method", method)?;
+    let v = points_to_py(py, mesh.vertices.clone())?;
+    let f = triangles_to_py(py, &mesh.triangles)?;
+    let n = points_to_py(py, mesh.normals.clone())?;
+    PyTuple::new(py, [v, f, n, stats_py.into_any()])
+}
+
 /// Low-level polygonizer entry point; use :func:`implicitmesh.polygonize`.
 ///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
 /// stats dict)``.
 #[pyfunction]
-#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None))]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn polygonize<'py>(
     py: Python<'py>,
@@ -146,46 +207,46 @@ pub fn polygonize<'py>(
     start_level: Option<u32>,
     safety: Option<f64>,
     corner_test: Option<bool>,
+    seeds: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let lattice = parse_lattice(bounds, resolution)?;
-    if batch_size == 0 {
-        return Err(value_error("batch_size", "must be positive"));
-    }
-    let defaults = Settings::default();
-    let settings = Settings {
-        ambiguity: parse_ambiguity(ambiguity)?,
-        normals,
-        batch: batch_size,
-        memory_limit: memory_limit.unwrap_or(defaults.memory_limit),
-        difference_gradients: if field.is_callable() {
-            Some(1e-3)
-        } else {
-            None
-        },
-    };
+    let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
-    let od = octree::Settings::default();
-    let octree_settings = octree::Settings {
-        start_level: start_level.or(od.start_level),
-        safety: safety.unwrap_or(od.safety),
-        corner_test: corner_test.unwrap_or(od.corner_test),
-    };
     if method != "octree" && (start_level.is_some() || safety.is_some() || corner_test.is_some()) {
         return Err(value_error(
             "start_level",
             "start_level, safety and corner_test apply to method=\"octree\" only",
         ));
     }
+    if method != "tracking" && seeds.is_some() {
+        return Err(value_error(
+            "seeds",
+            "seeds apply to method=\"tracking\" only",
+        ));
+    }
+    let f = field.as_field();
     let result = match method.as_str() {
-        "dense" => py.detach(|| field.with(|f| dense::polygonize(f, &lattice, &settings))),
-        "octree" => py.detach(|| {
-            field.with(|f| octree::polygonize(f, &lattice, &settings, &octree_settings))
-        }),
+        "dense" => py.detach(|| dense::polygonize(f, &lattice, &settings)),
+        "octree" => {
+            let od = octree::Settings::default();
+            let o = octree::Settings {
+                start_level: start_level.or(od.start_level),
+                safety: safety.unwrap_or(od.safety),
+                corner_test: corner_test.unwrap_or(od.corner_test),
+            };
+            py.detach(|| octree::polygonize(f, &lattice, &settings, &o))
+        }
+        "tracking" => {
+            let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
+            py.detach(|| tracking::polygonize(f, &lattice, &starts, walk, &settings))
+        }
         _ => {
             return Err(value_error(
                 "method",
-                format!("unknown method {method:?}; available: \"dense\", \"octree\""),
+                format!(
+                    "unknown method {method:?}; available: \"dense\", \"octree\", \"tracking\""
+                ),
             ))
         }
     };
@@ -193,10 +254,60 @@ pub fn polygonize<'py>(
         return Err(e);
     }
     let (mesh, stats) = result?;
-    let stats_py = stats_to_py(py, &stats, &lattice)?;
-    stats_py.set_item("method", method)?;
-    let v = points_to_py(py, mesh.vertices)?;
-    let f = triangles_to_py(py, &mesh.triangles)?;
-    let n = points_to_py(py, mesh.normals)?;
-    PyTuple::new(py, [v, f, n, stats_py.into_any()])
+    mesh_to_py(py, &mesh, &stats, &lattice, &method)
+}
+
+/// Surface tracking with caches kept between calls (Triquet et al.): for animation, move the
+/// field and call :meth:`polygonize` again; in steady state nothing is reallocated.
+#[pyclass(name = "Tessellator", module = "implicitmesh")]
+pub struct PyTessellator {
+    inner: tracking::Tessellator,
+}
+
+#[pymethods]
+impl PyTessellator {
+    #[new]
+    fn new() -> Self {
+        PyTessellator {
+            inner: tracking::Tessellator::new(),
+        }
+    }
+
+    /// Tracks the surface; see :meth:`implicitmesh.Tessellator.polygonize`.
+    #[pyo3(signature = (field, bounds, resolution, *, seeds=None, ambiguity="separate", normals=true, batch_size=262144, memory_limit=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn polygonize<'py>(
+        &mut self,
+        py: Python<'py>,
+        field: &Bound<'py, PyAny>,
+        bounds: &Bound<'py, PyAny>,
+        resolution: &Bound<'py, PyAny>,
+        seeds: Option<&Bound<'py, PyAny>>,
+        ambiguity: &str,
+        normals: bool,
+        batch_size: usize,
+        memory_limit: Option<u64>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let field = FieldArg::extract(field)?;
+        let lattice = parse_lattice(bounds, resolution)?;
+        let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
+        let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
+        let f = field.as_field();
+        let tess = &mut self.inner;
+        let result = py.detach(|| {
+            tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
+                .map(|(_, s)| s)
+        });
+        if let Some(e) = field.take_error() {
+            return Err(e);
+        }
+        let stats = result?;
+        mesh_to_py(py, self.inner.mesh(), &stats, &lattice, "tracking")
+    }
+
+    /// Bytes held by the caches and buffers.
+    #[getter]
+    fn capacity_bytes(&self) -> usize {
+        self.inner.capacity_bytes()
+    }
 }

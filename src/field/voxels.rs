@@ -1,0 +1,161 @@
+//! A uniform grid of voxels, each listing the primitives whose sphere of influence touches it
+//! (Triquet et al. §4.3). Stored flat (compressed rows: one offset array and one item array), so
+//! there is no allocation per voxel, and rebuilt in place when the primitives move: the arrays
+//! keep their capacity, so a steady-state animation allocates nothing.
+
+use glam::DVec3;
+
+/// Voxel grid over the spheres of influence of a set of primitives.
+#[derive(Clone, Debug, Default)]
+pub struct VoxelGrid {
+    origin: DVec3,
+    size: f64,
+    dims: [u32; 3],
+    /// `start[v]..start[v + 1]` indexes `items` for voxel v.
+    start: Vec<u32>,
+    items: Vec<u32>,
+    /// Per-voxel fill cursor used while building.
+    cursor: Vec<u32>,
+}
+
+/// Largest number of voxels a grid may have (the voxel size is grown to stay under it).
+pub const MAX_VOXELS: u64 = 1 << 24;
+
+impl VoxelGrid {
+    /// Rebuilds the grid for spheres (`centers[i]`, `radii[i]`) with voxels of side `size`
+    /// (grown if needed to keep at most [`MAX_VOXELS`] voxels), reusing the arrays.
+    pub fn rebuild(&mut self, centers: &[DVec3], radii: &[f64], size: f64) {
+        if centers.is_empty() {
+            self.dims = [0; 3];
+            self.start.clear();
+            self.start.push(0);
+            self.items.clear();
+            return;
+        }
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for (c, r) in centers.iter().zip(radii) {
+            lo = lo.min(*c - DVec3::splat(*r));
+            hi = hi.max(*c + DVec3::splat(*r));
+        }
+        let extent = (hi - lo).max(DVec3::splat(1e-12));
+        let mut size = size.max(1e-12);
+        loop {
+            let d = (extent / size).ceil();
+            if d.x * d.y * d.z <= MAX_VOXELS as f64 {
+                break;
+            }
+            size *= 1.25;
+        }
+        let dims = (extent / size).ceil().max(DVec3::ONE);
+        self.dims = [dims.x as u32, dims.y as u32, dims.z as u32];
+        self.origin = lo;
+        self.size = size;
+        let nvox = self.dims.iter().map(|&d| d as usize).product::<usize>();
+        // Counting pass, then fill pass (the same voxel ranges twice).
+        self.start.clear();
+        self.start.resize(nvox + 1, 0);
+        let (origin, dims) = (self.origin, self.dims);
+        for (c, r) in centers.iter().zip(radii) {
+            let start = &mut self.start;
+            voxels_touching(origin, size, dims, *c, *r, |v| start[v] += 1);
+        }
+        let mut total = 0u32;
+        for s in self.start.iter_mut() {
+            let c = *s;
+            *s = total;
+            total += c;
+        }
+        self.items.clear();
+        self.items.resize(total as usize, 0);
+        self.cursor.clear();
+        self.cursor.extend_from_slice(&self.start[..nvox]);
+        for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
+            let (origin, size, dims) = (self.origin, self.size, self.dims);
+            let cursor = &mut self.cursor;
+            let items = &mut self.items;
+            voxels_touching(origin, size, dims, *c, *r, |v| {
+                items[cursor[v] as usize] = i as u32;
+                cursor[v] += 1;
+            });
+        }
+    }
+
+    /// The primitives that may influence point `p` (empty outside the grid).
+    #[inline]
+    pub fn candidates(&self, p: DVec3) -> &[u32] {
+        let q = (p - self.origin) / self.size;
+        if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
+            return &[];
+        }
+        let (x, y, z) = (q.x as u32, q.y as u32, q.z as u32);
+        let [dx, dy, dz] = self.dims;
+        if x >= dx || y >= dy || z >= dz {
+            return &[];
+        }
+        let v = (x as usize) + dx as usize * (y as usize + dy as usize * z as usize);
+        &self.items[self.start[v] as usize..self.start[v + 1] as usize]
+    }
+
+    /// Voxels per axis.
+    pub fn dims(&self) -> [u32; 3] {
+        self.dims
+    }
+
+    /// Side of a voxel.
+    pub fn voxel_size(&self) -> f64 {
+        self.size
+    }
+
+    /// Total entries over all voxel lists.
+    pub fn entries(&self) -> usize {
+        self.items.len()
+    }
+
+    /// Bytes held by the grid's arrays (capacity).
+    pub fn capacity_bytes(&self) -> usize {
+        4 * (self.start.capacity() + self.items.capacity() + self.cursor.capacity())
+    }
+}
+
+/// Calls `f` with every voxel index whose box intersects the sphere (c, r).
+fn voxels_touching(
+    origin: DVec3,
+    size: f64,
+    dims: [u32; 3],
+    c: DVec3,
+    r: f64,
+    mut f: impl FnMut(usize),
+) {
+    let lo = ((c - DVec3::splat(r) - origin) / size)
+        .floor()
+        .max(DVec3::ZERO);
+    let hi = ((c + DVec3::splat(r) - origin) / size).floor();
+    let clamp = |v: f64, d: u32| (v as i64).clamp(0, d as i64 - 1) as u32;
+    let (x0, y0, z0) = (
+        clamp(lo.x, dims[0]),
+        clamp(lo.y, dims[1]),
+        clamp(lo.z, dims[2]),
+    );
+    let (x1, y1, z1) = (
+        clamp(hi.x, dims[0]),
+        clamp(hi.y, dims[1]),
+        clamp(hi.z, dims[2]),
+    );
+    let r2 = r * r;
+    for z in z0..=z1 {
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                // Distance from the centre to the voxel box.
+                let bmin = origin + DVec3::new(x as f64, y as f64, z as f64) * size;
+                let bmax = bmin + DVec3::splat(size);
+                let q = c.clamp(bmin, bmax);
+                if (q - c).length_squared() <= r2 {
+                    f(
+                        x as usize
+                            + dims[0] as usize * (y as usize + dims[1] as usize * z as usize),
+                    );
+                }
+            }
+        }
+    }
+}

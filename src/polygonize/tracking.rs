@@ -1,0 +1,416 @@
+//! Surface tracking (Triquet et al. §4.4): starting from seed cells, visit only cells the surface
+//! crosses, entering a neighbour only through a face whose corners change sign (known from the
+//! case table, §4.6). Each cell is processed once. Corner values, edge vertices and visited marks
+//! live in hash maps keyed by lattice coordinates and tagged with a time stamp (§4.1): an entry
+//! from an earlier call is simply stale, so nothing is cleared between frames, and storage grows
+//! with the surface, not with the lattice (§4.7).
+//!
+//! The walk goes wave by wave: all unknown corners of the current wave of cells are evaluated in
+//! one batched field call, so the field may be parallel (or a Python callable called in batches).
+//! Because the lattice, the table and the edge arithmetic are those of the dense polygonizer, the
+//! mesh equals the dense mesh on every component that holds a seed.
+
+use super::cell::{case_index, corner_offset, edge_origin, emit_triangles};
+use super::{compute_normals, evaluate, CaseTable, Settings, Stats};
+use crate::error::Result;
+use crate::field::Field;
+use crate::lattice::{edge_crossing, KeyMap, Lattice};
+use crate::mesh::Mesh;
+use glam::DVec3;
+use std::time::Instant;
+
+/// Neighbour offsets across the six faces (face f = 2·axis + side).
+const FACE_STEP: [(usize, i64); 6] = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)];
+
+/// Caches and buffers kept between calls, for animation: polygonize, move the field, polygonize
+/// again — in steady state nothing is reallocated.
+#[derive(Default)]
+pub struct Tessellator {
+    stamp: u32,
+    /// Lattice point → (stamp, value).
+    values: KeyMap<(u32, f64)>,
+    /// Lattice edge → (stamp, vertex index).
+    edges: KeyMap<(u32, u32)>,
+    /// Cell → stamp of the call that queued it.
+    queued: KeyMap<u32>,
+    /// Entries of each map touched by the last call (the live part).
+    touched: [usize; 3],
+    wave: Vec<[u32; 3]>,
+    next: Vec<[u32; 3]>,
+    points: Vec<DVec3>,
+    keys: Vec<u64>,
+    vals: Vec<f64>,
+    mesh: Mesh,
+}
+
+impl Tessellator {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The mesh of the last call.
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// Bytes held by the caches and buffers (capacities), to check that memory stays flat.
+    pub fn capacity_bytes(&self) -> usize {
+        self.values.capacity() * 24
+            + self.edges.capacity() * 24
+            + self.queued.capacity() * 16
+            + (self.wave.capacity() + self.next.capacity()) * 12
+            + self.points.capacity() * 24
+            + (self.keys.capacity() + self.vals.capacity()) * 8
+            + self.mesh.vertices.capacity() * 24
+            + self.mesh.normals.capacity() * 24
+            + self.mesh.triangles.capacity() * 12
+    }
+
+    fn begin(&mut self) {
+        // Drop stale entries only when they dominate, so that a moving surface cannot make the
+        // maps grow without bound; the maps keep their capacity.
+        let [tv, te, tq] = self.touched.map(|t| 2 * t + 1024);
+        if self.values.len() > tv || self.edges.len() > te || self.queued.len() > tq {
+            let s = self.stamp;
+            self.values.retain(|_, v| v.0 == s);
+            self.edges.retain(|_, v| v.0 == s);
+            self.queued.retain(|_, v| *v == s);
+        }
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            // After 2³² calls: start afresh so that no stale stamp can match.
+            self.values.clear();
+            self.edges.clear();
+            self.queued.clear();
+            self.stamp = 1;
+        }
+        self.mesh.vertices.clear();
+        self.mesh.triangles.clear();
+        self.mesh.normals.clear();
+    }
+
+    /// Evaluates, in one batch, the corners of `cells` not yet known in this call.
+    fn evaluate_corners<F: Field + ?Sized>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        cells: &[[u32; 3]],
+        settings: &Settings,
+        stats: &mut Stats,
+    ) -> Result<()> {
+        let s = self.stamp;
+        self.points.clear();
+        self.keys.clear();
+        for o in cells {
+            for k in 0..8 {
+                let d = corner_offset(k);
+                let c = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
+                let key = Lattice::key(c);
+                let e = self.values.entry(key).or_insert((0, 0.0));
+                if e.0 != s {
+                    *e = (s, f64::NAN);
+                    self.keys.push(key);
+                    self.points.push(lattice.point(c));
+                }
+            }
+        }
+        self.vals.resize(self.points.len(), 0.0);
+        evaluate(field, &self.points, &mut self.vals, settings.batch)?;
+        stats.evaluations += self.points.len() as u64;
+        for (k, v) in self.keys.iter().zip(&self.vals) {
+            self.values.insert(*k, (s, *v));
+        }
+        Ok(())
+    }
+
+    fn corners(&self, o: [u32; 3]) -> [f64; 8] {
+        let mut v = [0.0; 8];
+        for (k, vk) in v.iter_mut().enumerate() {
+            let d = corner_offset(k);
+            *vk = self.values[&Lattice::key([o[0] + d[0], o[1] + d[1], o[2] + d[2]])].1;
+        }
+        v
+    }
+
+    /// Seed cells from points: from the cell holding each point, walk along +x (Triquet's
+    /// Fig. 1) to the first cell the surface crosses, at most `max_steps` cells. Points outside
+    /// the lattice are skipped. All walkers advance together, one batch per step.
+    pub fn walk_seeds<F: Field + ?Sized>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        starts: &[DVec3],
+        max_steps: u32,
+        settings: &Settings,
+        stats: &mut Stats,
+    ) -> Result<Vec<[u32; 3]>> {
+        let cells = lattice.cells;
+        let mut walkers: Vec<[u32; 3]> = starts
+            .iter()
+            .filter_map(|p| {
+                let q = (*p - lattice.origin) / lattice.cell;
+                if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
+                    return None;
+                }
+                let c = [q.x as u64, q.y as u64, q.z as u64];
+                if c[0] >= cells[0] as u64 || c[1] >= cells[1] as u64 || c[2] >= cells[2] as u64 {
+                    return None;
+                }
+                Some([c[0] as u32, c[1] as u32, c[2] as u32])
+            })
+            .collect();
+        walkers.sort_unstable();
+        walkers.dedup();
+        let mut seeds = Vec::new();
+        let table = CaseTable::get(settings.ambiguity);
+        for _ in 0..=max_steps {
+            if walkers.is_empty() {
+                break;
+            }
+            self.evaluate_corners(field, lattice, &walkers, settings, stats)?;
+            let mut keep = 0;
+            for i in 0..walkers.len() {
+                let o = walkers[i];
+                let case = case_index(&self.corners(o));
+                if case != 0 && case != 255 {
+                    seeds.push(o);
+                } else if o[0] + 1 < cells[0] {
+                    walkers[keep] = [o[0] + 1, o[1], o[2]];
+                    keep += 1;
+                }
+            }
+            walkers.truncate(keep);
+            walkers.sort_unstable();
+            walkers.dedup();
+            let _ = table;
+        }
+        seeds.sort_unstable();
+        seeds.dedup();
+        Ok(seeds)
+    }
+
+    /// Starts a call: call before [`Tessellator::walk_seeds`] and [`Tessellator::track`].
+    pub fn start(&mut self) {
+        self.begin();
+    }
+
+    /// Tracks the surface from `seeds` (cells) and returns the mesh (valid until the next call).
+    pub fn track<F: Field + ?Sized>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        seeds: &[[u32; 3]],
+        settings: &Settings,
+        stats: &mut Stats,
+    ) -> Result<&Mesh> {
+        let table = CaseTable::get(settings.ambiguity);
+        let s = self.stamp;
+        let cells = lattice.cells;
+        self.wave.clear();
+        for &c in seeds {
+            if c[0] < cells[0] && c[1] < cells[1] && c[2] < cells[2] {
+                let q = self.queued.entry(Lattice::key(c)).or_insert(0);
+                if *q != s {
+                    *q = s;
+                    self.wave.push(c);
+                }
+            }
+        }
+        while !self.wave.is_empty() {
+            let t = Instant::now();
+            let wave = std::mem::take(&mut self.wave);
+            self.evaluate_corners(field, lattice, &wave, settings, stats)?;
+            stats.add_time("evaluate", t);
+            let t = Instant::now();
+            self.next.clear();
+            for &o in &wave {
+                stats.cells_visited += 1;
+                let v = self.corners(o);
+                let case = case_index(&v);
+                if case == 0 || case == 255 {
+                    continue;
+                }
+                stats.cells_crossed += 1;
+                let values = &self.values;
+                let edges = &mut self.edges;
+                let vertices = &mut self.mesh.vertices;
+                emit_triangles(
+                    table,
+                    case,
+                    |e| {
+                        let (d, axis) = edge_origin(e);
+                        let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
+                        let slot = edges.entry(Lattice::edge_key(a, axis)).or_insert((0, 0));
+                        if slot.0 != s {
+                            let mut b = a;
+                            b[axis as usize] += 1;
+                            let fa = values[&Lattice::key(a)].1;
+                            let fb = values[&Lattice::key(b)].1;
+                            vertices.push(edge_crossing(
+                                lattice.point(a),
+                                lattice.point(b),
+                                fa,
+                                fb,
+                            ));
+                            *slot = (s, (vertices.len() - 1) as u32);
+                        }
+                        slot.1
+                    },
+                    &mut self.mesh.triangles,
+                );
+                let faces = table.crossed_faces(case);
+                for (f, &(axis, step)) in FACE_STEP.iter().enumerate() {
+                    if faces & (1 << f) == 0 {
+                        continue;
+                    }
+                    let n = o[axis] as i64 + step;
+                    if n < 0 || n >= cells[axis] as i64 {
+                        continue;
+                    }
+                    let mut c = o;
+                    c[axis] = n as u32;
+                    let q = self.queued.entry(Lattice::key(c)).or_insert(0);
+                    if *q != s {
+                        *q = s;
+                        self.next.push(c);
+                    }
+                }
+            }
+            self.wave = wave;
+            std::mem::swap(&mut self.wave, &mut self.next);
+            stats.add_time("track", t);
+        }
+        self.touched = [
+            stats.evaluations as usize,
+            self.mesh.vertices.len(),
+            stats.cells_visited as usize,
+        ];
+        let mut mesh = std::mem::take(&mut self.mesh);
+        let r = compute_normals(field, lattice, &mut mesh, settings, stats);
+        self.mesh = mesh;
+        r?;
+        Ok(&self.mesh)
+    }
+
+    /// One polygonization: seeds walked from `starts` (e.g. blob centres or data points), then
+    /// tracking from them and from the extra `seed_cells`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn polygonize<F: Field + ?Sized>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        starts: &[DVec3],
+        max_walk: u32,
+        seed_cells: &[[u32; 3]],
+        settings: &Settings,
+    ) -> Result<(&Mesh, Stats)> {
+        super::check_memory(
+            super::estimate_triangles(lattice) * (super::BYTES_PER_TRIANGLE + 64),
+            settings.memory_limit,
+        )?;
+        let mut stats = Stats {
+            lattice_points: lattice.num_points(),
+            ..Default::default()
+        };
+        self.start();
+        let t = Instant::now();
+        let mut seeds = self.walk_seeds(field, lattice, starts, max_walk, settings, &mut stats)?;
+        seeds.extend_from_slice(seed_cells);
+        stats.add_time("seeds", t);
+        self.track(field, lattice, &seeds, settings, &mut stats)?;
+        Ok((&self.mesh, stats))
+    }
+}
+
+/// One-shot tracking polygonization (see [`Tessellator::polygonize`]).
+pub fn polygonize<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    starts: &[DVec3],
+    max_walk: u32,
+    settings: &Settings,
+) -> Result<(Mesh, Stats)> {
+    let mut t = Tessellator::new();
+    let (m, s) = t.polygonize(field, lattice, starts, max_walk, &[], settings)?;
+    Ok((m.clone(), s))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+    use crate::field::testing::random_points;
+    use crate::field::Counting;
+    use crate::polygonize::{dense, Ambiguity};
+
+    fn blobs(n: usize, r: f64, seed: u64) -> BlobField {
+        let c = random_points(n, -0.8, 0.8, seed);
+        BlobField::new(
+            &c,
+            PerPrimitive::All(r),
+            PerPrimitive::All(1.0),
+            0.5,
+            BlobSettings::default(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn tracking_equals_dense_on_blobs() {
+        for (n, r, res, seed) in [
+            (1, 0.3, 20, 1),
+            (30, 0.25, 40, 2),
+            (200, 0.12, 64, 3),
+            (5, 0.05, 30, 4),
+        ] {
+            let b = blobs(n, r, seed);
+            let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [res; 3]).unwrap();
+            for amb in [Ambiguity::Separate, Ambiguity::Join] {
+                let s = Settings {
+                    ambiguity: amb,
+                    ..Default::default()
+                };
+                let (d, _) = dense::polygonize(&b, &l, &s).unwrap();
+                let counting = Counting::new(&b);
+                let max_walk = (r / l.cell.x).ceil() as u32 + 2;
+                let (t, st) = polygonize(&counting, &l, b.centers(), max_walk, &s).unwrap();
+                let c = d.compare(&t);
+                assert_eq!(
+                    (c.missing, c.extra),
+                    (0, 0),
+                    "n={n} r={r} res={res} {amb:?}"
+                );
+                assert_eq!(counting.evaluations(), st.evaluations);
+                if !t.triangles.is_empty() {
+                    assert!(t.is_closed_oriented());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn animation_reuses_memory() {
+        let mut b = blobs(200, 0.25, 9);
+        let l = Lattice::new(DVec3::splat(-1.2), DVec3::splat(1.2), [64; 3]).unwrap();
+        let s = Settings::default();
+        let mut tess = Tessellator::new();
+        let base: Vec<DVec3> = b.centers().to_vec();
+        let mut sizes = vec![];
+        for frame in 0..60 {
+            let t = frame as f64 * 0.05;
+            let c: Vec<DVec3> = base
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    *p + DVec3::new((t + i as f64).sin(), (t * 1.3 + i as f64).cos(), 0.0) * 0.05
+                })
+                .collect();
+            b.update(&c, None, None).unwrap();
+            let (m, _) = tess.polygonize(&b, &l, b.centers(), 10, &[], &s).unwrap();
+            assert!(m.is_closed_oriented());
+            sizes.push(tess.capacity_bytes());
+        }
+        // After warming up, the capacity stays flat.
+        assert!(sizes[59] <= sizes[19] * 5 / 4, "{:?}", sizes);
+    }
+}

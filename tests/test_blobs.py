@@ -1,0 +1,112 @@
+"""Blob fields and the tracking polygonizer (Triquet et al.)."""
+
+import numpy as np
+import pytest
+
+import implicitmesh as im
+
+BOX = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]
+
+
+def brute_potential(centers, radii, strengths, p):
+    d2 = ((p[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2)
+    t = np.clip(1.0 - d2 / radii[None, :] ** 2, 0.0, None)
+    return (strengths[None, :] * t * t).sum(axis=1)
+
+
+@pytest.mark.parametrize("n, seed", [(1, 0), (25, 1), (400, 2)])
+def test_voxel_evaluation_equals_brute_force(n, seed):
+    rng = np.random.default_rng(seed)
+    c = rng.uniform(-0.8, 0.8, (n, 3))
+    r = rng.uniform(0.05, 0.3, n)
+    a = rng.uniform(0.5, 2.0, n)
+    b = im.BlobField(c, r, a, threshold=0.7)
+    p = rng.uniform(-1.2, 1.2, (5000, 3))
+    ref = brute_potential(c, r, a, p)
+    np.testing.assert_allclose(b.potential(p), ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b.evaluate(p), 0.7 - ref, rtol=0, atol=1e-12)
+
+
+def test_gradient_matches_central_differences():
+    rng = np.random.default_rng(4)
+    b = im.BlobField(rng.uniform(-0.5, 0.5, (30, 3)), 0.3)
+    p = rng.uniform(-0.8, 0.8, (500, 3))
+    h = 1e-6
+    fd = np.stack(
+        [(b.evaluate(p + h * e) - b.evaluate(p - h * e)) / (2 * h) for e in np.eye(3)], axis=1
+    )
+    np.testing.assert_allclose(b.gradient(p), fd, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("n, r, res, seed", [(1, 0.3, 24, 0), (40, 0.2, 48, 1), (150, 0.12, 64, 2), (3, 0.04, 40, 3)])
+@pytest.mark.parametrize("ambiguity", ["separate", "join"])
+def test_tracking_equals_dense(n, r, res, seed, ambiguity):
+    rng = np.random.default_rng(seed)
+    b = im.BlobField(rng.uniform(-0.7, 0.7, (n, 3)), r)
+    d = im.polygonize(b, bounds=BOX, resolution=res, ambiguity=ambiguity)
+    t = im.polygonize(b, bounds=BOX, resolution=res, method="tracking", ambiguity=ambiguity)
+    assert im.compare(d, t) == {"missing": 0, "extra": 0, "common": len(d.faces)}
+    if len(t.faces):
+        assert t.to_trimesh().is_watertight
+        assert t.stats["evaluations"] < d.stats["evaluations"]
+
+
+def test_tracking_a_variational_surface_equals_dense():
+    v, f = im.shapes.load_model("spot")
+    s = im.VariationalSurface.from_mesh(v, f)
+    d = im.polygonize(s, resolution=64, normals=False)
+    t = im.polygonize(s, resolution=64, method="tracking", normals=False)
+    assert im.compare(d, t)["missing"] == 0 and im.compare(d, t)["extra"] == 0
+    assert t.stats["evaluation_percent"] < 0.5 * d.stats["evaluation_percent"]
+
+
+def test_tracking_callable_needs_seeds():
+    sphere = im.shapes.Sphere(radius=0.5)
+    with pytest.raises(ValueError, match="seeds"):
+        im.polygonize(sphere, resolution=32, method="tracking")
+    t = im.polygonize(sphere, resolution=32, method="tracking", seeds=[[0.0, 0.0, 0.0]])
+    d = im.polygonize(sphere, resolution=32)
+    assert im.compare(d, t)["missing"] == 0
+    with pytest.raises(ValueError, match="seeds"):
+        im.polygonize(sphere, resolution=32, seeds=[[0.0, 0.0, 0.0]])
+
+
+def test_animation_memory_stays_flat():
+    rng = np.random.default_rng(7)
+    c0 = rng.uniform(-0.7, 0.7, (200, 3))
+    b = im.BlobField(c0, 0.25)
+    tess = im.Tessellator()
+    sizes = []
+    for k in range(100):
+        b.update(c0 + 0.05 * np.sin(0.1 * k + np.arange(200))[:, None])
+        m = tess.polygonize(b, resolution=48)
+        assert len(m.faces) > 0
+        sizes.append(tess.capacity_bytes)
+    # Stale cache entries are dropped when they outnumber the live ones, so after warming up
+    # the capacity stops growing.
+    assert max(sizes[50:]) <= sizes[30] * 1.1, sizes[::10]
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(centers=np.zeros((3, 2)), radii=0.2), "centers"),
+        (dict(centers=[[0, 0, np.nan]], radii=0.2), "centers"),
+        (dict(centers=np.zeros((3, 3)), radii=-0.2), "radii"),
+        (dict(centers=np.zeros((3, 3)), radii=[0.1, 0.2]), "radii"),
+        (dict(centers=np.zeros((3, 3)), radii=0.2, threshold=0.0), "threshold"),
+        (dict(centers=np.zeros((3, 3)), radii=0.2, strengths=[1.0, np.inf, 1.0]), "strengths"),
+        (dict(centers=np.zeros((3, 3)), radii=0.2, voxel_size=0.0), "voxel_size"),
+    ],
+)
+def test_bad_blob_input(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        im.BlobField(**kwargs)
+
+
+def test_update_checks_counts():
+    b = im.BlobField(np.zeros((3, 3)), 0.2)
+    with pytest.raises(ValueError, match="radii"):
+        b.update(np.zeros((4, 3)))
+    b.update(np.zeros((4, 3)), radii=0.3, strengths=1.0)
+    assert len(b) == 4
