@@ -144,7 +144,7 @@ def cmd_reconstruct(args) -> int:
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resolution", type=int, default=128, help="cells per axis (default 128)")
-    p.add_argument("--method", choices=METHODS, default=METHODS[-1], help="polygonizer")
+    p.add_argument("--method", choices=METHODS, default="octree", help="polygonizer (default octree)")
     p.add_argument("--d", type=float, default=None, help="normal constraint offset (default: 0.0075 x largest side)")
     p.add_argument("--w", type=float, default=None, help="normal constraint value (default 0.75 d)")
     p.add_argument("--kernel", default="triharmonic", choices=["triharmonic", "biharmonic", "thin_plate"])
