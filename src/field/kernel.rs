@@ -258,19 +258,79 @@ mod avx512 {
         (dx, dy, dz, r2)
     }
 
-    /// Σ w φ for φ = r³ (`cube = true`) or φ = r.
+    /// 1/√x for x > 0 (x already clamped away from 0).
+    #[inline(always)]
+    unsafe fn rsqrt_clamped(x: __m512d) -> __m512d {
+        let half = _mm512_mul_pd(x, _mm512_set1_pd(0.5));
+        let three_halves = _mm512_set1_pd(1.5);
+        let mut y = _mm512_rsqrt14_pd(x);
+        for _ in 0..2 {
+            let yy = _mm512_mul_pd(y, y);
+            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(half, yy, three_halves));
+        }
+        y
+    }
+
+    /// φ for one block against one centre: r³ (`cube`) or r.
+    #[inline(always)]
+    unsafe fn phi_block(
+        px: __m512d,
+        py: __m512d,
+        pz: __m512d,
+        cx: __m512d,
+        cy: __m512d,
+        cz: __m512d,
+        cube: bool,
+    ) -> __m512d {
+        let dx = _mm512_sub_pd(px, cx);
+        let dy = _mm512_sub_pd(py, cy);
+        let dz = _mm512_sub_pd(pz, cz);
+        let r2 = _mm512_fmadd_pd(dx, dx, _mm512_fmadd_pd(dy, dy, _mm512_mul_pd(dz, dz)));
+        let x = _mm512_max_pd(r2, _mm512_set1_pd(1e-280));
+        let r = _mm512_mul_pd(x, rsqrt_clamped(x));
+        if cube {
+            _mm512_mul_pd(r2, r)
+        } else {
+            r
+        }
+    }
+
+    /// Σ w φ for φ = r³ (`cube = true`) or φ = r; two blocks per pass over the centres.
     #[target_feature(enable = "avx512f")]
     pub unsafe fn values(c: &Centres, blocks: &[Block], out: &mut [[f64; LANES]], cube: bool) {
         let n = c.w.len();
-        for (b, o) in blocks.iter().zip(out.iter_mut()) {
-            let mut acc = _mm512_setzero_pd();
+        let mut k = 0;
+        while k < blocks.len() {
+            let two = k + 1 < blocks.len();
+            let b0 = &blocks[k];
+            let b1 = if two { &blocks[k + 1] } else { b0 };
+            let (p0x, p0y, p0z) = (
+                _mm512_loadu_pd(b0.x.as_ptr()),
+                _mm512_loadu_pd(b0.y.as_ptr()),
+                _mm512_loadu_pd(b0.z.as_ptr()),
+            );
+            let (p1x, p1y, p1z) = (
+                _mm512_loadu_pd(b1.x.as_ptr()),
+                _mm512_loadu_pd(b1.y.as_ptr()),
+                _mm512_loadu_pd(b1.z.as_ptr()),
+            );
+            let mut a0 = _mm512_setzero_pd();
+            let mut a1 = _mm512_setzero_pd();
             for j in 0..n {
-                let (_, _, _, r2) = r2_of(b, c.x[j], c.y[j], c.z[j]);
-                let r = _mm512_mul_pd(_mm512_max_pd(r2, _mm512_set1_pd(1e-280)), rsqrt(r2));
-                let phi = if cube { _mm512_mul_pd(r2, r) } else { r };
-                acc = _mm512_fmadd_pd(_mm512_set1_pd(c.w[j]), phi, acc);
+                let (cx, cy, cz) = (
+                    _mm512_set1_pd(c.x[j]),
+                    _mm512_set1_pd(c.y[j]),
+                    _mm512_set1_pd(c.z[j]),
+                );
+                let w = _mm512_set1_pd(c.w[j]);
+                a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
+                a1 = _mm512_fmadd_pd(w, phi_block(p1x, p1y, p1z, cx, cy, cz, cube), a1);
             }
-            _mm512_storeu_pd(o.as_mut_ptr(), acc);
+            _mm512_storeu_pd(out[k].as_mut_ptr(), a0);
+            if two {
+                _mm512_storeu_pd(out[k + 1].as_mut_ptr(), a1);
+            }
+            k += 2;
         }
     }
 
