@@ -518,6 +518,9 @@ mod tests {
             }
         }
         check::<Triharmonic>(&c, &blocks, Kernel::Triharmonic);
+        // An odd number of blocks (the vector path takes two at a time).
+        check::<Triharmonic>(&c, &blocks[..7], Kernel::Triharmonic);
+        check::<Biharmonic>(&c, &blocks[..1], Kernel::Biharmonic);
         check::<Biharmonic>(&c, &blocks, Kernel::Biharmonic);
         check::<ThinPlate>(&c, &blocks, Kernel::ThinPlate);
     }
