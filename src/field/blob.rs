@@ -123,34 +123,35 @@ impl BlobField {
         let n = centers.len();
         let mut r = std::mem::take(&mut self.radii);
         let mut a = std::mem::take(&mut self.strengths);
-        let res =
-            (|| {
-                match radii {
-                    Some(p) => p.fill("radii", n, &mut r, true)?,
-                    None if r.len() != n => {
-                        return Err(Error::invalid(
-                            "radii",
-                            format!(
-                                "{n} centers but {} radii: pass radii when the count changes",
-                                r.len()
-                            ),
-                        ))
-                    }
-                    None => {}
+        let res = (|| {
+            match radii {
+                Some(p) => p.fill("radii", n, &mut r, true)?,
+                None if r.len() != n => {
+                    return Err(Error::invalid(
+                        "radii",
+                        format!(
+                            "{n} centers but {} radii: pass radii when the count changes",
+                            r.len()
+                        ),
+                    ))
                 }
-                match strengths {
-                    Some(p) => p.fill("strengths", n, &mut a, false)?,
-                    None if a.len() != n => return Err(Error::invalid(
+                None => {}
+            }
+            match strengths {
+                Some(p) => p.fill("strengths", n, &mut a, false)?,
+                None if a.len() != n => {
+                    return Err(Error::invalid(
                         "strengths",
                         format!(
                             "{n} centers but {} strengths: pass strengths when the count changes",
                             a.len()
                         ),
-                    )),
-                    None => {}
+                    ))
                 }
-                Ok(())
-            })();
+                None => {}
+            }
+            Ok(())
+        })();
         self.radii = r;
         self.strengths = a;
         res?;
