@@ -10,11 +10,12 @@
 //! Because the lattice, the table and the edge arithmetic are those of the dense polygonizer, the
 //! mesh equals the dense mesh on every component that holds a seed.
 
+use super::bricks::Bricks;
 use super::cell::{case_index, corner_offset, edge_origin, emit_triangles};
 use super::{compute_normals, evaluate, CaseTable, Settings, Stats};
 use crate::error::Result;
 use crate::field::Field;
-use crate::lattice::{edge_crossing, KeyMap, Lattice};
+use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
 use std::time::Instant;
@@ -26,19 +27,12 @@ const FACE_STEP: [(usize, i64); 6] = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1),
 /// again — in steady state nothing is reallocated.
 #[derive(Default)]
 pub struct Tessellator {
-    stamp: u32,
-    /// Lattice point → (stamp, value).
-    values: KeyMap<(u32, f64)>,
-    /// Lattice edge → (stamp, vertex index).
-    edges: KeyMap<(u32, u32)>,
-    /// Cell → stamp of the call that queued it.
-    queued: KeyMap<u32>,
-    /// Entries of each map touched by the last call (the live part).
-    touched: [usize; 3],
+    /// Corner values, edge vertices and queued marks, time-stamped.
+    cache: Bricks,
     wave: Vec<[u32; 3]>,
     next: Vec<[u32; 3]>,
     points: Vec<DVec3>,
-    keys: Vec<u64>,
+    keys: Vec<[u32; 3]>,
     vals: Vec<f64>,
     mesh: Mesh,
 }
@@ -55,35 +49,18 @@ impl Tessellator {
 
     /// Bytes held by the caches and buffers (capacities), to check that memory stays flat.
     pub fn capacity_bytes(&self) -> usize {
-        self.values.capacity() * 24
-            + self.edges.capacity() * 24
-            + self.queued.capacity() * 16
+        self.cache.capacity_bytes()
             + (self.wave.capacity() + self.next.capacity()) * 12
             + self.points.capacity() * 24
-            + (self.keys.capacity() + self.vals.capacity()) * 8
+            + self.keys.capacity() * 12
+            + self.vals.capacity() * 8
             + self.mesh.vertices.capacity() * 24
             + self.mesh.normals.capacity() * 24
             + self.mesh.triangles.capacity() * 12
     }
 
-    fn begin(&mut self) {
-        // Drop stale entries only when they dominate, so that a moving surface cannot make the
-        // maps grow without bound; the maps keep their capacity.
-        let [tv, te, tq] = self.touched.map(|t| 2 * t + 1024);
-        if self.values.len() > tv || self.edges.len() > te || self.queued.len() > tq {
-            let s = self.stamp;
-            self.values.retain(|_, v| v.0 == s);
-            self.edges.retain(|_, v| v.0 == s);
-            self.queued.retain(|_, v| *v == s);
-        }
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            // After 2³² calls: start afresh so that no stale stamp can match.
-            self.values.clear();
-            self.edges.clear();
-            self.queued.clear();
-            self.stamp = 1;
-        }
+    fn begin(&mut self, lattice: &Lattice) {
+        self.cache.begin(lattice.points_per_axis());
         self.mesh.vertices.clear();
         self.mesh.triangles.clear();
         self.mesh.normals.clear();
@@ -98,18 +75,14 @@ impl Tessellator {
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<()> {
-        let s = self.stamp;
         self.points.clear();
         self.keys.clear();
         for o in cells {
             for k in 0..8 {
                 let d = corner_offset(k);
                 let c = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-                let key = Lattice::key(c);
-                let e = self.values.entry(key).or_insert((0, 0.0));
-                if e.0 != s {
-                    *e = (s, f64::NAN);
-                    self.keys.push(key);
+                if self.cache.claim_value(c) {
+                    self.keys.push(c);
                     self.points.push(lattice.point(c));
                 }
             }
@@ -117,17 +90,17 @@ impl Tessellator {
         self.vals.resize(self.points.len(), 0.0);
         evaluate(field, &self.points, &mut self.vals, settings.batch)?;
         stats.evaluations += self.points.len() as u64;
-        for (k, v) in self.keys.iter().zip(&self.vals) {
-            self.values.insert(*k, (s, *v));
+        for i in 0..self.keys.len() {
+            self.cache.set_value(self.keys[i], self.vals[i]);
         }
         Ok(())
     }
 
-    fn corners(&self, o: [u32; 3]) -> [f64; 8] {
+    fn corners(&mut self, o: [u32; 3]) -> [f64; 8] {
         let mut v = [0.0; 8];
         for (k, vk) in v.iter_mut().enumerate() {
             let d = corner_offset(k);
-            *vk = self.values[&Lattice::key([o[0] + d[0], o[1] + d[1], o[2] + d[2]])].1;
+            *vk = self.cache.known([o[0] + d[0], o[1] + d[1], o[2] + d[2]]);
         }
         v
     }
@@ -190,8 +163,8 @@ impl Tessellator {
     }
 
     /// Starts a call: call before [`Tessellator::walk_seeds`] and [`Tessellator::track`].
-    pub fn start(&mut self) {
-        self.begin();
+    pub fn start(&mut self, lattice: &Lattice) {
+        self.begin(lattice);
     }
 
     /// Tracks the surface from `seeds` (cells) and returns the mesh (valid until the next call).
@@ -204,18 +177,15 @@ impl Tessellator {
         stats: &mut Stats,
     ) -> Result<&Mesh> {
         let table = CaseTable::get(settings.ambiguity);
-        let s = self.stamp;
         let cells = lattice.cells;
         self.wave.clear();
         for &c in seeds {
-            if c[0] < cells[0] && c[1] < cells[1] && c[2] < cells[2] {
-                let q = self.queued.entry(Lattice::key(c)).or_insert(0);
-                if *q != s {
-                    *q = s;
-                    self.wave.push(c);
-                }
+            if c[0] < cells[0] && c[1] < cells[1] && c[2] < cells[2] && self.cache.queue(c) {
+                self.wave.push(c);
             }
         }
+        let mut vertices = std::mem::take(&mut self.mesh.vertices);
+        let mut triangles = std::mem::take(&mut self.mesh.triangles);
         while !self.wave.is_empty() {
             let t = Instant::now();
             let wave = std::mem::take(&mut self.wave);
@@ -231,32 +201,27 @@ impl Tessellator {
                     continue;
                 }
                 stats.cells_crossed += 1;
-                let values = &self.values;
-                let edges = &mut self.edges;
-                let vertices = &mut self.mesh.vertices;
+                let cache = &mut self.cache;
                 emit_triangles(
                     table,
                     case,
                     |e| {
                         let (d, axis) = edge_origin(e);
                         let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-                        let slot = edges.entry(Lattice::edge_key(a, axis)).or_insert((0, 0));
-                        if slot.0 != s {
+                        cache.edge(a, axis, |c| {
                             let mut b = a;
                             b[axis as usize] += 1;
-                            let fa = values[&Lattice::key(a)].1;
-                            let fb = values[&Lattice::key(b)].1;
+                            let (fa, fb) = (c.known(a), c.known(b));
                             vertices.push(edge_crossing(
                                 lattice.point(a),
                                 lattice.point(b),
                                 fa,
                                 fb,
                             ));
-                            *slot = (s, (vertices.len() - 1) as u32);
-                        }
-                        slot.1
+                            (vertices.len() - 1) as u32
+                        })
                     },
-                    &mut self.mesh.triangles,
+                    &mut triangles,
                 );
                 let faces = table.crossed_faces(case);
                 for (f, &(axis, step)) in FACE_STEP.iter().enumerate() {
@@ -269,9 +234,7 @@ impl Tessellator {
                     }
                     let mut c = o;
                     c[axis] = n as u32;
-                    let q = self.queued.entry(Lattice::key(c)).or_insert(0);
-                    if *q != s {
-                        *q = s;
+                    if self.cache.queue(c) {
                         self.next.push(c);
                     }
                 }
@@ -280,11 +243,8 @@ impl Tessellator {
             std::mem::swap(&mut self.wave, &mut self.next);
             stats.add_time("track", t);
         }
-        self.touched = [
-            stats.evaluations as usize,
-            self.mesh.vertices.len(),
-            stats.cells_visited as usize,
-        ];
+        self.mesh.vertices = vertices;
+        self.mesh.triangles = triangles;
         let mut mesh = std::mem::take(&mut self.mesh);
         let r = compute_normals(field, lattice, &mut mesh, settings, stats);
         self.mesh = mesh;
@@ -312,7 +272,7 @@ impl Tessellator {
             lattice_points: lattice.num_points(),
             ..Default::default()
         };
-        self.start();
+        self.start(lattice);
         let t = Instant::now();
         let mut seeds = self.walk_seeds(field, lattice, starts, max_walk, settings, &mut stats)?;
         seeds.extend_from_slice(seed_cells);
