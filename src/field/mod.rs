@@ -13,6 +13,7 @@ pub mod rbf;
 pub mod saddle;
 pub mod voxels;
 
+use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -61,6 +62,31 @@ pub trait Field: Sync {
                 }
             });
     }
+
+    /// Values at every lattice point of the z-planes `z0..z1`, x fastest, then y, then z; the
+    /// points are [`Lattice::point`]. Fields with a faster way to fill a grid (a blob field
+    /// splats each primitive into its box) override this; they must return the same bits as
+    /// [`Field::values`] at those points, so that every polygonizer sees the same values.
+    /// The default builds the points and calls [`Field::values`].
+    fn lattice_values(
+        &self,
+        lattice: &Lattice,
+        z0: u32,
+        z1: u32,
+        points: &mut Vec<DVec3>,
+        out: &mut [f64],
+    ) {
+        let p = lattice.points_per_axis();
+        points.clear();
+        for z in z0..z1 {
+            for y in 0..p[1] {
+                for x in 0..p[0] {
+                    points.push(lattice.point([x, y, z]));
+                }
+            }
+        }
+        self.values(points, out);
+    }
 }
 
 impl<F: Field + ?Sized> Field for &F {
@@ -78,6 +104,16 @@ impl<F: Field + ?Sized> Field for &F {
     }
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         (**self).gradients(points, out)
+    }
+    fn lattice_values(
+        &self,
+        lattice: &Lattice,
+        z0: u32,
+        z1: u32,
+        points: &mut Vec<DVec3>,
+        out: &mut [f64],
+    ) {
+        (**self).lattice_values(lattice, z0, z1, points, out)
     }
 }
 
@@ -166,6 +202,18 @@ impl<F: Field> Field for Counting<F> {
         self.count
             .fetch_add(points.len() as u64, std::sync::atomic::Ordering::Relaxed);
         self.inner.values(points, out)
+    }
+    fn lattice_values(
+        &self,
+        lattice: &Lattice,
+        z0: u32,
+        z1: u32,
+        points: &mut Vec<DVec3>,
+        out: &mut [f64],
+    ) {
+        self.count
+            .fetch_add(out.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        self.inner.lattice_values(lattice, z0, z1, points, out)
     }
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         self.inner.gradients(points, out)

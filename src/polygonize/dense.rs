@@ -6,9 +6,7 @@
 //! working memory grows with one plane, not with the lattice.
 
 use super::cell::{case_index, corner_offset, edge_origin, emit_triangles};
-use super::{
-    check_memory, compute_normals, estimate_triangles, evaluate, CaseTable, Settings, Stats,
-};
+use super::{check_memory, compute_normals, estimate_triangles, CaseTable, Settings, Stats};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
@@ -45,18 +43,42 @@ impl<F: Field + ?Sized> Planes<'_, F> {
             let last = self.lattice.cells[2];
             self.first = k;
             self.count = self.per_batch.min(last + 1 - k);
-            let p = self.lattice.points_per_axis();
-            self.points.clear();
-            for z in k..k + self.count {
-                for y in 0..p[1] {
-                    for x in 0..p[0] {
-                        self.points.push(self.lattice.point([x, y, z]));
-                    }
+            let n_values = self.count as usize * self.plane_len();
+            self.values.resize(n_values, 0.0);
+            // Whole planes at once; in batches for fields that are called per batch.
+            let per = ((self.batch / self.plane_len()).max(1)) as u32;
+            let mut z = k;
+            while z < k + self.count {
+                let z1 = (z + per).min(k + self.count);
+                let off = (z - k) as usize * self.plane_len();
+                let len = (z1 - z) as usize * self.plane_len();
+                self.field.lattice_values(
+                    &self.lattice,
+                    z,
+                    z1,
+                    &mut self.points,
+                    &mut self.values[off..off + len],
+                );
+                if let Some(i) = self.values[off..off + len]
+                    .iter()
+                    .position(|v| !v.is_finite())
+                {
+                    let p = self.lattice.points_per_axis();
+                    let (pl, r) = (i / self.plane_len(), i % self.plane_len());
+                    let q = self.lattice.point([
+                        (r % p[0] as usize) as u32,
+                        (r / p[0] as usize) as u32,
+                        z + pl as u32,
+                    ]);
+                    return Err(crate::Error::FieldNotFinite {
+                        x: q.x,
+                        y: q.y,
+                        z: q.z,
+                    });
                 }
+                z = z1;
             }
-            self.values.resize(self.points.len(), 0.0);
-            evaluate(self.field, &self.points, &mut self.values, self.batch)?;
-            stats.evaluations += self.points.len() as u64;
+            stats.evaluations += n_values as u64;
             stats.add_time("evaluate", t);
         }
         let off = (k - self.first) as usize * n;
