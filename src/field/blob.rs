@@ -338,6 +338,33 @@ mod tests {
     }
 
     #[test]
+    fn splatted_lattice_values_are_bit_identical() {
+        let b = random_blobs(120, 31);
+        let l = Lattice::new(
+            DVec3::new(-1.0, -0.9, -1.1),
+            DVec3::new(1.1, 1.0, 0.9),
+            [37, 41, 29],
+        )
+        .unwrap();
+        let p = l.points_per_axis();
+        let plane = (p[0] * p[1]) as usize;
+        let mut out = vec![0.0; plane * 5];
+        let mut scratch = vec![];
+        b.lattice_values(&l, 10, 15, &mut scratch, &mut out);
+        let mut pts = vec![];
+        for z in 10..15 {
+            for y in 0..p[1] {
+                for x in 0..p[0] {
+                    pts.push(l.point([x, y, z]));
+                }
+            }
+        }
+        let mut v = vec![0.0; pts.len()];
+        b.values(&pts, &mut v);
+        assert!(out.iter().zip(&v).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    #[test]
     fn gradient_matches_differences() {
         let b = random_blobs(50, 11);
         let pts = random_points(300, -1.0, 1.0, 12);
