@@ -236,28 +236,6 @@ mod avx512 {
     use super::{Block, Centres, LANES};
     use std::arch::x86_64::*;
 
-    #[inline(always)]
-    unsafe fn rsqrt(r2: __m512d) -> __m512d {
-        let x = _mm512_max_pd(r2, _mm512_set1_pd(1e-280));
-        let half = _mm512_mul_pd(x, _mm512_set1_pd(0.5));
-        let three_halves = _mm512_set1_pd(1.5);
-        let mut y = _mm512_rsqrt14_pd(x);
-        for _ in 0..2 {
-            let yy = _mm512_mul_pd(y, y);
-            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(half, yy, three_halves));
-        }
-        y
-    }
-
-    #[inline(always)]
-    unsafe fn r2_of(b: &Block, x: f64, y: f64, z: f64) -> (__m512d, __m512d, __m512d, __m512d) {
-        let dx = _mm512_sub_pd(_mm512_loadu_pd(b.x.as_ptr()), _mm512_set1_pd(x));
-        let dy = _mm512_sub_pd(_mm512_loadu_pd(b.y.as_ptr()), _mm512_set1_pd(y));
-        let dz = _mm512_sub_pd(_mm512_loadu_pd(b.z.as_ptr()), _mm512_set1_pd(z));
-        let r2 = _mm512_fmadd_pd(dx, dx, _mm512_fmadd_pd(dy, dy, _mm512_mul_pd(dz, dz)));
-        (dx, dy, dz, r2)
-    }
-
     /// 1/√x for x > 0 (x already clamped away from 0).
     #[inline(always)]
     unsafe fn rsqrt_clamped(x: __m512d) -> __m512d {
@@ -334,7 +312,41 @@ mod avx512 {
         }
     }
 
-    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r.
+    /// One block against one centre: (φ, φ'/r, dx, dy, dz).
+    #[inline(always)]
+    unsafe fn phi_grad_block(
+        px: __m512d,
+        py: __m512d,
+        pz: __m512d,
+        cx: __m512d,
+        cy: __m512d,
+        cz: __m512d,
+        cube: bool,
+    ) -> (__m512d, __m512d, __m512d, __m512d, __m512d) {
+        let dx = _mm512_sub_pd(px, cx);
+        let dy = _mm512_sub_pd(py, cy);
+        let dz = _mm512_sub_pd(pz, cz);
+        let r2 = _mm512_fmadd_pd(dx, dx, _mm512_fmadd_pd(dy, dy, _mm512_mul_pd(dz, dz)));
+        let x = _mm512_max_pd(r2, _mm512_set1_pd(1e-280));
+        let inv = rsqrt_clamped(x);
+        let r = _mm512_mul_pd(x, inv);
+        if cube {
+            // φ = r³, φ'/r = 3r.
+            (
+                _mm512_mul_pd(r2, r),
+                _mm512_mul_pd(_mm512_set1_pd(3.0), r),
+                dx,
+                dy,
+                dz,
+            )
+        } else {
+            // φ = r, φ'/r = 1/r (0 at r = 0).
+            let nz = _mm512_cmp_pd_mask(r2, _mm512_setzero_pd(), _CMP_GT_OQ);
+            (r, _mm512_maskz_mov_pd(nz, inv), dx, dy, dz)
+        }
+    }
+
+    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass.
     #[target_feature(enable = "avx512f")]
     pub unsafe fn values_gradients(
         c: &Centres,
@@ -344,31 +356,44 @@ mod avx512 {
     ) {
         let n = c.w.len();
         let zero = _mm512_setzero_pd();
-        for (b, o) in blocks.iter().zip(out.iter_mut()) {
-            let (mut v, mut gx, mut gy, mut gz) = (zero, zero, zero, zero);
+        let mut k = 0;
+        while k < blocks.len() {
+            let two = k + 1 < blocks.len();
+            let b0 = &blocks[k];
+            let b1 = if two { &blocks[k + 1] } else { b0 };
+            let p0 = (
+                _mm512_loadu_pd(b0.x.as_ptr()),
+                _mm512_loadu_pd(b0.y.as_ptr()),
+                _mm512_loadu_pd(b0.z.as_ptr()),
+            );
+            let p1 = (
+                _mm512_loadu_pd(b1.x.as_ptr()),
+                _mm512_loadu_pd(b1.y.as_ptr()),
+                _mm512_loadu_pd(b1.z.as_ptr()),
+            );
+            let mut acc = [[zero; 4]; 2];
             for j in 0..n {
-                let (dx, dy, dz, r2) = r2_of(b, c.x[j], c.y[j], c.z[j]);
-                let inv = rsqrt(r2);
-                let r = _mm512_mul_pd(_mm512_max_pd(r2, _mm512_set1_pd(1e-280)), inv);
+                let (cx, cy, cz) = (
+                    _mm512_set1_pd(c.x[j]),
+                    _mm512_set1_pd(c.y[j]),
+                    _mm512_set1_pd(c.z[j]),
+                );
                 let w = _mm512_set1_pd(c.w[j]);
-                let (phi, s) = if cube {
-                    // φ = r³, φ'/r = 3r.
-                    (_mm512_mul_pd(r2, r), _mm512_mul_pd(_mm512_set1_pd(3.0), r))
-                } else {
-                    // φ = r, φ'/r = 1/r (0 at r = 0).
-                    let nz = _mm512_cmp_pd_mask(r2, zero, _CMP_GT_OQ);
-                    (r, _mm512_maskz_mov_pd(nz, inv))
-                };
-                v = _mm512_fmadd_pd(w, phi, v);
-                let ws = _mm512_mul_pd(w, s);
-                gx = _mm512_fmadd_pd(ws, dx, gx);
-                gy = _mm512_fmadd_pd(ws, dy, gy);
-                gz = _mm512_fmadd_pd(ws, dz, gz);
+                for (a, p) in acc.iter_mut().zip([p0, p1]) {
+                    let (phi, s, dx, dy, dz) = phi_grad_block(p.0, p.1, p.2, cx, cy, cz, cube);
+                    a[0] = _mm512_fmadd_pd(w, phi, a[0]);
+                    let ws = _mm512_mul_pd(w, s);
+                    a[1] = _mm512_fmadd_pd(ws, dx, a[1]);
+                    a[2] = _mm512_fmadd_pd(ws, dy, a[2]);
+                    a[3] = _mm512_fmadd_pd(ws, dz, a[3]);
+                }
             }
-            _mm512_storeu_pd(o[0].as_mut_ptr(), v);
-            _mm512_storeu_pd(o[1].as_mut_ptr(), gx);
-            _mm512_storeu_pd(o[2].as_mut_ptr(), gy);
-            _mm512_storeu_pd(o[3].as_mut_ptr(), gz);
+            for (q, a) in acc.iter().enumerate().take(if two { 2 } else { 1 }) {
+                for (m, v) in a.iter().enumerate() {
+                    _mm512_storeu_pd(out[k + q][m].as_mut_ptr(), *v);
+                }
+            }
+            k += 2;
         }
     }
 }
