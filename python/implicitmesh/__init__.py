@@ -16,5 +16,6 @@ from ._core import BlobField, VariationalSurface, __version__
 from .mesh import Mesh, compare
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
+from .subdivision import blend, butterfly, subdivide
 
-__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "subdivide", "butterfly", "blend", "__version__"]

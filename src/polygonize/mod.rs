@@ -8,6 +8,7 @@ pub mod bricks;
 pub mod cell;
 pub mod dense;
 pub mod octree;
+pub mod subdivision;
 pub mod table;
 pub mod tracking;
 

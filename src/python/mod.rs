@@ -7,6 +7,7 @@ mod convert;
 mod errors;
 mod field;
 mod polygonize;
+mod subdivision;
 mod variational;
 
 use pyo3::prelude::*;
@@ -18,5 +19,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<blob::PyBlobField>()?;
     m.add_class::<polygonize::PyTessellator>()?;
     m.add_function(wrap_pyfunction!(polygonize::polygonize, m)?)?;
+    subdivision::register(m)?;
     Ok(())
 }

@@ -1,0 +1,1235 @@
+//! Subdivision of a control mesh onto an implicit surface (Jin, Sun & Peng 2003), the modified
+//! butterfly scheme it is blended with (Zorin, Schröder & Sweldens 1996), and the blend itself.
+//!
+//! The control mesh is a triangle mesh whose vertices lie on the surface (typically the mesh the
+//! surface was fitted to). Each level splits every triangle into four at its edge midpoints
+//! ([`split`]) and moves the new midpoints onto the zero set by Newton steps along the gradient
+//! ([`project`]), the "second way" of Jin §3: every level starts from vertices already on the
+//! surface, so the midpoints start close to it. Old vertices keep their index and their exact
+//! coordinates, so level `k` is a sub-mesh of level `k + 1`.
+//!
+//! [`butterfly`] makes the same connectivity with positions from the modified butterfly scheme,
+//! so that vertex `i` of both meshes corresponds and [`blend`] can mix them (Jin §4).
+
+use crate::error::{check_finite_points, Error, Result};
+use crate::field::rbf::VariationalSurface;
+use crate::field::Field;
+use crate::mesh::Mesh;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Most subdivision levels accepted (each multiplies the triangles by four).
+pub const MAX_LEVELS: usize = 8;
+
+/// Bytes per triangle of the finest level, counting its share of the vertices, normals and the
+/// coarser levels kept alongside it.
+const BYTES_PER_TRIANGLE: u64 = 96;
+
+/// Newton steps shorter than this multiple of the local edge length that fail to halve the
+/// previous step are taken as the rounding noise of the field: the point has converged.
+const NOISE_STEP: f64 = 1e-6;
+
+/// How the new vertices are projected onto the surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Newton stops when its step is shorter than `tolerance` × the local edge length (half the
+    /// parent edge), or when a step below 1e-6 × that length no longer halves (the rounding
+    /// noise of the field); the bisection fallback stops when its bracket is that short.
+    pub tolerance: f64,
+    /// Most Newton steps per vertex and level before the fallback takes over.
+    pub max_iterations: u32,
+    /// Longest Newton step, as a multiple of the local edge length.
+    pub max_step: f64,
+    /// Newton gives up on a vertex that wanders further than this multiple of the local edge
+    /// length from its midpoint (it would land on another part of the surface).
+    pub max_distance: f64,
+    /// The fallback looks for a sign change along the gradient line within ± this multiple of the
+    /// local edge length from the midpoint.
+    pub search_range: f64,
+    /// Samples per side of that search.
+    pub search_samples: u32,
+    /// Compute vertex normals from the field's gradient.
+    pub normals: bool,
+    /// Refuse requests whose finest level would need more than this many bytes.
+    pub memory_limit: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            tolerance: 1e-9,
+            max_iterations: 30,
+            max_step: 0.5,
+            max_distance: 4.0,
+            search_range: 4.0,
+            search_samples: 16,
+            normals: true,
+            memory_limit: 4 << 30,
+        }
+    }
+}
+
+impl Settings {
+    fn check(&self) -> Result<()> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(Error::invalid(
+                "tolerance",
+                format!("must be in (0, 1), got {}", self.tolerance),
+            ));
+        }
+        if self.max_iterations == 0 || self.max_iterations > 10_000 {
+            return Err(Error::invalid(
+                "max_steps",
+                format!("must be between 1 and 10000, got {}", self.max_iterations),
+            ));
+        }
+        for (name, v) in [
+            ("max_step", self.max_step),
+            ("max_distance", self.max_distance),
+            ("search_range", self.search_range),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::invalid(
+                    name,
+                    format!("must be finite and positive, got {v}"),
+                ));
+            }
+        }
+        if self.search_samples == 0 || self.search_samples > 1000 {
+            return Err(Error::invalid(
+                "search_samples",
+                format!("must be between 1 and 1000, got {}", self.search_samples),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What the projection of one level did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SubdivisionStats {
+    /// Subdivision level (0: the control mesh).
+    pub level: usize,
+    /// New vertices projected at this level.
+    pub projected: usize,
+    /// Field evaluations (value and gradient) per projected vertex during Newton: mean and max.
+    pub iterations_mean: f64,
+    pub iterations_max: u32,
+    /// Points evaluated in total (Newton, fallback and the final values and normals).
+    pub evaluations: u64,
+    /// Batched field calls made.
+    pub batches: u64,
+    /// Vertices for which Newton failed and the line search along the gradient took over.
+    pub fallbacks: usize,
+    /// Vertices left off the surface (no sign change found): they keep the point of smallest |f|
+    /// seen.
+    pub not_converged: usize,
+    /// Largest |f| among the vertices that did not converge (0 when all did).
+    pub not_converged_max_abs_value: f64,
+    /// Largest |f| over the new vertices of this level after projection.
+    pub max_abs_value: f64,
+    /// Wall-clock seconds for the level (split, projection, normals).
+    pub seconds: f64,
+}
+
+/// Checks that `mesh` can be subdivided: finite vertices, at least one triangle, indices in
+/// range, no triangle repeating a vertex, no edge shared by more than two triangles, and two
+/// triangles sharing an edge traverse it in opposite directions (consistent orientation).
+pub fn check_mesh(mesh: &Mesh) -> Result<()> {
+    check_finite_points("vertices", &mesh.vertices)?;
+    if mesh.triangles.is_empty() {
+        return Err(Error::invalid("faces", "the mesh has no faces"));
+    }
+    if mesh.vertices.len() > u32::MAX as usize / 2 {
+        return Err(Error::invalid("vertices", "too many vertices"));
+    }
+    let n = mesh.vertices.len();
+    let mut uses: HashMap<(u32, u32), (u32, u32)> =
+        HashMap::with_capacity(mesh.triangles.len() * 2);
+    for (k, t) in mesh.triangles.iter().enumerate() {
+        if let Some(&bad) = t.iter().find(|&&v| v as usize >= n) {
+            return Err(Error::invalid(
+                "faces",
+                format!("face {k} refers to vertex {bad}, but there are {n} vertices"),
+            ));
+        }
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            return Err(Error::invalid(
+                "faces",
+                format!("face {k} repeats a vertex: {t:?}"),
+            ));
+        }
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            let u = uses.entry((a.min(b), a.max(b))).or_default();
+            if a < b {
+                u.0 += 1;
+            } else {
+                u.1 += 1;
+            }
+            if u.0 + u.1 > 2 {
+                return Err(Error::invalid(
+                    "faces",
+                    format!("edge ({a}, {b}) is shared by more than two faces (non-manifold)"),
+                ));
+            }
+            if u.0 > 1 || u.1 > 1 {
+                return Err(Error::invalid(
+                    "faces",
+                    format!(
+                        "edge ({a}, {b}) is traversed twice in the same direction: faces are not \
+                         consistently oriented"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_levels(mesh: &Mesh, levels: usize, memory_limit: u64) -> Result<()> {
+    if levels > MAX_LEVELS {
+        return Err(Error::invalid(
+            "levels",
+            format!("must be at most {MAX_LEVELS}, got {levels}"),
+        ));
+    }
+    let faces = (mesh.triangles.len() as u64).saturating_mul(1u64 << (2 * levels));
+    let bytes = faces.saturating_mul(BYTES_PER_TRIANGLE);
+    if bytes > memory_limit || faces > u32::MAX as u64 / 2 {
+        return Err(Error::TooMuchMemory {
+            name: "levels",
+            needed_mib: bytes.div_ceil(1 << 20),
+            limit_mib: memory_limit >> 20,
+        });
+    }
+    Ok(())
+}
+
+/// 1-to-4 midpoint subdivision: one new vertex at the midpoint of every edge (shared by the
+/// faces on both sides), appended after the old vertices, which keep their indices. Each
+/// triangle `[a, b, c]` becomes `[a, ab, ca]`, `[ab, b, bc]`, `[ca, bc, c]`, `[ab, bc, ca]`, so
+/// the orientation is kept. Boundary edges get a midpoint like any other.
+///
+/// Returns the new mesh (without normals) and, for every new vertex in order, the two old
+/// vertices of its parent edge (smaller index first). Indices must be in range (see
+/// [`check_mesh`]).
+pub fn split(mesh: &Mesh) -> (Mesh, Vec<[u32; 2]>) {
+    let n = mesh.vertices.len() as u32;
+    let mut edge: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 3 / 2);
+    let mut parents: Vec<[u32; 2]> = Vec::with_capacity(mesh.triangles.len() * 3 / 2);
+    let mut triangles = Vec::with_capacity(mesh.triangles.len() * 4);
+    for t in &mesh.triangles {
+        let mut mid = [0u32; 3];
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            mid[e] = *edge.entry(key).or_insert_with(|| {
+                parents.push([key.0, key.1]);
+                n + parents.len() as u32 - 1
+            });
+        }
+        let [a, b, c] = *t;
+        let [ab, bc, ca] = mid;
+        triangles.push([a, ab, ca]);
+        triangles.push([ab, b, bc]);
+        triangles.push([ca, bc, c]);
+        triangles.push([ab, bc, ca]);
+    }
+    let mut vertices = Vec::with_capacity(mesh.vertices.len() + parents.len());
+    vertices.extend_from_slice(&mesh.vertices);
+    vertices.extend(
+        parents
+            .iter()
+            .map(|&[a, b]| 0.5 * (mesh.vertices[a as usize] + mesh.vertices[b as usize])),
+    );
+    (
+        Mesh {
+            vertices,
+            triangles,
+            normals: vec![],
+        },
+        parents,
+    )
+}
+
+/// Batched values and gradients at points.
+type ValuesGradientsFn<'a> = &'a (dyn Fn(&[DVec3], &mut [f64], &mut [DVec3]) + Sync);
+/// Batched values at points.
+type ValuesFn<'a> = &'a (dyn Fn(&[DVec3], &mut [f64]) + Sync);
+
+/// A field seen through batched calls: values with gradients, and values alone.
+struct Evaluator<'a> {
+    values_gradients: ValuesGradientsFn<'a>,
+    values: ValuesFn<'a>,
+    evaluations: u64,
+    batches: u64,
+}
+
+impl Evaluator<'_> {
+    fn both(&mut self, p: &[DVec3], v: &mut [f64], g: &mut [DVec3]) -> Result<()> {
+        (self.values_gradients)(p, v, g);
+        self.evaluations += p.len() as u64;
+        self.batches += 1;
+        match (0..p.len()).find(|&i| !(v[i].is_finite() && g[i].is_finite())) {
+            Some(i) => Err(not_finite(p[i])),
+            None => Ok(()),
+        }
+    }
+    fn values(&mut self, p: &[DVec3], v: &mut [f64]) -> Result<()> {
+        (self.values)(p, v);
+        self.evaluations += p.len() as u64;
+        self.batches += 1;
+        match v.iter().position(|x| !x.is_finite()) {
+            Some(i) => Err(not_finite(p[i])),
+            None => Ok(()),
+        }
+    }
+}
+
+fn not_finite(p: DVec3) -> Error {
+    Error::FieldNotFinite {
+        x: p.x,
+        y: p.y,
+        z: p.z,
+    }
+}
+
+/// What [`project`] did to a batch of points.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Projection {
+    /// Projected points.
+    pub points: Vec<DVec3>,
+    /// Newton evaluations per point.
+    pub iterations: Vec<u32>,
+    /// Points handed to the line-search fallback.
+    pub fallbacks: usize,
+    /// Indices of the points the fallback could not place either.
+    pub not_converged: Vec<usize>,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum State {
+    Moving,
+    Done,
+    Failed,
+}
+
+/// Moves every start point onto the zero set: Newton steps r ← r − f ∇f / |∇f|² (Jin eq. 10),
+/// all still-moving points evaluated in one batched call per step. `scales[i]` is the local
+/// edge length of point `i`, which sets the stopping tolerance, the longest step and how far the
+/// point may go; `hints[i]` is a direction to search along when the gradient vanishes at the
+/// start (e.g. the mean normal of the parent edge).
+///
+/// Points where Newton fails (vanishing gradient, too many steps, wandering too far) are searched
+/// along the gradient line through their start point for the nearest sign change, then bisected.
+fn project(
+    eval: &mut Evaluator<'_>,
+    starts: &[DVec3],
+    scales: &[f64],
+    hints: &[DVec3],
+    s: &Settings,
+) -> Result<Projection> {
+    let n = starts.len();
+    let mut pos = starts.to_vec();
+    let mut iterations = vec![0u32; n];
+    let mut state = vec![State::Moving; n];
+    // Value and gradient at the start point (for the fallback); best point seen.
+    let mut f0 = vec![0.0; n];
+    let mut g0 = vec![DVec3::ZERO; n];
+    let mut best: Vec<(f64, DVec3)> = starts.iter().map(|&p| (f64::INFINITY, p)).collect();
+    let mut last = vec![f64::INFINITY; n];
+    let mut active: Vec<usize> = (0..n).collect();
+    let mut pts: Vec<DVec3> = Vec::with_capacity(n);
+    let mut vals = vec![0.0; n];
+    let mut grads = vec![DVec3::ZERO; n];
+    for step in 0..s.max_iterations {
+        if active.is_empty() {
+            break;
+        }
+        pts.clear();
+        pts.extend(active.iter().map(|&i| pos[i]));
+        let m = pts.len();
+        eval.both(&pts, &mut vals[..m], &mut grads[..m])?;
+        let mut next = Vec::with_capacity(m);
+        for (k, &i) in active.iter().enumerate() {
+            let (f, g) = (vals[k], grads[k]);
+            iterations[i] += 1;
+            if step == 0 {
+                f0[i] = f;
+                g0[i] = g;
+            }
+            if f.abs() < best[i].0 {
+                best[i] = (f.abs(), pos[i]);
+            }
+            if f == 0.0 {
+                state[i] = State::Done;
+                continue;
+            }
+            let g2 = g.length_squared();
+            if !(g2 > 0.0 && g2.is_finite()) {
+                state[i] = State::Failed;
+                continue;
+            }
+            let mut d = g * (-f / g2);
+            let len = d.length();
+            let h = scales[i];
+            if !len.is_finite() {
+                state[i] = State::Failed;
+                continue;
+            }
+            // Converged, or stalled at the rounding noise of f: a tiny step that is no longer
+            // shrinking quadratically.
+            if len <= s.tolerance * h || (len <= NOISE_STEP * h && len > 0.5 * last[i]) {
+                if len < last[i] {
+                    pos[i] += d;
+                }
+                state[i] = State::Done;
+                continue;
+            }
+            last[i] = len;
+            if len > s.max_step * h {
+                d *= s.max_step * h / len;
+            }
+            pos[i] += d;
+            if (pos[i] - starts[i]).length() > s.max_distance * h {
+                state[i] = State::Failed;
+            } else {
+                next.push(i);
+            }
+        }
+        active = next;
+    }
+    for &i in &active {
+        state[i] = State::Failed;
+    }
+
+    // Fallback: nearest sign change along the gradient line through the start point.
+    let failed: Vec<usize> = (0..n).filter(|&i| state[i] == State::Failed).collect();
+    let mut not_converged = Vec::new();
+    if !failed.is_empty() {
+        let ns = s.search_samples as usize;
+        let dirs: Vec<DVec3> = failed
+            .iter()
+            .map(|&i| {
+                let g = g0[i].normalize_or_zero();
+                if g != DVec3::ZERO {
+                    g
+                } else {
+                    hints[i].normalize_or_zero()
+                }
+            })
+            .collect();
+        let t_of = |i: usize, j: usize| -> f64 {
+            // Sample j in 0..2ns: first the + side outward, then the − side outward.
+            let r = s.search_range * scales[i] * ((j % ns) + 1) as f64 / ns as f64;
+            if j < ns {
+                r
+            } else {
+                -r
+            }
+        };
+        let mut probes = Vec::with_capacity(failed.len() * 2 * ns);
+        for (k, &i) in failed.iter().enumerate() {
+            for j in 0..2 * ns {
+                probes.push(starts[i] + dirs[k] * t_of(i, j));
+            }
+        }
+        let mut pv = vec![0.0; probes.len()];
+        if dirs.iter().any(|d| *d != DVec3::ZERO) {
+            eval.values(&probes, &mut pv)?;
+        }
+        // Brackets (lo, f_lo, hi, f_hi) in t.
+        let mut brackets: Vec<(usize, f64, f64, f64, f64)> = Vec::new();
+        for (k, &i) in failed.iter().enumerate() {
+            if dirs[k] == DVec3::ZERO {
+                not_converged.push(i);
+                continue;
+            }
+            let mut found: Option<(f64, f64, f64, f64)> = None;
+            for side in 0..2 {
+                let (mut tp, mut fp) = (0.0, f0[i]);
+                for j in 0..ns {
+                    let jj = side * ns + j;
+                    let (t, f) = (t_of(i, jj), pv[k * 2 * ns + jj]);
+                    if f.abs() < best[i].0 {
+                        best[i] = (f.abs(), starts[i] + dirs[k] * t);
+                    }
+                    if (f <= 0.0) != (fp <= 0.0) {
+                        if found.is_none_or(|b| t.abs() < b.2.abs().max(b.0.abs())) {
+                            found = Some((tp, fp, t, f));
+                        }
+                        break;
+                    }
+                    (tp, fp) = (t, f);
+                }
+            }
+            match found {
+                Some((a, fa, b, fb)) => brackets.push((k, a, fa, b, fb)),
+                None => not_converged.push(i),
+            }
+        }
+        // Bisection, all bracketed points per batched call.
+        let mut open: Vec<usize> = (0..brackets.len()).collect();
+        let mut mids = Vec::with_capacity(brackets.len());
+        let mut mv = vec![0.0; brackets.len()];
+        for _ in 0..200 {
+            open.retain(|&b| {
+                let (k, a, _, c, _) = brackets[b];
+                (c - a).abs() > s.tolerance * scales[failed[k]]
+            });
+            if open.is_empty() {
+                break;
+            }
+            mids.clear();
+            mids.extend(open.iter().map(|&b| {
+                let (k, a, _, c, _) = brackets[b];
+                starts[failed[k]] + dirs[k] * (0.5 * (a + c))
+            }));
+            eval.values(&mids, &mut mv[..open.len()])?;
+            for (q, &b) in open.iter().enumerate() {
+                let (_, a, fa, c, fc) = &mut brackets[b];
+                let (t, f) = (0.5 * (*a + *c), mv[q]);
+                if f == 0.0 {
+                    (*a, *fa, *c, *fc) = (t, f, t, f);
+                } else if (f <= 0.0) == (*fa <= 0.0) {
+                    (*a, *fa) = (t, f);
+                } else {
+                    (*c, *fc) = (t, f);
+                }
+            }
+        }
+        for &(k, a, fa, c, fc) in &brackets {
+            let i = failed[k];
+            let t = if fa.abs() <= fc.abs() { a } else { c };
+            pos[i] = starts[i] + dirs[k] * t;
+        }
+        for &i in &not_converged {
+            pos[i] = best[i].1;
+        }
+    }
+    Ok(Projection {
+        points: pos,
+        iterations,
+        fallbacks: failed.len(),
+        not_converged,
+    })
+}
+
+/// Unit normals from gradients, falling back to face normals where the gradient vanishes.
+fn normals_from_gradients(mesh: &Mesh, g: &[DVec3]) -> Vec<DVec3> {
+    let mut fallback: Option<Vec<DVec3>> = None;
+    g.iter()
+        .enumerate()
+        .map(|(i, gi)| {
+            let n = gi.normalize_or_zero();
+            if n != DVec3::ZERO {
+                n
+            } else {
+                fallback.get_or_insert_with(|| mesh.face_normals_at_vertices())[i]
+            }
+        })
+        .collect()
+}
+
+fn subdivide_with(
+    eval: &mut Evaluator<'_>,
+    control: &Mesh,
+    levels: usize,
+    settings: &Settings,
+) -> Result<Vec<(Mesh, SubdivisionStats)>> {
+    settings.check()?;
+    check_mesh(control)?;
+    check_levels(control, levels, settings.memory_limit)?;
+    let mut out: Vec<(Mesh, SubdivisionStats)> = Vec::with_capacity(levels + 1);
+
+    // Level 0: the control mesh with normals from the field.
+    let t = Instant::now();
+    let mut mesh = control.clone();
+    let (ev0, b0) = (eval.evaluations, eval.batches);
+    let mut v = vec![0.0; mesh.vertices.len()];
+    let mut g = vec![DVec3::ZERO; mesh.vertices.len()];
+    eval.both(&mesh.vertices, &mut v, &mut g)?;
+    mesh.normals = normals_from_gradients(&mesh, &g);
+    let stats = SubdivisionStats {
+        level: 0,
+        evaluations: eval.evaluations - ev0,
+        batches: eval.batches - b0,
+        max_abs_value: v.iter().fold(0.0, |a: f64, x| a.max(x.abs())),
+        seconds: t.elapsed().as_secs_f64(),
+        ..Default::default()
+    };
+    out.push((mesh.clone(), stats));
+
+    for level in 1..=levels {
+        let t = Instant::now();
+        let (ev0, b0) = (eval.evaluations, eval.batches);
+        let old = mesh.vertices.len();
+        let (mut next, parents) = split(&mesh);
+        let scales: Vec<f64> = parents
+            .iter()
+            .map(|&[a, b]| 0.5 * (mesh.vertices[a as usize] - mesh.vertices[b as usize]).length())
+            .collect();
+        let hints: Vec<DVec3> = parents
+            .iter()
+            .map(|&[a, b]| mesh.normals[a as usize] + mesh.normals[b as usize])
+            .collect();
+        let proj = project(eval, &next.vertices[old..], &scales, &hints, settings)?;
+        next.vertices[old..].copy_from_slice(&proj.points);
+        let n_all = next.vertices.len();
+        let mut v = vec![0.0; n_all];
+        let mut g = vec![DVec3::ZERO; n_all];
+        eval.both(&next.vertices, &mut v, &mut g)?;
+        next.normals = if settings.normals {
+            normals_from_gradients(&next, &g)
+        } else {
+            vec![]
+        };
+        let it = &proj.iterations;
+        let stats = SubdivisionStats {
+            level,
+            projected: it.len(),
+            iterations_mean: it.iter().map(|&x| x as f64).sum::<f64>() / it.len().max(1) as f64,
+            iterations_max: it.iter().copied().max().unwrap_or(0),
+            evaluations: eval.evaluations - ev0,
+            batches: eval.batches - b0,
+            fallbacks: proj.fallbacks,
+            not_converged: proj.not_converged.len(),
+            not_converged_max_abs_value: proj
+                .not_converged
+                .iter()
+                .fold(0.0, |a: f64, &i| a.max(v[old + i].abs())),
+            max_abs_value: v[old..].iter().fold(0.0, |a: f64, x| a.max(x.abs())),
+            seconds: t.elapsed().as_secs_f64(),
+        };
+        // The next level needs normals for its search hints even when they are not wanted.
+        if !settings.normals {
+            let mut with = next.clone();
+            with.normals = normals_from_gradients(&next, &g);
+            mesh = with;
+        } else {
+            mesh = next.clone();
+        }
+        out.push((next, stats));
+    }
+    Ok(out)
+}
+
+/// Subdivides `control` `levels` times onto the zero set of `field` (Jin et al. §3): entry `k`
+/// of the result is level `k` (entry 0 the control mesh, with normals), each with the stats of
+/// its projection. Uses batched `values` and `gradients` calls (two per Newton step).
+///
+/// Errors for a broken control mesh (see [`check_mesh`]), `levels` over [`MAX_LEVELS`] or over
+/// the memory limit, bad settings, or a field returning NaN/infinity.
+pub fn subdivide<F: Field + ?Sized>(
+    field: &F,
+    control: &Mesh,
+    levels: usize,
+    settings: &Settings,
+) -> Result<Vec<(Mesh, SubdivisionStats)>> {
+    let vg = |p: &[DVec3], v: &mut [f64], g: &mut [DVec3]| {
+        field.values(p, v);
+        field.gradients(p, g);
+    };
+    let vo = |p: &[DVec3], v: &mut [f64]| field.values(p, v);
+    let mut eval = Evaluator {
+        values_gradients: &vg,
+        values: &vo,
+        evaluations: 0,
+        batches: 0,
+    };
+    subdivide_with(&mut eval, control, levels, settings)
+}
+
+/// [`subdivide`] for a variational surface, with values and gradients from one batched call per
+/// Newton step ([`VariationalSurface::values_gradients`]).
+pub fn subdivide_surface(
+    surface: &VariationalSurface,
+    control: &Mesh,
+    levels: usize,
+    settings: &Settings,
+) -> Result<Vec<(Mesh, SubdivisionStats)>> {
+    let vg = |p: &[DVec3], v: &mut [f64], g: &mut [DVec3]| surface.values_gradients(p, v, g);
+    let vo = |p: &[DVec3], v: &mut [f64]| surface.values(p, v);
+    let mut eval = Evaluator {
+        values_gradients: &vg,
+        values: &vo,
+        evaluations: 0,
+        batches: 0,
+    };
+    subdivide_with(&mut eval, control, levels, settings)
+}
+
+/// Ordered one-ring of every vertex, from the oriented triangles: `rings[v]` lists the neighbours
+/// counter-clockwise; `boundary[v]` tells whether the ring is an open fan (first and last
+/// neighbours then lie across boundary edges).
+struct Rings {
+    rings: Vec<Vec<u32>>,
+    boundary: Vec<bool>,
+}
+
+impl Rings {
+    fn new(mesh: &Mesh) -> Result<Rings> {
+        let n = mesh.vertices.len();
+        // For triangle (v, x, y) counter-clockwise: the neighbour after x around v is y.
+        let mut pairs: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                pairs[t[k] as usize].push((t[(k + 1) % 3], t[(k + 2) % 3]));
+            }
+        }
+        let mut rings = Vec::with_capacity(n);
+        let mut boundary = Vec::with_capacity(n);
+        for (v, p) in pairs.iter().enumerate() {
+            if p.is_empty() {
+                rings.push(Vec::new());
+                boundary.push(false);
+                continue;
+            }
+            let next = |x: u32| p.iter().find(|q| q.0 == x).map(|q| q.1);
+            let start = p.iter().find(|q| !p.iter().any(|r| r.1 == q.0));
+            let (first, open) = match start {
+                Some(q) => (q.0, true),
+                None => (p[0].0, false),
+            };
+            let mut ring = vec![first];
+            let mut cur = first;
+            while let Some(y) = next(cur) {
+                if y == first {
+                    break;
+                }
+                ring.push(y);
+                cur = y;
+                if ring.len() > p.len() + 1 {
+                    break;
+                }
+            }
+            let expected = if open { p.len() + 1 } else { p.len() };
+            if ring.len() != expected {
+                return Err(Error::invalid(
+                    "faces",
+                    format!("vertex {v} is not manifold (its faces do not form one fan)"),
+                ));
+            }
+            rings.push(ring);
+            boundary.push(open);
+        }
+        Ok(Rings { rings, boundary })
+    }
+
+    /// The ring of `v` rotated to start at `start`.
+    fn from(&self, v: u32, start: u32) -> Vec<u32> {
+        let r = &self.rings[v as usize];
+        let s = r.iter().position(|&x| x == start).unwrap_or(0);
+        r[s..].iter().chain(&r[..s]).copied().collect()
+    }
+}
+
+/// Zorin's weights for an extraordinary interior vertex of valence `k`: the new point is
+/// 3/4 × the vertex + Σ s_j × ring_j, ring_0 the other end of the edge. `None` for k < 3.
+fn extraordinary_weights(k: usize) -> Option<Vec<f64>> {
+    match k {
+        0..=2 => None,
+        3 => Some(vec![5.0 / 12.0, -1.0 / 12.0, -1.0 / 12.0]),
+        4 => Some(vec![3.0 / 8.0, 0.0, -1.0 / 8.0, 0.0]),
+        _ => {
+            let kf = k as f64;
+            Some(
+                (0..k)
+                    .map(|j| {
+                        let a = 2.0 * std::f64::consts::PI * j as f64 / kf;
+                        (0.25 + a.cos() + 0.5 * (2.0 * a).cos()) / kf
+                    })
+                    .collect(),
+            )
+        }
+    }
+}
+
+/// The new point on edge (a, b) by the modified butterfly rules.
+fn butterfly_point(mesh: &Mesh, rings: &Rings, a: u32, b: u32, w: f64) -> DVec3 {
+    let p = |i: u32| mesh.vertices[i as usize];
+    let (ia, ib) = (a as usize, b as usize);
+    let ra_full = &rings.rings[ia];
+    let rb_full = &rings.rings[ib];
+    let is_boundary_edge = (rings.boundary[ia]
+        && (ra_full.first() == Some(&b) || ra_full.last() == Some(&b)))
+        || (rings.boundary[ib] && (rb_full.first() == Some(&a) || rb_full.last() == Some(&a)));
+    if is_boundary_edge {
+        // Four-point scheme along the boundary: the other boundary neighbour of each end.
+        let other = |r: &Vec<u32>, skip: u32, v: u32| -> u32 {
+            let (f, l) = (r[0], r[r.len() - 1]);
+            if f != skip {
+                f
+            } else if l != skip {
+                l
+            } else {
+                v
+            }
+        };
+        let (a2, b2) = (other(ra_full, b, a), other(rb_full, a, b));
+        return (p(a) + p(b)) * (9.0 / 16.0) - (p(a2) + p(b2)) * (1.0 / 16.0);
+    }
+    // Interior edge.
+    let stencil = |v: u32, o: u32| -> Option<DVec3> {
+        let r = rings.from(v, o);
+        let s = extraordinary_weights(r.len())?;
+        Some(p(v) * 0.75 + r.iter().zip(&s).map(|(&x, &sj)| p(x) * sj).sum::<DVec3>())
+    };
+    let interior = |v: usize| !rings.boundary[v];
+    let regular = |v: usize| interior(v) && rings.rings[v].len() == 6;
+    if regular(ia) && regular(ib) {
+        let ra = rings.from(a, b);
+        let rb = rings.from(b, a);
+        return (p(a) + p(b)) * (0.5 - w)
+            + (p(ra[1]) + p(ra[5])) * (0.125 + 2.0 * w)
+            + (p(ra[2]) + p(ra[4]) + p(rb[2]) + p(rb[4])) * (-0.0625 - w)
+            + (p(ra[3]) + p(rb[3])) * w;
+    }
+    let sa = if interior(ia) && !regular(ia) {
+        stencil(a, b)
+    } else {
+        None
+    };
+    let sb = if interior(ib) && !regular(ib) {
+        stencil(b, a)
+    } else {
+        None
+    };
+    match (sa, sb) {
+        (Some(x), Some(y)) => (x + y) * 0.5,
+        (Some(x), None) => x,
+        (None, Some(y)) => y,
+        (None, None) => {
+            // One end on the boundary and the other regular or on the boundary too: use the
+            // interior end's ring when it has one, else the two wings of the edge.
+            if interior(ia) {
+                if let Some(x) = stencil(a, b) {
+                    return x;
+                }
+            }
+            if interior(ib) {
+                if let Some(y) = stencil(b, a) {
+                    return y;
+                }
+            }
+            let wings = wing_vertices(rings, a, b);
+            match wings {
+                Some((c, d)) => (p(a) + p(b)) * 0.375 + (p(c) + p(d)) * 0.125,
+                None => (p(a) + p(b)) * 0.5,
+            }
+        }
+    }
+}
+
+/// The vertices opposite edge (a, b) in its two faces, when it has two.
+fn wing_vertices(rings: &Rings, a: u32, b: u32) -> Option<(u32, u32)> {
+    let r = &rings.rings[a as usize];
+    let i = r.iter().position(|&x| x == b)?;
+    let n = r.len();
+    if rings.boundary[a as usize] && (i == 0 || i + 1 == n) {
+        return None;
+    }
+    Some((r[(i + 1) % n], r[(i + n - 1) % n]))
+}
+
+/// Modified butterfly subdivision (Zorin, Schröder & Sweldens 1996; Jin §4) with tension `w`:
+/// entry `k` of the result is level `k` (entry 0 the control mesh). Connectivity and vertex
+/// numbering are those of [`split`], so vertex `i` matches vertex `i` of [`subdivide`].
+///
+/// Edges between two interior vertices of valence 6 use the 10-point stencil (a: 1/2 − w,
+/// b: 1/8 + 2w, c: −1/16 − w, d: w); an end of another valence uses Zorin's stencil of that
+/// vertex (the two stencils averaged when both ends are extraordinary); boundary edges use the
+/// four-point scheme (−1/16, 9/16, 9/16, −1/16). Interior edges joining two boundary vertices
+/// (not covered by those rules) take 3/8 of each end and 1/8 of each wing. Normals are the
+/// area-weighted face normals.
+pub fn butterfly(control: &Mesh, levels: usize, w: f64) -> Result<Vec<Mesh>> {
+    check_mesh(control)?;
+    check_levels(control, levels, Settings::default().memory_limit)?;
+    if !w.is_finite() {
+        return Err(Error::invalid("w", format!("must be finite, got {w}")));
+    }
+    let mut mesh = control.clone();
+    mesh.normals = mesh.face_normals_at_vertices();
+    let mut out = vec![mesh.clone()];
+    for _ in 0..levels {
+        let rings = Rings::new(&mesh)?;
+        let old = mesh.vertices.len();
+        let (mut next, parents) = split(&mesh);
+        let pts: Vec<DVec3> = parents
+            .par_iter()
+            .map(|&[a, b]| butterfly_point(&mesh, &rings, a, b, w))
+            .collect();
+        next.vertices[old..].copy_from_slice(&pts);
+        next.normals = next.face_normals_at_vertices();
+        out.push(next.clone());
+        mesh = next;
+    }
+    Ok(out)
+}
+
+/// (1 − λ) a + λ b per vertex (Jin §4). Both meshes must have the same triangles and vertex
+/// count; λ in [0, 1]. At λ = 0 and λ = 1 the result is exactly `a` and `b`. Normals (when
+/// both have them) are blended and renormalised.
+pub fn blend(a: &Mesh, b: &Mesh, lam: f64) -> Result<Mesh> {
+    if !(lam.is_finite() && (0.0..=1.0).contains(&lam)) {
+        return Err(Error::invalid(
+            "lam",
+            format!("must be in [0, 1], got {lam}"),
+        ));
+    }
+    if a.vertices.len() != b.vertices.len() || a.triangles != b.triangles {
+        return Err(Error::invalid(
+            "butterfly",
+            "must have the same connectivity as the implicit mesh (same subdivision level and \
+             control mesh)",
+        ));
+    }
+    if lam == 0.0 {
+        return Ok(a.clone());
+    }
+    if lam == 1.0 {
+        return Ok(b.clone());
+    }
+    let vertices = a
+        .vertices
+        .iter()
+        .zip(&b.vertices)
+        .map(|(x, y)| *x * (1.0 - lam) + *y * lam)
+        .collect();
+    let normals = if a.normals.len() == a.vertices.len() && b.normals.len() == b.vertices.len() {
+        a.normals
+            .iter()
+            .zip(&b.normals)
+            .map(|(x, y)| (*x * (1.0 - lam) + *y * lam).normalize_or_zero())
+            .collect()
+    } else {
+        vec![]
+    };
+    Ok(Mesh {
+        vertices,
+        triangles: a.triangles.clone(),
+        normals,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::analytic::Sphere;
+    use crate::field::{constraints, rbf};
+
+    /// The 12-vertex icosahedron with circumradius 0.9, faces counter-clockwise from outside.
+    fn icosahedron() -> Mesh {
+        let t = (1.0 + 5f64.sqrt()) / 2.0;
+        let raw = [
+            [-1.0, t, 0.0],
+            [1.0, t, 0.0],
+            [-1.0, -t, 0.0],
+            [1.0, -t, 0.0],
+            [0.0, -1.0, t],
+            [0.0, 1.0, t],
+            [0.0, -1.0, -t],
+            [0.0, 1.0, -t],
+            [t, 0.0, -1.0],
+            [t, 0.0, 1.0],
+            [-t, 0.0, -1.0],
+            [-t, 0.0, 1.0],
+        ];
+        let vertices = raw
+            .iter()
+            .map(|v| DVec3::from_array(*v).normalize() * 0.9)
+            .collect();
+        let triangles = vec![
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        Mesh {
+            vertices,
+            triangles,
+            normals: vec![],
+        }
+    }
+
+    fn grid(n: u32, z: f64) -> Mesh {
+        let mut vertices = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                // A slightly irregular planar grid.
+                let x = i as f64 + 0.13 * ((i * 7 + j * 3) % 5) as f64;
+                let y = j as f64 + 0.11 * ((i * 5 + j * 2) % 3) as f64;
+                vertices.push(DVec3::new(x, y, z));
+            }
+        }
+        let id = |i: u32, j: u32| j * (n + 1) + i;
+        let mut triangles = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                if (i + j) % 2 == 0 {
+                    triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                    triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+                } else {
+                    triangles.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                    triangles.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+                }
+            }
+        }
+        Mesh {
+            vertices,
+            triangles,
+            normals: vec![],
+        }
+    }
+
+    #[test]
+    fn icosahedron_is_valid() {
+        let m = icosahedron();
+        assert!(m.is_closed_oriented());
+        assert_eq!(m.euler_characteristic(), 2);
+        assert!(m.volume() > 0.0);
+    }
+
+    #[test]
+    fn split_counts_and_orientation() {
+        let m = icosahedron();
+        let (s, parents) = split(&m);
+        assert_eq!(s.triangles.len(), 80);
+        assert_eq!(parents.len(), 30);
+        assert_eq!(s.vertices.len(), 42);
+        assert_eq!(&s.vertices[..12], &m.vertices[..]);
+        assert!(s.is_closed_oriented());
+        assert_eq!(s.euler_characteristic(), 2);
+        // Open mesh: boundary edges double.
+        let mut open = m.clone();
+        open.triangles.truncate(15);
+        let boundary = |m: &Mesh| {
+            let mut c: HashMap<(u32, u32), u32> = HashMap::new();
+            for t in &m.triangles {
+                for k in 0..3 {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    *c.entry((a.min(b), a.max(b))).or_default() += 1;
+                }
+            }
+            c.values().filter(|&&x| x == 1).count()
+        };
+        let (so, _) = split(&open);
+        assert_eq!(boundary(&so), 2 * boundary(&open));
+    }
+
+    #[test]
+    fn icosahedron_subdivides_onto_surface() {
+        let m = icosahedron();
+        let s = VariationalSurface::from_mesh(
+            &m.vertices,
+            &m.triangles,
+            &constraints::Settings::default(),
+            &rbf::Settings::default(),
+        )
+        .unwrap();
+        let levels = subdivide_surface(&s, &m, 5, &Settings::default()).unwrap();
+        assert_eq!(levels.len(), 6);
+        let counts: Vec<usize> = levels.iter().map(|(l, _)| l.triangles.len()).collect();
+        assert_eq!(counts, vec![20, 80, 320, 1280, 5120, 20480]);
+        for (k, (mesh, stats)) in levels.iter().enumerate() {
+            assert_eq!(stats.level, k);
+            assert!(mesh.is_closed_oriented(), "level {k}");
+            assert_eq!(mesh.euler_characteristic(), 2, "level {k}");
+            assert_eq!(mesh.normals.len(), mesh.vertices.len());
+            for (a, b) in m.vertices.iter().zip(&mesh.vertices) {
+                assert_eq!(
+                    a.to_array().map(f64::to_bits),
+                    b.to_array().map(f64::to_bits)
+                );
+            }
+            let mut v = vec![0.0; mesh.vertices.len()];
+            s.values(&mesh.vertices, &mut v);
+            let worst = v.iter().fold(0.0, |a: f64, x| a.max(x.abs()));
+            assert!(worst <= 1e-6, "level {k}: |f| up to {worst}");
+            assert_eq!(stats.not_converged, 0);
+            // The vertices of level k stay exactly in level k + 1.
+            if k > 0 {
+                let prev = &levels[k - 1].0;
+                assert_eq!(&mesh.vertices[..prev.vertices.len()], &prev.vertices[..]);
+            }
+        }
+        assert!(levels[5].1.iterations_mean < 6.0, "{:?}", levels[5].1);
+    }
+
+    #[test]
+    fn generic_field_matches_and_fallback_runs() {
+        let m = icosahedron();
+        let sphere = Sphere {
+            center: DVec3::ZERO,
+            radius: 0.9,
+        };
+        let levels = subdivide(&sphere, &m, 3, &Settings::default()).unwrap();
+        for (mesh, _) in &levels {
+            for p in &mesh.vertices {
+                assert!((p.length() - 0.9).abs() < 1e-9);
+            }
+            assert!(mesh.is_closed_oriented());
+        }
+        // A single Newton step forces the fallback for every vertex off the sphere.
+        let s = Settings {
+            max_iterations: 1,
+            ..Default::default()
+        };
+        let levels = subdivide(&sphere, &m, 2, &s).unwrap();
+        assert!(levels[1].1.fallbacks > 0);
+        assert_eq!(levels[1].1.not_converged, 0);
+        for p in &levels[2].0.vertices {
+            assert!((p.length() - 0.9).abs() < 1e-7);
+        }
+    }
+
+    #[test]
+    fn refuses_bad_input() {
+        let m = icosahedron();
+        let sphere = Sphere {
+            center: DVec3::ZERO,
+            radius: 0.9,
+        };
+        let s = Settings::default();
+        let name = |e: Error| match e {
+            Error::InvalidArgument { name, .. } => name,
+            Error::TooMuchMemory { name, .. } => name,
+            other => panic!("unexpected {other:?}"),
+        };
+        assert_eq!(name(subdivide(&sphere, &m, 9, &s).unwrap_err()), "levels");
+        let mut bad = m.clone();
+        bad.triangles[0][1] = 99;
+        assert_eq!(name(subdivide(&sphere, &bad, 1, &s).unwrap_err()), "faces");
+        let mut nm = m.clone();
+        nm.triangles.push([0, 11, 3]);
+        assert_eq!(name(butterfly(&nm, 1, 0.0).unwrap_err()), "faces");
+        let mut flipped = m.clone();
+        flipped.triangles[0] = [0, 5, 11];
+        assert_eq!(name(check_mesh(&flipped).unwrap_err()), "faces");
+        let (b, _) = split(&m);
+        assert_eq!(name(blend(&m, &b, 0.5).unwrap_err()), "butterfly");
+        assert_eq!(name(blend(&m, &m, 1.5).unwrap_err()), "lam");
+        assert_eq!(name(blend(&m, &m, f64::NAN).unwrap_err()), "lam");
+        let tight = Settings {
+            memory_limit: 1 << 20,
+            ..Default::default()
+        };
+        assert_eq!(
+            name(subdivide(&sphere, &m, 8, &tight).unwrap_err()),
+            "levels"
+        );
+    }
+
+    #[test]
+    fn butterfly_reproduces_planes() {
+        let g = grid(8, 0.25);
+        for w in [0.0, 1.0 / 16.0, -0.03, 0.1] {
+            let levels = butterfly(&g, 3, w).unwrap();
+            assert_eq!(levels.len(), 4);
+            for (k, m) in levels.iter().enumerate() {
+                assert_eq!(m.triangles.len(), g.triangles.len() << (2 * k));
+                for p in &m.vertices {
+                    assert!((p.z - 0.25).abs() <= 1e-12, "w {w}: z = {}", p.z);
+                }
+                assert_eq!(&m.vertices[..g.vertices.len()], &g.vertices[..]);
+            }
+        }
+    }
+
+    #[test]
+    fn butterfly_regular_weights_and_linear_precision() {
+        // On a regular triangular lattice the 10-point stencil reproduces linear functions
+        // exactly: every new vertex is the edge midpoint.
+        let n = 6u32;
+        let h = 3f64.sqrt() / 2.0;
+        let mut vertices = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                vertices.push(DVec3::new(i as f64 + 0.5 * j as f64, h * j as f64, 0.0));
+            }
+        }
+        let id = |i: u32, j: u32| j * (n + 1) + i;
+        let mut triangles = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                triangles.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                triangles.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let g = Mesh {
+            vertices,
+            triangles,
+            normals: vec![],
+        };
+        let (s, parents) = split(&g);
+        let levels = butterfly(&g, 1, 0.05).unwrap();
+        let interior = |v: u32| {
+            let (i, j) = (v % (n + 1), v / (n + 1));
+            i > 0 && i < n && j > 0 && j < n
+        };
+        let mut checked = 0;
+        for (k, &[a, b]) in parents.iter().enumerate() {
+            if !(interior(a) && interior(b)) {
+                continue;
+            }
+            checked += 1;
+            let mid = 0.5 * (g.vertices[a as usize] + g.vertices[b as usize]);
+            let got = levels[1].vertices[g.vertices.len() + k];
+            assert!((got - mid).length() < 1e-12, "edge {a}-{b}: {got} vs {mid}");
+        }
+        assert!(checked > 50);
+        assert_eq!(levels[1].triangles, s.triangles);
+    }
+
+    #[test]
+    fn butterfly_closed_mesh_and_blend_identities() {
+        let m = icosahedron();
+        let s = VariationalSurface::from_mesh(
+            &m.vertices,
+            &m.triangles,
+            &constraints::Settings::default(),
+            &rbf::Settings::default(),
+        )
+        .unwrap();
+        let imp = subdivide_surface(&s, &m, 3, &Settings::default()).unwrap();
+        let bf = butterfly(&m, 3, 0.0).unwrap();
+        for k in 0..=3 {
+            let (a, b) = (&imp[k].0, &bf[k]);
+            assert_eq!(a.triangles, b.triangles);
+            assert!(b.is_closed_oriented());
+            let b0 = blend(a, b, 0.0).unwrap();
+            let b1 = blend(a, b, 1.0).unwrap();
+            assert_eq!(&b0, a);
+            assert_eq!(&b1, b);
+            let h = blend(a, b, 0.5).unwrap();
+            for i in 0..a.vertices.len() {
+                let e = 0.5 * (a.vertices[i] + b.vertices[i]);
+                assert!((h.vertices[i] - e).length() < 1e-15);
+            }
+        }
+        // Regular icosahedron: butterfly points lie on a sphere by symmetry per level (valence 5
+        // stencil at level 1 is symmetric), and stay near the sphere.
+        for p in &bf[1].vertices {
+            assert!((p.length() - 0.9).abs() < 0.1);
+        }
+    }
+}
