@@ -116,8 +116,16 @@ def polygonize(
     the mesh is open along the box.
     """
     bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
-    if not isinstance(method, str):
+    if not isinstance(method, str) or method.lower() not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    if start_level is not None and (
+        isinstance(start_level, bool) or not isinstance(start_level, (int, np.integer)) or start_level < 0
+    ):
+        raise ValueError(f"start_level: must be a non-negative integer, got {start_level!r}")
+    if safety is not None and (isinstance(safety, bool) or not isinstance(safety, (int, float, np.floating, np.integer))):
+        raise ValueError(f"safety: must be a positive number, got {safety!r}")
+    if corner_test is not None and not isinstance(corner_test, (bool, np.bool_)):
+        raise ValueError(f"corner_test: must be True or False, got {corner_test!r}")
     v, f, n, stats = _core.polygonize(
         field,
         bounds,

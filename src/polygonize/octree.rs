@@ -46,8 +46,8 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        // Measured on the shared meshes (d = 0.015, w/d = 3/4, 64³ and 128³): see the octree
-        // notebook and BENCHMARKS.md.
+        // Measured on the shared meshes (d = 0.015, w/d = 3/4, 24³ to 128³): see
+        // notebooks/cuno_tables.ipynb and BENCHMARKS.md.
         Settings {
             start_level: None,
             safety: 1.0,

@@ -213,11 +213,22 @@ pub fn polygonize<'py>(
     let lattice = parse_lattice(bounds, resolution)?;
     let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
-    if method != "octree" && (start_level.is_some() || safety.is_some() || corner_test.is_some()) {
+    if !["dense", "octree", "tracking"].contains(&method.as_str()) {
         return Err(value_error(
-            "start_level",
-            "start_level, safety and corner_test apply to method=\"octree\" only",
+            "method",
+            format!("unknown method {method:?}; available: \"dense\", \"octree\", \"tracking\""),
         ));
+    }
+    if method != "octree" {
+        for (name, given) in [
+            ("start_level", start_level.is_some()),
+            ("safety", safety.is_some()),
+            ("corner_test", corner_test.is_some()),
+        ] {
+            if given {
+                return Err(value_error(name, "applies to method=\"octree\" only"));
+            }
+        }
     }
     if method != "tracking" && seeds.is_some() {
         return Err(value_error(
