@@ -62,6 +62,33 @@ pub fn levels(lattice: &Lattice) -> u32 {
     n.next_power_of_two().trailing_zeros()
 }
 
+/// Evaluates, in one batched call, the lattice points of `wanted` not yet in `cache` (each once)
+/// and adds them to it.
+fn fill_cache<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    cache: &mut KeyMap<f64>,
+    wanted: impl Iterator<Item = [u32; 3]>,
+    settings: &super::Settings,
+    stats: &mut Stats,
+) -> Result<()> {
+    let mut keys = Vec::new();
+    let mut points = Vec::new();
+    for c in wanted {
+        let key = Lattice::key(c);
+        if let std::collections::hash_map::Entry::Vacant(e) = cache.entry(key) {
+            e.insert(f64::NAN);
+            keys.push(key);
+            points.push(lattice.point(c));
+        }
+    }
+    let mut values = vec![0.0; points.len()];
+    evaluate(field, &points, &mut values, settings.batch)?;
+    stats.evaluations += points.len() as u64;
+    cache.extend(keys.into_iter().zip(values));
+    Ok(())
+}
+
 /// Polygonizes `field` over `lattice` with hierarchical rejection; leaves are single cells.
 pub fn polygonize<F: Field + ?Sized>(
     field: &F,
@@ -148,44 +175,26 @@ pub fn polygonize<F: Field + ?Sized>(
     if octree.corner_test && levels > 0 {
         // Each leaf's corner with even coordinates is a corner of its parent block; evaluate the
         // unknown ones in one batch and reject leaves whose corner is provably far.
-        points.clear();
-        keys.clear();
         let even = |o: &[u32; 3]| [o[0] + (o[0] & 1), o[1] + (o[1] & 1), o[2] + (o[2] & 1)];
-        let mut pending: KeyMap<()> = KeyMap::default();
-        for o in &blocks {
-            let c = even(o);
-            let key = Lattice::key(c);
-            if !cache.contains_key(&key) && pending.insert(key, ()).is_none() {
-                keys.push(key);
-                points.push(lattice.point(c));
-            }
-        }
-        values.resize(points.len(), 0.0);
-        evaluate(field, &points, &mut values, settings.batch)?;
-        stats.evaluations += points.len() as u64;
-        cache.extend(keys.iter().copied().zip(values.iter().copied()));
+        fill_cache(
+            field,
+            lattice,
+            &mut cache,
+            blocks.iter().map(even),
+            settings,
+            &mut stats,
+        )?;
         let diag = octree.safety * lattice.cell.length();
         blocks.retain(|o| cache[&Lattice::key(even(o))].abs() <= diag);
     }
     // Evaluate the leaves' corners not yet known, in one batch.
-    points.clear();
-    keys.clear();
-    let mut pending: KeyMap<()> = KeyMap::default();
-    for o in &blocks {
-        for k in 0..8 {
+    let corners = blocks.iter().flat_map(|o| {
+        (0..8).map(move |k| {
             let d = corner_offset(k);
-            let c = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-            let key = Lattice::key(c);
-            if !cache.contains_key(&key) && pending.insert(key, ()).is_none() {
-                keys.push(key);
-                points.push(lattice.point(c));
-            }
-        }
-    }
-    values.resize(points.len(), 0.0);
-    evaluate(field, &points, &mut values, settings.batch)?;
-    stats.evaluations += points.len() as u64;
-    cache.extend(keys.iter().copied().zip(values.iter().copied()));
+            [o[0] + d[0], o[1] + d[1], o[2] + d[2]]
+        })
+    });
+    fill_cache(field, lattice, &mut cache, corners, settings, &mut stats)?;
     stats.cells_per_level.push(blocks.len() as u64);
     stats.cells_visited = blocks.len() as u64;
     stats.add_time("sample", t);
