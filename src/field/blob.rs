@@ -35,9 +35,24 @@ pub struct BlobField {
     /// 1 / R² per primitive.
     inv_r2: Vec<f64>,
     strengths: Vec<f64>,
+    /// The same numbers packed per primitive for point queries (one cache line each).
+    packed: Vec<Packed>,
     threshold: f64,
     settings: Settings,
     grid: VoxelGrid,
+}
+
+/// One primitive as point queries read it.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(64))]
+struct Packed {
+    center: DVec3,
+    /// 1 / R².
+    inv_r2: f64,
+    /// A.
+    strength: f64,
+    /// 4A / R², the gradient's factor.
+    grad: f64,
 }
 
 /// A scalar or one value per primitive.
@@ -162,6 +177,15 @@ impl BlobField {
         self.centers.extend_from_slice(centers);
         self.inv_r2.clear();
         self.inv_r2.extend(self.radii.iter().map(|r| 1.0 / (r * r)));
+        self.packed.clear();
+        for i in 0..n {
+            self.packed.push(Packed {
+                center: self.centers[i],
+                inv_r2: self.inv_r2[i],
+                strength: self.strengths[i],
+                grad: 4.0 * self.strengths[i] * self.inv_r2[i],
+            });
+        }
         let mean_r = if n > 0 {
             self.radii.iter().sum::<f64>() / n as f64
         } else {
@@ -182,12 +206,10 @@ impl BlobField {
 
     #[inline(always)]
     fn term(&self, i: usize, p: DVec3) -> f64 {
-        let t = 1.0 - (p - self.centers[i]).length_squared() * self.inv_r2[i];
-        if t > 0.0 {
-            self.strengths[i] * t * t
-        } else {
-            0.0
-        }
+        // max(t, 0) instead of a branch: the same bits (a·0·0 = +0), no mispredictions.
+        let q = &self.packed[i];
+        let t = (1.0 - (p - q.center).length_squared() * q.inv_r2).max(0.0);
+        q.strength * t * t
     }
 
     /// Potential F(p) from the voxel lists.
@@ -198,6 +220,71 @@ impl BlobField {
             f += self.term(i as usize, p);
         }
         f
+    }
+
+    /// Fills one z-plane of lattice values (`xs`, `ys`: the lattice's coordinates; `z`: the
+    /// plane's) by splatting every primitive that reaches the plane, row by row over the
+    /// x-range its sphere covers.
+    #[inline(always)]
+    fn splat_plane(&self, lattice: &Lattice, xs: &[f64], ys: &[f64], z: f64, slab: &mut [f64]) {
+        let (px, py) = (xs.len(), ys.len());
+        slab.fill(0.0);
+        let inv_h = DVec3::ONE / lattice.cell;
+        // Index range of the lattice points in [c - r, c + r] along an axis, with a point of
+        // margin for rounding (the exact test is t > 0 in the row loop); empty when outside.
+        let range = |c: f64, r: f64, o: f64, inv_h: f64, n: usize| -> Option<(usize, usize)> {
+            let lo = ((c - r - o) * inv_h).floor() - 1.0;
+            let hi = ((c + r - o) * inv_h).ceil() + 1.0;
+            if hi < 0.0 || lo > (n - 1) as f64 {
+                return None;
+            }
+            Some((lo.max(0.0) as usize, (hi as usize).min(n - 1)))
+        };
+        for i in 0..self.centers.len() {
+            let (c, r, inv, a) = (self.centers[i], self.radii[i], self.inv_r2[i], self.strengths[i]);
+            let dz = z - c.z;
+            let dz2 = dz * dz;
+            // (dx² + dy²) + dz² ≥ dz² in floating point too, so no point of the plane is
+            // reached when this is not positive.
+            if 1.0 - dz2 * inv <= 0.0 {
+                continue;
+            }
+            let Some((y0, y1)) = range(c.y, r, lattice.origin.y, inv_h.y, py) else {
+                continue;
+            };
+            for y in y0..=y1 {
+                let dy = ys[y] - c.y;
+                let dy2 = dy * dy;
+                if 1.0 - (dy2 + dz2) * inv <= 0.0 {
+                    continue;
+                }
+                let half = (r * r - dy2 - dz2).max(0.0).sqrt();
+                let Some((x0, x1)) = range(c.x, half, lattice.origin.x, inv_h.x, px) else {
+                    continue;
+                };
+                let row = &mut slab[y * px + x0..=y * px + x1];
+                for (v, &x) in row.iter_mut().zip(&xs[x0..=x1]) {
+                    let dx = x - c.x;
+                    let t = (1.0 - ((dx * dx + dy2) + dz2) * inv).max(0.0);
+                    *v += a * t * t;
+                }
+            }
+        }
+        for v in slab.iter_mut() {
+            *v = self.threshold - *v;
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn splat_plane_avx512(&self, l: &Lattice, xs: &[f64], ys: &[f64], z: f64, s: &mut [f64]) {
+        self.splat_plane(l, xs, ys, z, s)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn splat_plane_avx2(&self, l: &Lattice, xs: &[f64], ys: &[f64], z: f64, s: &mut [f64]) {
+        self.splat_plane(l, xs, ys, z, s)
     }
 
     pub fn centers(&self) -> &[DVec3] {
@@ -234,11 +321,39 @@ impl BlobField {
     }
 }
 
+/// Instruction sets the splatting loop is compiled for.
+#[derive(Clone, Copy)]
+enum Isa {
+    Generic,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Isa {
+    fn detect() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::env::var_os("IMPLICITMESH_NO_AVX512").is_none()
+                && std::is_x86_feature_detected!("avx512f")
+            {
+                return Isa::Avx512;
+            }
+            if std::is_x86_feature_detected!("avx2") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Generic
+    }
+}
+
 impl Field for BlobField {
-    /// Splats every primitive into the lattice points of its bounding box, plane by plane in
-    /// parallel. Each point accumulates the primitives in index order, skipping those that do
-    /// not reach it — exactly the sum the voxel lists give — so the values are bit-identical to
-    /// [`Field::values`].
+    /// Splats every primitive into the lattice points of its sphere of influence, plane by plane
+    /// in parallel, row by row over the x-range the sphere covers. Each point accumulates the
+    /// primitives in index order with the same arithmetic as [`BlobField::potential`] (terms
+    /// that do not reach the point add +0.0, which changes nothing), so the values are
+    /// bit-identical to [`Field::values`].
     fn lattice_values(
         &self,
         lattice: &Lattice,
@@ -249,40 +364,23 @@ impl Field for BlobField {
     ) {
         let [px, py, _] = lattice.points_per_axis();
         let plane = px as usize * py as usize;
+        // Coordinates exactly as Lattice::point computes them.
+        let xs: Vec<f64> = (0..px).map(|i| lattice.point([i, 0, 0]).x).collect();
+        let ys: Vec<f64> = (0..py).map(|j| lattice.point([0, j, 0]).y).collect();
+        let isa = Isa::detect();
         out.par_chunks_mut(plane)
             .enumerate()
             .for_each(|(dz, slab)| {
                 let k = z0 + dz as u32;
                 debug_assert!(k < z1);
-                slab.fill(0.0);
                 let z = lattice.point([0, 0, k]).z;
-                let range = |c: f64, r: f64, o: f64, h: f64, n: u32| {
-                    let lo = ((c - r - o) / h).floor().max(0.0);
-                    let hi = ((c + r - o) / h).ceil().min(n as f64 - 1.0);
-                    (lo as u32, hi as i64)
-                };
-                for i in 0..self.centers.len() {
-                    let c = self.centers[i];
-                    let r = self.radii[i];
-                    if (z - c.z).abs() >= r {
-                        continue;
-                    }
-                    let (x0, x1) = range(c.x, r, lattice.origin.x, lattice.cell.x, px);
-                    let (y0, y1) = range(c.y, r, lattice.origin.y, lattice.cell.y, py);
-                    for y in y0 as i64..=y1 {
-                        let row =
-                            &mut slab[y as usize * px as usize..(y as usize + 1) * px as usize];
-                        for x in x0 as i64..=x1 {
-                            let p = lattice.point([x as u32, y as u32, k]);
-                            let t = 1.0 - (p - c).length_squared() * self.inv_r2[i];
-                            if t > 0.0 {
-                                row[x as usize] += self.strengths[i] * t * t;
-                            }
-                        }
-                    }
-                }
-                for v in slab.iter_mut() {
-                    *v = self.threshold - *v;
+                match isa {
+                    // SAFETY: the variant is only chosen when the CPU has the feature.
+                    #[cfg(target_arch = "x86_64")]
+                    Isa::Avx512 => unsafe { self.splat_plane_avx512(lattice, &xs, &ys, z, slab) },
+                    #[cfg(target_arch = "x86_64")]
+                    Isa::Avx2 => unsafe { self.splat_plane_avx2(lattice, &xs, &ys, z, slab) },
+                    Isa::Generic => self.splat_plane(lattice, &xs, &ys, z, slab),
                 }
             });
     }
@@ -295,12 +393,10 @@ impl Field for BlobField {
     fn gradient(&self, p: DVec3) -> DVec3 {
         let mut g = DVec3::ZERO;
         for &i in self.grid.candidates(p) {
-            let i = i as usize;
-            let d = p - self.centers[i];
-            let t = 1.0 - d.length_squared() * self.inv_r2[i];
-            if t > 0.0 {
-                g += d * (4.0 * self.strengths[i] * self.inv_r2[i] * t);
-            }
+            let q = &self.packed[i as usize];
+            let d = p - q.center;
+            let t = (1.0 - d.length_squared() * q.inv_r2).max(0.0);
+            g += d * (q.grad * t);
         }
         g
     }

@@ -1,89 +1,407 @@
 //! Plain marching cubes over the whole lattice: the reference polygonizer.
 //!
-//! The lattice is swept slab by slab along z. Field values come in batches of whole z-planes (one
-//! batched field call per batch), edge vertices are made once per crossed lattice edge and shared
-//! by the four cells around the edge, and only two planes of edge-vertex indices are kept, so the
-//! working memory grows with one plane, not with the lattice.
+//! The lattice is swept in groups of z-layers of cells. For each group, one batched field call
+//! (or a few, for small batches) fills the values of its planes ([`Field::lattice_values`]);
+//! then, in parallel over the planes and layers of the group:
+//! 1. the signs of every plane are packed into bit rows (64 points per word), and every point
+//!    row is classified as all outside, all inside or mixed;
+//! 2. each layer makes the vertices of the crossed edges it owns — the x- and y-edges of its top
+//!    plane and the z-edges between its planes — with indices local to the layer; crossed
+//!    edges are found a word at a time (the exclusive-or of neighbouring bit rows);
+//! 3. a prefix sum over the layers turns local indices into global ones, and each layer
+//!    triangulates its crossed cells (found a word at a time too) with the shared case table.
+//!
+//! So the work grows with the surface, plus one pass over the values. Every crossed lattice
+//! edge gets exactly one vertex, shared by the four cells around it; the output (vertex and
+//! triangle order included) does not depend on the number of threads. The working memory grows
+//! with one group of planes, not with the lattice.
 
-use super::cell::{case_index, corner_offset, edge_origin, emit_triangles};
 use super::{check_memory, compute_normals, estimate_triangles, CaseTable, Settings, Stats};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::time::Instant;
 
-const NONE: u32 = u32::MAX;
+/// A point row (fixed y and z) whose points are all outside.
+const OUT: u8 = 0;
+/// A point row whose points are all inside.
+const IN: u8 = 1;
+/// A point row with points on both sides.
+const MIXED: u8 = 2;
 
-/// Supplies the values of successive z-planes, evaluating several planes per field call.
-struct Planes<'a, F: ?Sized> {
-    field: &'a F,
-    lattice: Lattice,
-    per_batch: u32,
-    /// Planes `first..first + count` are in `values`.
-    first: u32,
-    count: u32,
-    values: Vec<f64>,
-    points: Vec<DVec3>,
-    batch: usize,
+/// Smallest number of cell layers per group, so that both phases have parallel work.
+const MIN_LAYERS_PER_GROUP: u32 = 8;
+
+/// For each cell edge: which index array holds it (0 bottom x, 1 top x, 2 bottom y, 3 top y,
+/// 4 z) and its offset in x and y from the cell's lower corner.
+const EDGE_SLOT: [(usize, usize, usize); 12] = [
+    (0, 0, 0),
+    (0, 0, 1),
+    (1, 0, 0),
+    (1, 0, 1),
+    (2, 0, 0),
+    (2, 1, 0),
+    (3, 0, 0),
+    (3, 1, 0),
+    (4, 0, 0),
+    (4, 1, 0),
+    (4, 0, 1),
+    (4, 1, 1),
+];
+
+/// Shape of the bit rows: words per row.
+#[derive(Clone, Copy)]
+struct Bits {
+    words: usize,
 }
 
-impl<F: Field + ?Sized> Planes<'_, F> {
-    fn plane_len(&self) -> usize {
-        let p = self.lattice.points_per_axis();
-        p[0] as usize * p[1] as usize
+impl Bits {
+    fn new(points: usize) -> Self {
+        Bits {
+            words: points.div_ceil(64),
+        }
     }
 
-    /// Values of plane `k` (planes must be requested in increasing order).
-    fn plane(&mut self, k: u32, stats: &mut Stats) -> Result<&[f64]> {
-        let n = self.plane_len();
-        if k >= self.first + self.count {
-            let t = Instant::now();
-            let last = self.lattice.cells[2];
-            self.first = k;
-            self.count = self.per_batch.min(last + 1 - k);
-            let n_values = self.count as usize * self.plane_len();
-            self.values.resize(n_values, 0.0);
-            // Whole planes at once; in batches for fields that are called per batch.
-            let per = ((self.batch / self.plane_len()).max(1)) as u32;
-            let mut z = k;
-            while z < k + self.count {
-                let z1 = (z + per).min(k + self.count);
-                let off = (z - k) as usize * self.plane_len();
-                let len = (z1 - z) as usize * self.plane_len();
-                self.field.lattice_values(
-                    &self.lattice,
-                    z,
-                    z1,
-                    &mut self.points,
-                    &mut self.values[off..off + len],
-                );
-                if let Some(i) = self.values[off..off + len]
-                    .iter()
-                    .position(|v| !v.is_finite())
-                {
-                    let p = self.lattice.points_per_axis();
-                    let (pl, r) = (i / self.plane_len(), i % self.plane_len());
-                    let q = self.lattice.point([
-                        (r % p[0] as usize) as u32,
-                        (r / p[0] as usize) as u32,
-                        z + pl as u32,
-                    ]);
-                    return Err(crate::Error::FieldNotFinite {
-                        x: q.x,
-                        y: q.y,
-                        z: q.z,
-                    });
-                }
-                z = z1;
-            }
-            stats.evaluations += n_values as u64;
-            stats.add_time("evaluate", t);
+    /// Mask of the bits of word `w` whose index is below `n`.
+    #[inline]
+    fn below(w: usize, n: usize) -> u64 {
+        let lo = w * 64;
+        if lo + 64 <= n {
+            !0
+        } else if lo >= n {
+            0
+        } else {
+            (1u64 << (n - lo)) - 1
         }
-        let off = (k - self.first) as usize * n;
-        Ok(&self.values[off..off + n])
     }
+
+    /// Word `w` of `row` shifted down by one bit (bit i holds point i + 1).
+    #[inline]
+    fn next(row: &[u64], w: usize) -> u64 {
+        (row[w] >> 1) | (row.get(w + 1).map_or(0, |n| n << 63))
+    }
+}
+
+/// Packs the signs of a row (bit i set when point i is inside) and returns whether its points
+/// are all outside, all inside, or mixed.
+#[inline]
+fn row_bits(row: &[f64], out: &mut [u64]) -> u8 {
+    let mut inside = 0u32;
+    for (o, chunk) in out.iter_mut().zip(row.chunks(64)) {
+        let mut w = 0u64;
+        for (b, v) in chunk.iter().enumerate() {
+            w |= ((*v < 0.0) as u64) << b;
+        }
+        inside += w.count_ones();
+        *o = w;
+    }
+    if inside == 0 {
+        OUT
+    } else if inside as usize == row.len() {
+        IN
+    } else {
+        MIXED
+    }
+}
+
+/// True when an edge between rows of these kinds may be crossed.
+#[inline]
+fn may_cross(a: u8, b: u8) -> bool {
+    a == MIXED || a != b
+}
+
+/// Calls `f(i)` for every set bit `i` of the words that `mask(w)` gives.
+#[inline(always)]
+fn for_each_bit(words: usize, mut mask: impl FnMut(usize) -> u64, mut f: impl FnMut(usize)) {
+    for w in 0..words {
+        let mut m = mask(w);
+        while m != 0 {
+            f(w * 64 + m.trailing_zeros() as usize);
+            m &= m - 1;
+        }
+    }
+}
+
+/// The edge vertices one layer of cells owns (the x- and y-edges of its top plane, the z-edges
+/// between its planes). An index array entry is written only when its edge is crossed and read
+/// only for crossed edges (the case table refers to no other), so the arrays are never cleared.
+#[derive(Default)]
+struct Layer {
+    /// x-edge `(i, j)` of the top plane at `j * nx + i`.
+    x: Vec<u32>,
+    /// y-edge `(i, j)` of the top plane at `j * px + i`.
+    y: Vec<u32>,
+    /// z-edge from point `(i, j)` of the bottom plane at `j * px + i`.
+    z: Vec<u32>,
+    vertices: Vec<DVec3>,
+    /// Global index of the layer's first vertex.
+    base: u32,
+}
+
+/// One plane's values, sign bits and row kinds.
+#[derive(Clone, Copy)]
+struct Plane<'a> {
+    values: &'a [f64],
+    bits: &'a [u64],
+    rows: &'a [u8],
+}
+
+impl Plane<'_> {
+    #[inline]
+    fn bit_row(&self, b: Bits, j: usize) -> &[u64] {
+        &self.bits[j * b.words..(j + 1) * b.words]
+    }
+}
+
+/// Makes the vertices of the crossed x- and y-edges of plane `k`, writing their indices (from
+/// `vertices.len()`) into `xe` and `ye`.
+fn plane_edges(
+    lattice: &Lattice,
+    k: u32,
+    p: Plane,
+    xe: &mut [u32],
+    ye: &mut [u32],
+    vertices: &mut Vec<DVec3>,
+) {
+    let [nx, ny, _] = lattice.cells;
+    let (nxu, px) = (nx as usize, nx as usize + 1);
+    let b = Bits::new(px);
+    for j in 0..=ny as usize {
+        if p.rows[j] != MIXED {
+            continue;
+        }
+        let r = p.bit_row(b, j);
+        let v = &p.values[j * px..(j + 1) * px];
+        for_each_bit(
+            b.words,
+            |w| (r[w] ^ Bits::next(r, w)) & Bits::below(w, nxu),
+            |i| {
+                xe[j * nxu + i] = vertices.len() as u32;
+                let pa = lattice.point([i as u32, j as u32, k]);
+                let pb = lattice.point([i as u32 + 1, j as u32, k]);
+                vertices.push(edge_crossing(pa, pb, v[i], v[i + 1]));
+            },
+        );
+    }
+    for j in 0..ny as usize {
+        if !may_cross(p.rows[j], p.rows[j + 1]) {
+            continue;
+        }
+        let (r0, r1) = (p.bit_row(b, j), p.bit_row(b, j + 1));
+        for_each_bit(
+            b.words,
+            |w| r0[w] ^ r1[w],
+            |i| {
+                ye[j * px + i] = vertices.len() as u32;
+                let pa = lattice.point([i as u32, j as u32, k]);
+                let pb = lattice.point([i as u32, j as u32 + 1, k]);
+                let (a, c) = (p.values[j * px + i], p.values[(j + 1) * px + i]);
+                vertices.push(edge_crossing(pa, pb, a, c));
+            },
+        );
+    }
+}
+
+/// Makes the vertices layer `k` owns: the crossed x- and y-edges of plane `k + 1` and the
+/// crossed z-edges between planes `k` and `k + 1`.
+fn layer_vertices(lattice: &Lattice, k: u32, lo: Plane, hi: Plane, layer: &mut Layer) {
+    let [nx, ny, _] = lattice.cells;
+    let (nxu, pxu, pyu) = (nx as usize, nx as usize + 1, ny as usize + 1);
+    for (a, n) in [
+        (&mut layer.x, nxu * pyu),
+        (&mut layer.y, pxu * (pyu - 1)),
+        (&mut layer.z, pxu * pyu),
+    ] {
+        if a.len() != n {
+            *a = vec![0; n];
+        }
+    }
+    layer.vertices.clear();
+    plane_edges(lattice, k + 1, hi, &mut layer.x, &mut layer.y, &mut layer.vertices);
+    let b = Bits::new(pxu);
+    for j in 0..pyu {
+        if !may_cross(lo.rows[j], hi.rows[j]) {
+            continue;
+        }
+        let (r0, r1) = (lo.bit_row(b, j), hi.bit_row(b, j));
+        for_each_bit(
+            b.words,
+            |w| r0[w] ^ r1[w],
+            |i| {
+                let idx = j * pxu + i;
+                layer.z[idx] = layer.vertices.len() as u32;
+                let pa = lattice.point([i as u32, j as u32, k]);
+                let pb = lattice.point([i as u32, j as u32, k + 1]);
+                layer
+                    .vertices
+                    .push(edge_crossing(pa, pb, lo.values[idx], hi.values[idx]));
+            },
+        );
+    }
+}
+
+/// Edge-vertex indices of a layer's bottom plane: x-edges, y-edges and the number to add.
+type Bottom<'a> = (&'a [u32], &'a [u32], u32);
+
+/// Triangulates the crossed cells of one layer into `out`; returns their number.
+fn triangulate_layer(
+    table: &CaseTable,
+    lattice: &Lattice,
+    (lo, hi): (Plane, Plane),
+    bottom: Bottom,
+    layer: &Layer,
+    out: &mut Vec<[u32; 3]>,
+) -> u64 {
+    let [nx, ny, _] = lattice.cells;
+    let (nxu, pxu) = (nx as usize, nx as usize + 1);
+    let b = Bits::new(pxu);
+    let (bx, by, bbase) = bottom;
+    let arrays: [&[u32]; 5] = [bx, &layer.x, by, &layer.y, &layer.z];
+    let strides = [nxu, nxu, pxu, pxu, pxu];
+    let bases = [bbase, layer.base, bbase, layer.base, layer.base];
+    let mut crossed = 0;
+    for j in 0..ny as usize {
+        let kinds = [lo.rows[j], lo.rows[j + 1], hi.rows[j], hi.rows[j + 1]];
+        if kinds[0] != MIXED && kinds.iter().all(|&r| r == kinds[0]) {
+            continue;
+        }
+        // Corner rows in case-bit order: (y, z) = (0, 0), (1, 0), (0, 1), (1, 1).
+        let rows = [
+            lo.bit_row(b, j),
+            lo.bit_row(b, j + 1),
+            hi.bit_row(b, j),
+            hi.bit_row(b, j + 1),
+        ];
+        let bit = |r: &[u64], i: usize| ((r[i >> 6] >> (i & 63)) & 1) as u8;
+        for_each_bit(
+            b.words,
+            |w| {
+                // A cell is crossed unless its eight corners agree.
+                let (mut any, mut all) = (0u64, !0u64);
+                for r in rows {
+                    let (a, n) = (r[w], Bits::next(r, w));
+                    any |= a | n;
+                    all &= a & n;
+                }
+                any & !all & Bits::below(w, nxu)
+            },
+            |i| {
+                let mut case = 0u8;
+                for (q, r) in rows.iter().enumerate() {
+                    case |= (bit(r, i) | bit(r, i + 1) << 1) << (2 * q);
+                }
+                crossed += 1;
+                let vertex = |e: u8| {
+                    let (slot, dx, dy) = EDGE_SLOT[e as usize];
+                    arrays[slot][(j + dy) * strides[slot] + i + dx].wrapping_add(bases[slot])
+                };
+                for t in table.triangles(case) {
+                    out.push([vertex(t[0]), vertex(t[1]), vertex(t[2])]);
+                }
+            },
+        );
+    }
+    crossed
+}
+
+/// Fills `out` with the values of planes `z0..z1`, at most `batch` points per field call (at
+/// least one plane), and checks that they are finite.
+fn fill_planes<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    (z0, z1): (u32, u32),
+    batch: usize,
+    points: &mut Vec<DVec3>,
+    out: &mut [f64],
+) -> Result<()> {
+    let [px, py, _] = lattice.points_per_axis();
+    let plane = px as usize * py as usize;
+    let per = (batch / plane).max(1) as u32;
+    let mut z = z0;
+    while z < z1 {
+        let z2 = (z + per).min(z1);
+        let chunk = &mut out[(z - z0) as usize * plane..(z2 - z0) as usize * plane];
+        field.lattice_values(lattice, z, z2, points, chunk);
+        if let Some(i) = chunk.iter().position(|v| !v.is_finite()) {
+            let (pl, r) = (i / plane, i % plane);
+            let q = lattice.point([
+                (r % px as usize) as u32,
+                (r / px as usize) as u32,
+                z + pl as u32,
+            ]);
+            return Err(crate::Error::FieldNotFinite {
+                x: q.x,
+                y: q.y,
+                z: q.z,
+            });
+        }
+        z = z2;
+    }
+    Ok(())
+}
+
+/// Buffers of one polygonization, kept between calls so that a repeated call (an animation, a
+/// benchmark) does not fault in fresh pages for them every time.
+#[derive(Default)]
+struct Workspace {
+    values: Vec<f64>,
+    bits: Vec<u64>,
+    rows: Vec<u8>,
+    points: Vec<DVec3>,
+    layers: Vec<Layer>,
+    triangles: Vec<Vec<[u32; 3]>>,
+    carry_x: Vec<u32>,
+    carry_y: Vec<u32>,
+}
+
+impl Workspace {
+    fn bytes(&self) -> usize {
+        self.values.capacity() * 8
+            + self.bits.capacity() * 8
+            + self.rows.capacity()
+            + self.points.capacity() * 24
+            + self.carry_x.capacity() * 4
+            + self.carry_y.capacity() * 4
+            + self
+                .layers
+                .iter()
+                .map(|l| (l.x.capacity() + l.y.capacity() + l.z.capacity()) * 4 + l.vertices.capacity() * 24)
+                .sum::<usize>()
+            + self.triangles.iter().map(|t| t.capacity() * 12).sum::<usize>()
+    }
+}
+
+/// Workspaces returned by finished calls (at most two, and none above [`KEEP_BYTES`]).
+static WORKSPACES: std::sync::Mutex<Vec<Workspace>> = std::sync::Mutex::new(Vec::new());
+const KEEP_BYTES: usize = 64 << 20;
+
+fn take_workspace() -> Workspace {
+    WORKSPACES
+        .lock()
+        .ok()
+        .and_then(|mut w| w.pop())
+        .unwrap_or_default()
+}
+
+fn return_workspace(w: Workspace) {
+    if w.bytes() <= KEEP_BYTES {
+        if let Ok(mut pool) = WORKSPACES.lock() {
+            if pool.len() < 2 {
+                pool.push(w);
+            }
+        }
+    }
+}
+
+/// Cell layers per group: as many planes as one batch holds, at least a few for parallel work.
+fn layers_per_group(lattice: &Lattice, settings: &Settings) -> u32 {
+    let [px, py, _] = lattice.points_per_axis();
+    (settings.batch as u64 / (px as u64 * py as u64))
+        .max(MIN_LAYERS_PER_GROUP as u64)
+        .min(lattice.cells[2] as u64) as u32
 }
 
 /// Polygonizes `field` over every cell of `lattice` with plain marching cubes.
@@ -92,13 +410,12 @@ pub fn polygonize<F: Field + ?Sized>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Stats)> {
-    let [nx, ny, nz] = lattice.cells;
-    let [px, py, _] = lattice.points_per_axis();
-    let plane = px as u64 * py as u64;
-    let per_batch = ((settings.batch as u64 / plane).max(1)).min(nz as u64 + 1) as u32;
-    // Working memory: the batch of planes (points and values), two planes of values and five
-    // planes of edge indices; plus the output.
-    let working = per_batch as u64 * plane * 32 + plane * (16 + 5 * 4);
+    let plane = lattice.points_per_axis()[..2].iter().map(|&p| p as u64).product::<u64>();
+    let per_group = layers_per_group(lattice, settings) as u64;
+    // Working memory: the group's values, sign bits, edge indices and row kinds, the points of
+    // one batch (for fields that build them); plus the output.
+    let working =
+        (per_group + 1) * plane * 10 + per_group * plane * 12 + (settings.batch as u64).max(plane) * 24;
     check_memory(
         working + estimate_triangles(lattice) * super::BYTES_PER_TRIANGLE,
         settings.memory_limit,
@@ -107,140 +424,163 @@ pub fn polygonize<F: Field + ?Sized>(
     let table = CaseTable::get(settings.ambiguity);
     let mut stats = Stats {
         lattice_points: lattice.num_points(),
+        cells_visited: lattice.num_cells(),
         ..Default::default()
     };
-    let mut planes = Planes {
-        field,
-        lattice: *lattice,
-        per_batch,
-        first: 0,
-        count: 0,
-        values: vec![],
-        points: vec![],
-        batch: settings.batch,
-    };
     let mut mesh = Mesh::default();
-    let (pxu, nxu, nyu) = (px as usize, nx as usize, ny as usize);
-    let plane_len = pxu * py as usize;
-    // Edge-vertex indices: x-edges and y-edges of the lower and upper plane of the slab, z-edges
-    // of the slab.
-    let mut xe = [vec![NONE; nxu * py as usize], vec![NONE; nxu * py as usize]];
-    let mut ye = [vec![NONE; pxu * nyu], vec![NONE; pxu * nyu]];
-    let mut ze = vec![NONE; plane_len];
-    let mut lo = planes.plane(0, &mut stats)?.to_vec();
-    let mut hi = vec![0.0; plane_len];
-
-    let t = Instant::now();
-    plane_vertices(lattice, 0, &lo, &mut xe[0], &mut ye[0], &mut mesh.vertices);
-    stats.add_time("triangulate", t);
-    for k in 0..nz {
-        hi.copy_from_slice(planes.plane(k + 1, &mut stats)?);
-        let t = Instant::now();
-        let (xlo, xhi) = xe.split_at_mut(1);
-        let (ylo, yhi) = ye.split_at_mut(1);
-        plane_vertices(
-            lattice,
-            k + 1,
-            &hi,
-            &mut xhi[0],
-            &mut yhi[0],
-            &mut mesh.vertices,
-        );
-        // z-edges between the planes.
-        for j in 0..py {
-            for i in 0..px {
-                let idx = j as usize * pxu + i as usize;
-                let (a, b) = (lo[idx], hi[idx]);
-                ze[idx] = if (a < 0.0) != (b < 0.0) {
-                    let pa = lattice.point([i, j, k]);
-                    let pb = lattice.point([i, j, k + 1]);
-                    mesh.vertices.push(edge_crossing(pa, pb, a, b));
-                    (mesh.vertices.len() - 1) as u32
-                } else {
-                    NONE
-                };
-            }
-        }
-        let (xs, ys) = ([&xlo[0], &xhi[0]], [&ylo[0], &yhi[0]]);
-        for j in 0..ny as usize {
-            for i in 0..nxu {
-                let mut v = [0.0; 8];
-                for (c, vc) in v.iter_mut().enumerate() {
-                    let o = corner_offset(c);
-                    let idx = (j + o[1] as usize) * pxu + i + o[0] as usize;
-                    *vc = if o[2] == 0 { lo[idx] } else { hi[idx] };
-                }
-                let case = case_index(&v);
-                if case == 0 || case == 255 {
-                    continue;
-                }
-                stats.cells_crossed += 1;
-                emit_triangles(
-                    table,
-                    case,
-                    |e| {
-                        let (o, axis) = edge_origin(e);
-                        let (x, y, z) = (i + o[0] as usize, j + o[1] as usize, o[2] as usize);
-                        match axis {
-                            0 => xs[z][y * nxu + x],
-                            1 => ys[z][y * pxu + x],
-                            _ => ze[y * pxu + x],
-                        }
-                    },
-                    &mut mesh.triangles,
-                );
-            }
-        }
-        std::mem::swap(&mut lo, &mut hi);
-        xe.swap(0, 1);
-        ye.swap(0, 1);
-        stats.add_time("triangulate", t);
-    }
-    stats.cells_visited = lattice.num_cells();
-    debug_assert!(mesh.triangles.iter().flatten().all(|&v| v != NONE));
+    let mut ws = take_workspace();
+    let r = sweep(field, lattice, settings, table, &mut ws, &mut mesh, &mut stats);
+    return_workspace(ws);
+    r?;
+    debug_assert!(mesh
+        .triangles
+        .iter()
+        .flatten()
+        .all(|&v| (v as usize) < mesh.vertices.len()));
     compute_normals(field, lattice, &mut mesh, settings, &mut stats)?;
     Ok((mesh, stats))
 }
 
-/// Creates the vertices on the crossed x- and y-edges of plane `k`.
-fn plane_vertices(
+/// The sweep over the groups of planes (see the module documentation).
+fn sweep<F: Field + ?Sized>(
+    field: &F,
     lattice: &Lattice,
-    k: u32,
-    values: &[f64],
-    xe: &mut [u32],
-    ye: &mut [u32],
-    vertices: &mut Vec<DVec3>,
-) {
-    let [nx, ny, _] = lattice.cells;
-    let px = nx as usize + 1;
-    for j in 0..=ny {
-        for i in 0..nx {
-            let a = values[j as usize * px + i as usize];
-            let b = values[j as usize * px + i as usize + 1];
-            xe[j as usize * nx as usize + i as usize] = if (a < 0.0) != (b < 0.0) {
-                let pa = lattice.point([i, j, k]);
-                let pb = lattice.point([i + 1, j, k]);
-                vertices.push(edge_crossing(pa, pb, a, b));
-                (vertices.len() - 1) as u32
-            } else {
-                NONE
-            };
+    settings: &Settings,
+    table: &CaseTable,
+    ws: &mut Workspace,
+    mesh: &mut Mesh,
+    stats: &mut Stats,
+) -> Result<()> {
+    let [nx, _, nz] = lattice.cells;
+    let [px, py, _] = lattice.points_per_axis();
+    let (nxu, pxu, pyu) = (nx as usize, px as usize, py as usize);
+    let plane = pxu * pyu;
+    let b = Bits::new(pxu);
+    let plane_words = b.words * pyu;
+    let per_group = layers_per_group(lattice, settings);
+    let Workspace {
+        values,
+        bits,
+        rows,
+        points,
+        layers,
+        triangles,
+        carry_x,
+        carry_y,
+    } = ws;
+    // Global vertex indices of the x- and y-edges of the group's bottom plane.
+    carry_x.resize(nxu * pyu, 0);
+    carry_y.resize(pxu * (pyu - 1), 0);
+    values.clear();
+    let mut g0 = 0u32;
+    while g0 < nz {
+        let g1 = (g0 + per_group).min(nz);
+        let (n_planes, n_layers) = ((g1 - g0 + 1) as usize, (g1 - g0) as usize);
+        let t = Instant::now();
+        // The previous group's top plane is this group's bottom plane: evaluated once.
+        let first_new = if g0 == 0 {
+            0
+        } else {
+            let last = values.len() - plane;
+            values.copy_within(last.., 0);
+            1
+        };
+        values.resize(n_planes * plane, 0.0);
+        fill_planes(
+            field,
+            lattice,
+            (g0 + first_new as u32, g1 + 1),
+            settings.batch,
+            points,
+            &mut values[first_new * plane..],
+        )?;
+        stats.evaluations += ((n_planes - first_new) * plane) as u64;
+        stats.add_time("evaluate", t);
+
+        let t = Instant::now();
+        rows.resize(n_planes * pyu, OUT);
+        bits.resize(n_planes * plane_words, 0);
+        rows.par_chunks_mut(pyu)
+            .zip(bits.par_chunks_mut(plane_words))
+            .zip(values.par_chunks(plane))
+            .for_each(|((r, bw), v)| {
+                for (j, rj) in r.iter_mut().enumerate() {
+                    *rj = row_bits(
+                        &v[j * pxu..(j + 1) * pxu],
+                        &mut bw[j * b.words..(j + 1) * b.words],
+                    );
+                }
+            });
+        let planes: Vec<Plane> = (0..n_planes)
+            .map(|l| Plane {
+                values: &values[l * plane..(l + 1) * plane],
+                bits: &bits[l * plane_words..(l + 1) * plane_words],
+                rows: &rows[l * pyu..(l + 1) * pyu],
+            })
+            .collect();
+        if g0 == 0 {
+            plane_edges(
+                lattice,
+                0,
+                planes[0],
+                carry_x,
+                carry_y,
+                &mut mesh.vertices,
+            );
         }
-    }
-    for j in 0..ny {
-        for i in 0..=nx {
-            let a = values[j as usize * px + i as usize];
-            let b = values[(j as usize + 1) * px + i as usize];
-            ye[j as usize * px + i as usize] = if (a < 0.0) != (b < 0.0) {
-                let pa = lattice.point([i, j, k]);
-                let pb = lattice.point([i, j + 1, k]);
-                vertices.push(edge_crossing(pa, pb, a, b));
-                (vertices.len() - 1) as u32
-            } else {
-                NONE
-            };
+        if layers.len() < n_layers {
+            layers.resize_with(n_layers, Layer::default);
+            triangles.resize_with(n_layers, Vec::new);
         }
+        layers[..n_layers]
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(l, layer)| {
+                layer_vertices(lattice, g0 + l as u32, planes[l], planes[l + 1], layer)
+            });
+        let new_vertices: usize = layers[..n_layers].iter().map(|l| l.vertices.len()).sum();
+        mesh.vertices.reserve(new_vertices);
+        // A closed surface has about twice as many triangles as vertices.
+        mesh.triangles.reserve(2 * new_vertices + new_vertices / 8);
+        for layer in layers[..n_layers].iter_mut() {
+            layer.base = mesh.vertices.len() as u32;
+            mesh.vertices.extend_from_slice(&layer.vertices);
+        }
+        let done: &[Layer] = &layers[..n_layers];
+        let (cx, cy) = (&carry_x[..], &carry_y[..]);
+        stats.cells_crossed += triangles[..n_layers]
+            .par_iter_mut()
+            .enumerate()
+            .map(|(l, out)| {
+                out.clear();
+                let bottom = match l {
+                    0 => (cx, cy, 0),
+                    _ => (&done[l - 1].x[..], &done[l - 1].y[..], done[l - 1].base),
+                };
+                triangulate_layer(
+                    table,
+                    lattice,
+                    (planes[l], planes[l + 1]),
+                    bottom,
+                    &done[l],
+                    out,
+                )
+            })
+            .sum::<u64>();
+        for t in &triangles[..n_layers] {
+            mesh.triangles.extend_from_slice(t);
+        }
+        let top = &layers[n_layers - 1];
+        for (c, &i) in carry_x.iter_mut().zip(&top.x) {
+            *c = i.wrapping_add(top.base);
+        }
+        for (c, &i) in carry_y.iter_mut().zip(&top.y) {
+            *c = i.wrapping_add(top.base);
+        }
+        stats.add_time("triangulate", t);
+        g0 = g1;
     }
+    Ok(())
 }
 
 #[cfg(test)]

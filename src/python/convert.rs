@@ -103,16 +103,67 @@ pub fn triangles(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[u3
     Ok(out)
 }
 
-/// (N, 3) float64 array from points.
+/// (N, 3) float64 array from points (the buffer is handed to numpy, not copied).
 pub fn points_to_py<'py>(py: Python<'py>, p: Vec<DVec3>) -> PyResult<Bound<'py, PyAny>> {
     let n = p.len();
-    let flat: Vec<f64> = bytemuck::cast_slice::<DVec3, f64>(&p).to_vec();
+    let flat = flatten_points(p);
     Ok(PyArray1::from_vec(py, flat).reshape([n, 3])?.into_any())
+}
+
+/// The coordinates of points as one flat vector, reusing the allocation (a `DVec3` is three
+/// `f64` with the same alignment).
+pub fn flatten_points(p: Vec<DVec3>) -> Vec<f64> {
+    match bytemuck::allocation::try_cast_vec::<DVec3, f64>(p) {
+        Ok(v) => v,
+        Err((_, p)) => bytemuck::cast_slice::<DVec3, f64>(&p).to_vec(),
+    }
+}
+
+/// Triangles as int64 indices, flat (run without the GIL: it is a pass over the whole mesh).
+pub fn flatten_triangles(t: &[[u32; 3]]) -> Vec<i64> {
+    use rayon::prelude::*;
+    let mut out = vec![0i64; 3 * t.len()];
+    out.par_chunks_mut(3 * 4096)
+        .zip(t.par_chunks(4096))
+        .for_each(|(o, t)| {
+            for (o, v) in o.iter_mut().zip(t.iter().flatten()) {
+                *o = *v as i64;
+            }
+        });
+    out
+}
+
+/// A mesh as flat numpy-ready buffers: vertices, int64 faces, normals.
+pub struct MeshBuffers {
+    pub vertices: Vec<f64>,
+    pub faces: Vec<i64>,
+    pub normals: Vec<f64>,
+}
+
+impl MeshBuffers {
+    /// Takes the mesh's buffers (no copy of the coordinates).
+    pub fn new(mesh: crate::mesh::Mesh) -> Self {
+        MeshBuffers {
+            faces: flatten_triangles(&mesh.triangles),
+            vertices: flatten_points(mesh.vertices),
+            normals: flatten_points(mesh.normals),
+        }
+    }
+
+    /// (vertices (V, 3), faces (F, 3), normals (V, 3) or (0, 3)) numpy arrays.
+    pub fn to_py<'py>(self, py: Python<'py>) -> PyResult<[Bound<'py, PyAny>; 3]> {
+        let (nv, nf, nn) = (self.vertices.len() / 3, self.faces.len() / 3, self.normals.len() / 3);
+        Ok([
+            PyArray1::from_vec(py, self.vertices).reshape([nv, 3])?.into_any(),
+            PyArray1::from_vec(py, self.faces).reshape([nf, 3])?.into_any(),
+            PyArray1::from_vec(py, self.normals).reshape([nn, 3])?.into_any(),
+        ])
+    }
 }
 
 /// (F, 3) int64 array from triangles.
 pub fn triangles_to_py<'py>(py: Python<'py>, t: &[[u32; 3]]) -> PyResult<Bound<'py, PyAny>> {
-    let flat: Vec<i64> = t.iter().flatten().map(|&v| v as i64).collect();
+    let flat = flatten_triangles(t);
     Ok(PyArray1::from_vec(py, flat)
         .reshape([t.len(), 3])?
         .into_any())

@@ -1,6 +1,6 @@
 //! `_core.polygonize`: argument checks, the GIL released around the polygonizer, numpy out.
 
-use super::convert::{points, points_to_py, triangles_to_py};
+use super::convert::{points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
@@ -172,18 +172,21 @@ fn tracking_starts(
     }
 }
 
+/// A polygonizer's result with the mesh as numpy-ready buffers.
+fn buffers((mesh, stats): (crate::mesh::Mesh, Stats)) -> (MeshBuffers, Stats) {
+    (MeshBuffers::new(mesh), stats)
+}
+
 fn mesh_to_py<'py>(
     py: Python<'py>,
-    mesh: &crate::mesh::Mesh,
+    mesh: MeshBuffers,
     stats: &Stats,
     lattice: &Lattice,
     method: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let stats_py = stats_to_py(py, stats, lattice)?;
     stats_py.set_item("method", method)?;
-    let v = points_to_py(py, mesh.vertices.clone())?;
-    let f = triangles_to_py(py, &mesh.triangles)?;
-    let n = points_to_py(py, mesh.normals.clone())?;
+    let [v, f, n] = mesh.to_py(py)?;
     PyTuple::new(py, [v, f, n, stats_py.into_any()])
 }
 
@@ -238,7 +241,7 @@ pub fn polygonize<'py>(
     }
     let f = field.as_field();
     let result = match method.as_str() {
-        "dense" => py.detach(|| dense::polygonize(f, &lattice, &settings)),
+        "dense" => py.detach(|| dense::polygonize(f, &lattice, &settings).map(buffers)),
         "octree" => {
             let od = octree::Settings::default();
             let o = octree::Settings {
@@ -246,11 +249,11 @@ pub fn polygonize<'py>(
                 safety: safety.unwrap_or(od.safety),
                 corner_test: corner_test.unwrap_or(od.corner_test),
             };
-            py.detach(|| octree::polygonize(f, &lattice, &settings, &o))
+            py.detach(|| octree::polygonize(f, &lattice, &settings, &o).map(buffers))
         }
         "tracking" => {
             let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
-            py.detach(|| tracking::polygonize(f, &lattice, &starts, walk, &settings))
+            py.detach(|| tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers))
         }
         _ => {
             return Err(value_error(
@@ -265,7 +268,7 @@ pub fn polygonize<'py>(
         return Err(e);
     }
     let (mesh, stats) = result?;
-    mesh_to_py(py, &mesh, &stats, &lattice, &method)
+    mesh_to_py(py, mesh, &stats, &lattice, &method)
 }
 
 /// Surface tracking with caches kept between calls (Triquet et al.): for animation, move the
@@ -307,13 +310,13 @@ impl PyTessellator {
         let tess = &mut self.inner;
         let result = py.detach(|| {
             tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
-                .map(|(_, s)| s)
+                .map(|(m, s)| (MeshBuffers::new(m.clone()), s))
         });
         if let Some(e) = field.take_error() {
             return Err(e);
         }
-        let stats = result?;
-        mesh_to_py(py, self.inner.mesh(), &stats, &lattice, "tracking")
+        let (mesh, stats) = result?;
+        mesh_to_py(py, mesh, &stats, &lattice, "tracking")
     }
 
     /// Bytes held by the caches and buffers.

@@ -1,0 +1,75 @@
+//! Times the polygonizers on random blob fields (the benchmark cases), for profiling:
+//! `cargo run --release --example blob_timing -- 200 0.25 128 dense`.
+use glam::DVec3;
+use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+use implicitmesh::lattice::Lattice;
+use implicitmesh::polygonize::{dense, tracking, Settings};
+use std::time::Instant;
+
+fn main() {
+    let a: Vec<String> = std::env::args().collect();
+    let n: usize = a.get(1).map_or(200, |s| s.parse().unwrap());
+    let r: f64 = a.get(2).map_or(0.25, |s| s.parse().unwrap());
+    let res: u32 = a.get(3).map_or(128, |s| s.parse().unwrap());
+    let method = a.get(4).map_or("dense", |s| s.as_str());
+    let reps: usize = a.get(5).map_or(20, |s| s.parse().unwrap());
+    let voxel_size: f64 = a.get(6).map_or(BlobSettings::default().voxel_size, |s| s.parse().unwrap());
+    // A small deterministic generator (splitmix64).
+    let mut state = 12345u64;
+    let mut next = || {
+        state = state.wrapping_add(0x9e3779b97f4a7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let centers: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(next(), next(), next()) * 1.6 - 0.8)
+        .collect();
+    let field = BlobField::new(
+        &centers,
+        PerPrimitive::All(r),
+        PerPrimitive::All(1.0),
+        0.5,
+        BlobSettings { voxel_size },
+    )
+    .unwrap();
+    let g = field.grid();
+    let nvox: u32 = g.dims().iter().product();
+    println!(
+        "voxel size {voxel_size}: {:?} voxels, {:.1} entries per voxel",
+        g.dims(),
+        g.entries() as f64 / nvox as f64
+    );
+    let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [res; 3]).unwrap();
+    let settings = Settings::default();
+    let mut tess = tracking::Tessellator::new();
+    let mut times = vec![];
+    for _ in 0..reps {
+        let t = Instant::now();
+        let (tris, stats) = match method {
+            "tracking" => {
+                let (m, s) = tess
+                    .polygonize(&field, &lattice, &centers, res, &[], &settings)
+                    .unwrap();
+                (m.triangles.len(), s)
+            }
+            _ => {
+                let (m, s) = dense::polygonize(&field, &lattice, &settings).unwrap();
+                (m.triangles.len(), s)
+            }
+        };
+        times.push(t.elapsed().as_secs_f64());
+        if times.len() == reps {
+            println!("{tris} triangles, {:?}", stats.seconds);
+            let mut best = [f64::INFINITY; 8];
+            let _ = &mut best;
+        }
+    }
+    times.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    println!(
+        "{method} {n} blobs r={r} {res}³: median {:.2} ms, min {:.2} ms",
+        times[reps / 2] * 1e3,
+        times[0] * 1e3
+    );
+}
