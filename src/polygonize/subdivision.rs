@@ -117,7 +117,8 @@ pub struct SubdivisionStats {
     /// Field evaluations (value and gradient) per projected vertex during Newton: mean and max.
     pub iterations_mean: f64,
     pub iterations_max: u32,
-    /// Points evaluated in total (Newton, fallback and the final values and normals).
+    /// Points evaluated in total (Newton, fallback, and the fallback's points once more for their
+    /// normals; Newton's points reuse the gradient of their last step, the old vertices theirs).
     pub evaluations: u64,
     /// Batched field calls made.
     pub batches: u64,
@@ -128,7 +129,9 @@ pub struct SubdivisionStats {
     pub not_converged: usize,
     /// Largest |f| among the vertices that did not converge (0 when all did).
     pub not_converged_max_abs_value: f64,
-    /// Largest |f| over the new vertices of this level after projection.
+    /// Largest |f| over the new vertices of this level after projection: for Newton's vertices the
+    /// value of their last evaluation, before a final step shorter than the tolerance (so an upper
+    /// bound to rounding), for the fallback's vertices the value at the final point.
     pub max_abs_value: f64,
     /// Wall-clock seconds for the level (split, projection, normals).
     pub seconds: f64,
@@ -310,6 +313,9 @@ pub struct Projection {
     pub fallbacks: usize,
     /// Indices of the points the fallback could not place either.
     pub not_converged: Vec<usize>,
+    /// For points Newton placed: the value and gradient of its last evaluation (at most one step
+    /// shorter than the tolerance away from the final point); `None` for the fallback's points.
+    pub last: Vec<Option<(f64, DVec3)>>,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -343,6 +349,7 @@ fn project(
     let mut g0 = vec![DVec3::ZERO; n];
     let mut best: Vec<(f64, DVec3)> = starts.iter().map(|&p| (f64::INFINITY, p)).collect();
     let mut last = vec![f64::INFINITY; n];
+    let mut last_eval: Vec<Option<(f64, DVec3)>> = vec![None; n];
     let mut active: Vec<usize> = (0..n).collect();
     let mut pts: Vec<DVec3> = Vec::with_capacity(n);
     let mut vals = vec![0.0; n];
@@ -368,6 +375,7 @@ fn project(
             }
             if f == 0.0 {
                 state[i] = State::Done;
+                last_eval[i] = Some((f, g));
                 continue;
             }
             let g2 = g.length_squared();
@@ -389,6 +397,7 @@ fn project(
                     pos[i] += d;
                 }
                 state[i] = State::Done;
+                last_eval[i] = Some((f, g));
                 continue;
             }
             last[i] = len;
@@ -517,6 +526,7 @@ fn project(
         iterations,
         fallbacks: failed.len(),
         not_converged,
+        last: last_eval,
     })
 }
 
@@ -580,10 +590,32 @@ fn subdivide_with(
             .collect();
         let proj = project(eval, &next.vertices[old..], &scales, &hints, settings)?;
         next.vertices[old..].copy_from_slice(&proj.points);
+        // Values and gradients at the final points: the old vertices keep theirs (same points),
+        // Newton's points take those of their last evaluation (less than the tolerance away), and
+        // only the fallback's points are evaluated again.
         let n_all = next.vertices.len();
         let mut v = vec![0.0; n_all];
         let mut g = vec![DVec3::ZERO; n_all];
-        eval.both(&next.vertices, &mut v, &mut g)?;
+        g[..old].copy_from_slice(&mesh.normals);
+        let again: Vec<usize> = (0..proj.points.len())
+            .filter(|&k| proj.last[k].is_none())
+            .collect();
+        for (k, last) in proj.last.iter().enumerate() {
+            if let Some((f, grad)) = last {
+                v[old + k] = *f;
+                g[old + k] = *grad;
+            }
+        }
+        if !again.is_empty() {
+            let pts: Vec<DVec3> = again.iter().map(|&k| proj.points[k]).collect();
+            let mut av = vec![0.0; pts.len()];
+            let mut ag = vec![DVec3::ZERO; pts.len()];
+            eval.both(&pts, &mut av, &mut ag)?;
+            for (q, &k) in again.iter().enumerate() {
+                v[old + k] = av[q];
+                g[old + k] = ag[q];
+            }
+        }
         next.normals = if settings.normals {
             normals_from_gradients(&next, &g)
         } else {
