@@ -201,8 +201,8 @@ def crossed_cells(values):
 
 def walk_seeds(centers, radii, values, n):
     """Seed cells as documented: from the cell holding each centre (centres outside the lattice
-    are skipped), walk along +x to the first crossed cell; the walk for a blob field is
-    ceil(max radius / cell) + 2 cells long (``default_starts`` in the binding)."""
+    are skipped), walk along +x to the first crossed cell, stopping at the box; for a blob field
+    the walk takes at most ceil(max radius / cell) + 2 steps (``default_starts`` in the binding)."""
     lo, cell = lattice(n)
     crossed = crossed_cells(values)
     max_steps = int(np.ceil(radii.max() / cell.min())) + 2
