@@ -217,3 +217,206 @@ def test_zero_levels_is_control_mesh(icosahedron):
     assert isinstance(m, Mesh)
     assert np.array_equal(m.vertices, v) and np.array_equal(m.faces, f)
     assert m.stats["projected"] == 0
+
+
+# --- Any field: blobs, analytic shapes, Python callables -----------------------------------------
+
+
+def test_icosahedron_onto_sphere_callable(icosahedron):
+    v, f, _ = icosahedron
+    r = float(np.linalg.norm(v, axis=1).mean())
+    sphere = implicitmesh.shapes.Sphere(radius=r)
+    levels = subdivide(v, f, levels=5, surface=sphere)
+    assert [len(m.faces) for m in levels] == [20 * 4**k for k in range(6)]
+    errors = []
+    for k, m in enumerate(levels):
+        assert np.abs(np.linalg.norm(m.vertices, axis=1) - r).max() <= 1e-6, k
+        assert np.array_equal(m.vertices[: len(v)], v)
+        assert np.allclose(m.normals, m.vertices / r, atol=1e-6)
+        assert m.to_trimesh().is_watertight
+        errors.append(4 * np.pi * r**2 - m.to_trimesh().area)
+        if k:
+            assert m.stats["not_converged"] == 0 and m.stats["fallbacks"] == 0
+            # Value and difference gradient: 7 field values per point and Newton step.
+            assert m.stats["evaluations"] % 7 == 0 or m.stats["evaluations"] > 7 * m.stats["projected"]
+    # The inscribed area converges to 4πr² from below, at second order (the error quarters).
+    errors = np.asarray(errors)
+    assert np.all(errors > 0) and np.all(np.diff(errors) < 0)
+    assert errors[-1] / (4 * np.pi * r**2) < 1e-3
+    assert 3.5 < errors[-2] / errors[-1] < 4.5
+
+
+def test_torus_callable_and_call_batches():
+    from conftest import CountingField
+
+    torus = implicitmesh.shapes.Torus()
+    coarse = implicitmesh.polygonize(torus, resolution=12)
+    counting = CountingField(torus)
+    levels = subdivide(coarse.vertices, coarse.faces, levels=2, surface=counting)
+    assert not counting.bad_inputs
+    # Batched: a few calls per Newton step for the whole level, never one per point.
+    assert counting.calls < 100 and counting.points > 10 * counting.calls
+    for m in levels[1:]:
+        # Marching-cubes control vertices are near the surface, the new ones on it.
+        new = m.vertices[len(coarse.vertices) :]
+        assert np.abs(torus(new)).max() <= 1e-6
+        assert m.stats["not_converged"] == 0
+        assert genus_of(m.euler_number) == 1
+    assert abs(levels[2].to_trimesh().area / torus.area - 1) < 0.02
+
+
+def test_blob_field():
+    blobs = implicitmesh.BlobField(np.array([[0.0, 0.0, 0.0], [0.35, 0.1, 0.0]]), radii=0.6)
+    coarse = implicitmesh.polygonize(blobs, bounds=[[-1, -1, -1], [1.4, 1, 1]], resolution=14)
+    levels = subdivide(coarse.vertices, coarse.faces, levels=2, surface=blobs)
+    for m in levels[1:]:
+        new = m.vertices[len(coarse.vertices) :]
+        assert np.abs(blobs.evaluate(new)).max() <= 1e-6
+        assert m.stats["not_converged"] == 0
+        assert m.stats["evaluations"] < 7 * m.stats["projected"] * 30  # exact gradients, no 7×
+        assert m.to_trimesh().is_watertight
+
+
+def test_field_errors(icosahedron):
+    v, f, s = icosahedron
+    sphere = implicitmesh.shapes.Sphere(radius=1.0)
+    for bad in (3, "sphere", np.zeros(3), object()):
+        with pytest.raises(ValueError, match="surface"):
+            subdivide(v, f, levels=1, surface=bad)
+    with pytest.raises(ValueError, match="surface.*shape"):
+        subdivide(v, f, levels=1, surface=lambda p: np.zeros(3))
+    with pytest.raises(ValueError, match="non-finite"):
+        subdivide(v, f, levels=1, surface=lambda p: np.full(len(p), np.nan))
+    with pytest.raises(ZeroDivisionError):
+        subdivide(v, f, levels=1, surface=lambda p: 1 / 0)
+    for name, kw in (("d", {"d": 0.01}), ("w", {"w": 0.01}), ("kernel", {"kernel": "biharmonic"})):
+        with pytest.raises(ValueError, match=name):
+            subdivide(v, f, levels=1, surface=sphere, **kw)
+    with pytest.raises(ValueError, match="step"):
+        subdivide(v, f, levels=1, surface=sphere, step=0.0)
+    with pytest.raises(ValueError, match="step"):
+        subdivide(v, f, levels=1, surface=s, step=1e-6)
+    with pytest.raises(ValueError, match="step"):
+        subdivide(v, f, levels=1, step=1e-6)
+    # An explicit step works and gives the same mesh to rounding.
+    a = subdivide(v, f, levels=2, surface=sphere)[2].vertices
+    b = subdivide(v, f, levels=2, surface=sphere, step=1e-5)[2].vertices
+    assert np.abs(a - b).max() < 1e-9
+
+
+# --- Butterfly near the boundary -------------------------------------------------------------------
+
+
+def bent_strip():
+    """Six faces around the interior edge (0, 1) whose two ends are boundary vertices, symmetric
+    under x -> 1 - x and y -> -y."""
+    v = np.array(
+        [[0, 0, 0], [1, 0, 0], [0.5, 1, 0.3], [0.5, -1, 0.3], [-0.5, 1, 0.7], [1.5, 1, 0.7], [-0.5, -1, 0.7], [1.5, -1, 0.7]],
+        dtype=float,
+    )
+    f = np.array([[0, 1, 2], [1, 0, 3], [0, 2, 4], [2, 1, 5], [3, 0, 6], [1, 3, 7]])
+    return v, f
+
+
+@pytest.mark.parametrize("w", [0.0, 1 / 16])
+def test_butterfly_edge_between_boundary_vertices(w):
+    v, f = bent_strip()
+    levels = butterfly(v, f, levels=3, w=w)
+    assert [len(m.faces) for m in levels] == [6, 24, 96, 384]
+    # The new vertex of edge (0, 1): the 10-point stencil, every outer vertex present here.
+    new = levels[1].vertices[len(v) :]
+    want = (0.5 - w) * (v[0] + v[1]) + (1 / 8 + 2 * w) * (v[2] + v[3]) - (1 / 16 + w) * v[4:].sum(axis=0) + w * (v[0] + v[1])
+    got = new[np.argmin(np.linalg.norm(new - want, axis=1))]
+    assert np.abs(got - want).max() < 1e-14
+    assert abs(got[0] - 0.5) < 1e-15 and abs(got[1]) < 1e-15  # symmetric configuration, symmetric point
+    # The whole mesh keeps both mirror symmetries at every level.
+    for m in levels:
+        key = {tuple(np.round(p, 9)) for p in m.vertices}
+        for p in m.vertices:
+            assert tuple(np.round([1 - p[0], p[1], p[2]], 9)) in key
+            assert tuple(np.round([p[0], -p[1], p[2]], 9)) in key
+    # Relabelling the vertices does not change the surface.
+    perm = np.array([5, 2, 7, 0, 1, 6, 3, 4])  # new index of each old vertex
+    v2 = np.empty_like(v)
+    v2[perm] = v
+    other = butterfly(v2, perm[f], levels=2, w=w)[2].vertices
+    assert {tuple(np.round(p, 9)) for p in other} == {tuple(np.round(p, 9)) for p in levels[2].vertices}
+
+
+def test_butterfly_open_planar_strip_stays_planar():
+    # A zig-zag strip: every vertex on the boundary, every diagonal an interior edge between two
+    # boundary vertices; tilted out of the coordinate planes.
+    n = 8
+    x = np.arange(n + 1) + 0.2 * (np.arange(n + 1) % 3)
+    lower = np.stack([x, 0.1 * (np.arange(n + 1) % 2)], axis=1)
+    upper = np.stack([x + 0.4, 1 + 0.07 * (np.arange(n + 1) % 3)], axis=1)
+    uv = np.empty((2 * n + 2, 2))
+    uv[0::2], uv[1::2] = lower, upper
+    e1, e2 = np.array([1.0, 0.2, 0.3]), np.array([-0.1, 1.0, 0.5])
+    v = 0.3 + uv[:, :1] * e1 + uv[:, 1:] * e2
+    f = np.array([t for i in range(n) for t in ([2 * i, 2 * i + 2, 2 * i + 3], [2 * i, 2 * i + 3, 2 * i + 1])])
+    normal = np.cross(e1, e2) / np.linalg.norm(np.cross(e1, e2))
+    for w in (0.0, 1 / 16):
+        levels = butterfly(v, f, levels=3, w=w)
+        assert [len(m.faces) for m in levels] == [len(f) * 4**k for k in range(4)]
+        for m in levels:
+            assert np.abs((m.vertices - v[0]) @ normal).max() < 1e-12
+            _, counts = edges_of(m.faces)
+            assert counts.max() == 2
+
+
+# --- Jin's claim: better triangles than marching cubes at the same count ---------------------------
+
+
+def marching_cubes_near(surface, triangles: int):
+    """Our marching cubes (octree: the same mesh as dense) at the resolution whose triangle count
+    is closest to `triangles`."""
+    probe = implicitmesh.polygonize(surface, resolution=48, method="octree")
+    guess = int(round(48 * np.sqrt(triangles / len(probe.faces))))
+    meshes = [implicitmesh.polygonize(surface, resolution=r, method="octree") for r in range(guess - 2, guess + 3)]
+    return min(meshes, key=lambda m: abs(len(m.faces) - triangles))
+
+
+@pytest.fixture(scope="module")
+def jin_quality(shared):
+    out = {}
+    for name in ("knot", "star", "spot"):
+        v, f = shared.arrays(name)
+        s = shared.surface(name)
+        levels = subdivide(v, f, levels=2, surface=s)
+        mc = marching_cubes_near(s, len(levels[2].faces))
+        out[name] = (levels[0].quality(), levels[2].quality(), mc.quality(), len(levels[2].faces), len(mc.faces))
+    return out
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(
+            "knot",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="measured: knot_800's own triangles are thin (mean minimum angle 24°) and subdivision "
+                "keeps them (24.2° at level 2), while marching cubes gets a 31° mean; the 5th percentile is "
+                "better (9.4° vs 4.6°). Jin's limitation (2): subdivision does not improve the control mesh.",
+            ),
+        ),
+        "star",
+        "spot",
+    ],
+)
+def test_jin_claim_better_angles_than_marching_cubes(jin_quality, name):
+    _, sub, mc, n_sub, n_mc = jin_quality[name]
+    assert abs(n_mc - n_sub) / n_sub < 0.05
+    assert sub["min_angle_mean"] > mc["min_angle_mean"], (sub["min_angle_mean"], mc["min_angle_mean"])
+    assert sub["min_angle_p5"] > mc["min_angle_p5"], (sub["min_angle_p5"], mc["min_angle_p5"])
+
+
+@pytest.mark.parametrize("name", ["knot", "star", "spot"])
+def test_subdivision_keeps_control_quality_and_beats_mc_worst_triangles(jin_quality, name):
+    control, sub, mc, n_sub, n_mc = jin_quality[name]
+    assert abs(n_mc - n_sub) / n_sub < 0.05
+    # The thin triangles of marching cubes: the 5th percentile of minimum angles is far lower.
+    assert sub["min_angle_p5"] > 1.5 * mc["min_angle_p5"]
+    # Subdivision inherits the control mesh's angles (Jin §7, limitation 2).
+    assert abs(sub["min_angle_mean"] - control["min_angle_mean"]) < 1.5

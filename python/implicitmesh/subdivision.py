@@ -1,8 +1,8 @@
 """Subdivision interpolating implicit surfaces (Jin, Sun & Peng 2003).
 
-:func:`subdivide` refines a control mesh onto the variational surface that interpolates it:
-every level splits each triangle into four at its edge midpoints and moves the midpoints onto
-the surface by Newton steps along the gradient. :func:`butterfly` refines the same mesh with the
+:func:`subdivide` refines a control mesh onto the variational surface that interpolates it (or
+onto any other field of the package): every level splits each triangle into four at its edge
+midpoints and moves the midpoints onto the surface by Newton steps along the gradient. :func:`butterfly` refines the same mesh with the
 modified butterfly scheme (Zorin et al. 1996) into the same connectivity, and :func:`blend`
 mixes the two, vertex by vertex (Jin §4).
 """
@@ -10,12 +10,12 @@ mixes the two, vertex by vertex (Jin §4).
 from __future__ import annotations
 
 import numbers
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from . import _core
-from ._core import VariationalSurface
+from ._core import BlobField, VariationalSurface
 from .mesh import Mesh
 
 __all__ = ["subdivide", "butterfly", "blend"]
@@ -39,17 +39,18 @@ def subdivide(
     faces: Any,
     *,
     levels: int = 2,
-    surface: VariationalSurface | None = None,
+    surface: VariationalSurface | BlobField | Callable[[np.ndarray], np.ndarray] | None = None,
     d: float | None = None,
     w: float | None = None,
-    kernel: str = "triharmonic",
+    kernel: str | None = None,
     tolerance: float | None = None,
     max_steps: int | None = None,
+    step: float | None = None,
 ) -> list[Mesh]:
-    """Subdivides a control mesh onto the implicit surface that interpolates it.
+    """Subdivides a control mesh onto an implicit surface (Jin et al. 2003).
 
     Each level splits every triangle into four at its edge midpoints (one new vertex per edge,
-    shared by its faces) and projects the new vertices onto the zero set of the surface by
+    shared by its faces) and projects the new vertices onto the zero set of the field by
     Newton's iteration r ← r − f ∇f / |∇f|² (Jin et al. eq. 10), level after level. Vertices of a
     level keep their index and exact coordinates in every finer level; the new ones are appended.
     Where Newton fails (vanishing gradient, too many steps, wandering off), a sign change is
@@ -58,21 +59,29 @@ def subdivide(
     Parameters
     ----------
     vertices : (V, 3) float64
-        Control mesh vertices, on the surface.
+        Control mesh vertices, on the surface (they are kept as they are, not projected; level
+        0's ``stats["max_abs_value"]`` tells how far off the surface they are).
     faces : (F, 3) int
         Triangles, counter-clockwise seen from outside; every edge shared by at most two faces,
         traversed in opposite directions. Open meshes are fine (their boundary is kept).
     levels : int
         Subdivision levels, 0 to 8 (default 2). Level k has F × 4^k triangles.
-    surface : VariationalSurface, optional
-        The surface to project on. Default: ``VariationalSurface.from_mesh(vertices, faces,
-        d=d, w=w, kernel=kernel)``.
+    surface : VariationalSurface, BlobField or callable, optional
+        The field to project on (negative inside). A callable takes (N, 3) float64 points and
+        returns N values (e.g. :class:`implicitmesh.shapes.Sphere`); it is called in batches from
+        the calling thread, and its gradient is taken by central differences (7 values per point
+        and Newton step, all in one call). Default: ``VariationalSurface.from_mesh(vertices,
+        faces, d=d, w=w, kernel=kernel)``, the surface that interpolates the control mesh.
     d, w, kernel
-        Passed to :meth:`VariationalSurface.from_mesh` when ``surface`` is not given.
+        Passed to :meth:`VariationalSurface.from_mesh` when ``surface`` is not given (kernel
+        default ``"triharmonic"``); refused when it is.
     tolerance : float, optional
         Newton stops when its step is below ``tolerance`` × the local edge length (default 1e-9).
     max_steps : int, optional
         Most Newton steps per vertex and level before the fallback (default 30).
+    step : float, optional
+        Callables only: the central-difference step for gradients (default 1e-6 × the largest
+        side of the control mesh's bounding box).
 
     Returns
     -------
@@ -81,28 +90,51 @@ def subdivide(
         (F_k, 3) int64, ``normals`` (V_k, 3) float64 unit gradients, and ``stats``: ``level``,
         ``projected`` (new vertices), ``iterations_mean`` / ``iterations_max`` (Newton
         evaluations per new vertex), ``fallbacks``, ``not_converged`` and
-        ``not_converged_max_abs_value``, ``max_abs_value`` (largest |f| at the new vertices),
-        ``evaluations``, ``batches``, ``seconds``.
+        ``not_converged_max_abs_value``, ``max_abs_value`` (largest |f| at the new vertices; at
+        level 0, at the control vertices), ``evaluations`` (field values computed, 7 per point
+        for a callable's value and gradient), ``batches``, ``seconds``.
 
     Raises
     ------
     ValueError
         For wrong shapes, out-of-range or repeated indices, non-manifold or inconsistently
-        oriented faces, ``levels`` outside [0, 8] or too large for memory, a bad ``tolerance``
-        or ``max_steps``, and everything :meth:`VariationalSurface.from_mesh` refuses.
+        oriented faces, ``levels`` outside [0, 8] or too large for memory, a bad ``tolerance``,
+        ``max_steps`` or ``step``, a ``surface`` that is not a field, ``d``/``w``/``kernel``
+        given with ``surface``, a callable returning the wrong shape or NaN, and everything
+        :meth:`VariationalSurface.from_mesh` refuses. An exception raised by the callable
+        propagates as it is.
     """
     levels = _check_levels(levels)
     if max_steps is not None:
         max_steps = _check_int("max_steps", max_steps)
-    if tolerance is not None:
-        if isinstance(tolerance, bool) or not isinstance(tolerance, numbers.Real):
-            raise ValueError(f"tolerance: must be a number, got {tolerance!r}")
-        tolerance = float(tolerance)
+    for name, value in (("tolerance", tolerance), ("step", step)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+            raise ValueError(f"{name}: must be a number, got {value!r}")
+    tolerance = None if tolerance is None else float(tolerance)
+    step = None if step is None else float(step)
     if surface is None:
-        surface = VariationalSurface.from_mesh(vertices, faces, d=d, w=w, kernel=kernel)
-    elif not isinstance(surface, VariationalSurface):
-        raise ValueError(f"surface: expected a VariationalSurface, got {type(surface).__name__}")
-    out = _core.subdivide(surface, vertices, faces, levels, tolerance=tolerance, max_steps=max_steps)
+        if step is not None:
+            raise ValueError("step: applies to a callable surface only")
+        surface = VariationalSurface.from_mesh(vertices, faces, d=d, w=w, kernel="triharmonic" if kernel is None else kernel)
+    else:
+        for name, value in (("d", d), ("w", w), ("kernel", kernel)):
+            if value is not None:
+                raise ValueError(f"{name}: applies only when surface is not given (it fits the default surface)")
+        if not isinstance(surface, (VariationalSurface, BlobField)) and not callable(surface):
+            raise ValueError(
+                "surface: expected a VariationalSurface, a BlobField or a callable taking (N, 3) float64 "
+                f"points and returning (N,) values, got {type(surface).__name__}"
+            )
+        if step is not None and isinstance(surface, (VariationalSurface, BlobField)):
+            raise ValueError("step: applies to a callable surface only (this field has exact gradients)")
+    try:
+        out = _core.subdivide(surface, vertices, faces, levels, tolerance=tolerance, max_steps=max_steps, step=step)
+    except ValueError as e:
+        # The core names a callable's bad output "field"; here that argument is `surface`.
+        msg = str(e)
+        if msg.startswith("field:"):
+            raise ValueError("surface:" + msg[len("field:") :]) from None
+        raise
     meshes = []
     for v, f, n, stats in out:
         stats["triangles"] = len(f)
@@ -118,8 +150,13 @@ def butterfly(vertices: Any, faces: Any, *, levels: int = 2, w: float = 0.0) -> 
     Interpolating: old vertices stay; each edge gets one new vertex from the 10-point stencil
     (weights 1/2 − w, 1/8 + 2w, −1/16 − w, w) between two interior vertices of valence 6, Zorin's
     stencil around an extraordinary end (averaged when both ends are extraordinary), and the
-    four-point rule (−1/16, 9/16, 9/16, −1/16) on boundary edges. The connectivity and vertex
-    numbering equal those of :func:`subdivide`, so the results can be :func:`blend`-ed.
+    four-point rule (−1/16, 9/16, 9/16, −1/16) on boundary edges. An interior edge with one end on
+    the boundary uses the stencil of its interior end; one joining two boundary vertices uses
+    the 10-point stencil with each missing vertex replaced by a ghost, the affine reflection
+    x + y − o across the boundary edge (x, y) of the face (x, y, o), and the tension points by
+    2a − b and 2b − a (affine, so planar meshes stay planar, and exact on regular lattices). The
+    connectivity and vertex numbering equal those of :func:`subdivide`, so the results can be
+    :func:`blend`-ed.
 
     Parameters
     ----------

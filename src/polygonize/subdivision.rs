@@ -117,7 +117,8 @@ pub struct SubdivisionStats {
     /// Field evaluations (value and gradient) per projected vertex during Newton: mean and max.
     pub iterations_mean: f64,
     pub iterations_max: u32,
-    /// Points evaluated in total (Newton, fallback and the final values and normals).
+    /// Points evaluated in total (Newton, fallback, and the fallback's points once more for their
+    /// normals; Newton's points reuse the gradient of their last step, the old vertices theirs).
     pub evaluations: u64,
     /// Batched field calls made.
     pub batches: u64,
@@ -128,7 +129,9 @@ pub struct SubdivisionStats {
     pub not_converged: usize,
     /// Largest |f| among the vertices that did not converge (0 when all did).
     pub not_converged_max_abs_value: f64,
-    /// Largest |f| over the new vertices of this level after projection.
+    /// Largest |f| over the new vertices of this level after projection: for Newton's vertices the
+    /// value of their last evaluation, before a final step shorter than the tolerance (so an upper
+    /// bound to rounding), for the fallback's vertices the value at the final point.
     pub max_abs_value: f64,
     /// Wall-clock seconds for the level (split, projection, normals).
     pub seconds: f64,
@@ -264,6 +267,8 @@ type ValuesFn<'a> = &'a (dyn Fn(&[DVec3], &mut [f64]) + Sync);
 struct Evaluator<'a> {
     values_gradients: ValuesGradientsFn<'a>,
     values: ValuesFn<'a>,
+    /// Field evaluations one point of `both` costs (1, or 7 with difference gradients).
+    both_cost: u64,
     evaluations: u64,
     batches: u64,
 }
@@ -271,7 +276,7 @@ struct Evaluator<'a> {
 impl Evaluator<'_> {
     fn both(&mut self, p: &[DVec3], v: &mut [f64], g: &mut [DVec3]) -> Result<()> {
         (self.values_gradients)(p, v, g);
-        self.evaluations += p.len() as u64;
+        self.evaluations += self.both_cost * p.len() as u64;
         self.batches += 1;
         match (0..p.len()).find(|&i| !(v[i].is_finite() && g[i].is_finite())) {
             Some(i) => Err(not_finite(p[i])),
@@ -308,6 +313,9 @@ pub struct Projection {
     pub fallbacks: usize,
     /// Indices of the points the fallback could not place either.
     pub not_converged: Vec<usize>,
+    /// For points Newton placed: the value and gradient of its last evaluation (at most one step
+    /// shorter than the tolerance away from the final point); `None` for the fallback's points.
+    pub last: Vec<Option<(f64, DVec3)>>,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -341,6 +349,7 @@ fn project(
     let mut g0 = vec![DVec3::ZERO; n];
     let mut best: Vec<(f64, DVec3)> = starts.iter().map(|&p| (f64::INFINITY, p)).collect();
     let mut last = vec![f64::INFINITY; n];
+    let mut last_eval: Vec<Option<(f64, DVec3)>> = vec![None; n];
     let mut active: Vec<usize> = (0..n).collect();
     let mut pts: Vec<DVec3> = Vec::with_capacity(n);
     let mut vals = vec![0.0; n];
@@ -366,6 +375,7 @@ fn project(
             }
             if f == 0.0 {
                 state[i] = State::Done;
+                last_eval[i] = Some((f, g));
                 continue;
             }
             let g2 = g.length_squared();
@@ -387,6 +397,7 @@ fn project(
                     pos[i] += d;
                 }
                 state[i] = State::Done;
+                last_eval[i] = Some((f, g));
                 continue;
             }
             last[i] = len;
@@ -515,6 +526,7 @@ fn project(
         iterations,
         fallbacks: failed.len(),
         not_converged,
+        last: last_eval,
     })
 }
 
@@ -578,10 +590,32 @@ fn subdivide_with(
             .collect();
         let proj = project(eval, &next.vertices[old..], &scales, &hints, settings)?;
         next.vertices[old..].copy_from_slice(&proj.points);
+        // Values and gradients at the final points: the old vertices keep theirs (same points),
+        // Newton's points take those of their last evaluation (less than the tolerance away), and
+        // only the fallback's points are evaluated again.
         let n_all = next.vertices.len();
         let mut v = vec![0.0; n_all];
         let mut g = vec![DVec3::ZERO; n_all];
-        eval.both(&next.vertices, &mut v, &mut g)?;
+        g[..old].copy_from_slice(&mesh.normals);
+        let again: Vec<usize> = (0..proj.points.len())
+            .filter(|&k| proj.last[k].is_none())
+            .collect();
+        for (k, last) in proj.last.iter().enumerate() {
+            if let Some((f, grad)) = last {
+                v[old + k] = *f;
+                g[old + k] = *grad;
+            }
+        }
+        if !again.is_empty() {
+            let pts: Vec<DVec3> = again.iter().map(|&k| proj.points[k]).collect();
+            let mut av = vec![0.0; pts.len()];
+            let mut ag = vec![DVec3::ZERO; pts.len()];
+            eval.both(&pts, &mut av, &mut ag)?;
+            for (q, &k) in again.iter().enumerate() {
+                v[old + k] = av[q];
+                g[old + k] = ag[q];
+            }
+        }
         next.normals = if settings.normals {
             normals_from_gradients(&next, &g)
         } else {
@@ -637,6 +671,7 @@ pub fn subdivide<F: Field + ?Sized>(
     let mut eval = Evaluator {
         values_gradients: &vg,
         values: &vo,
+        both_cost: 1,
         evaluations: 0,
         batches: 0,
     };
@@ -656,6 +691,68 @@ pub fn subdivide_surface(
     let mut eval = Evaluator {
         values_gradients: &vg,
         values: &vo,
+        both_cost: 1,
+        evaluations: 0,
+        batches: 0,
+    };
+    subdivide_with(&mut eval, control, levels, settings)
+}
+
+/// [`subdivide`] for a field that only has values (such as a Python callable): each Newton step
+/// makes one batched [`Field::values`] call on 7 points per vertex, the vertex and ± `h` along
+/// each axis, and takes the gradient by central differences (as
+/// [`crate::field::gradients_by_differences`]). `h` defaults (when `None`) to 1e-6 × the largest
+/// side of the control mesh's bounding box. `evaluations` in the stats count all 7 points.
+pub fn subdivide_by_differences<F: Field + ?Sized>(
+    field: &F,
+    control: &Mesh,
+    levels: usize,
+    settings: &Settings,
+    h: Option<f64>,
+) -> Result<Vec<(Mesh, SubdivisionStats)>> {
+    check_finite_points("vertices", &control.vertices)?;
+    let h = match h {
+        Some(h) if h.is_finite() && h > 0.0 => h,
+        Some(h) => {
+            return Err(Error::invalid(
+                "step",
+                format!("must be finite and positive, got {h}"),
+            ))
+        }
+        None => {
+            let (lo, hi) = control.vertices.iter().fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+            );
+            let side = (hi - lo).max_element();
+            1e-6 * if side.is_finite() && side > 0.0 {
+                side
+            } else {
+                1.0
+            }
+        }
+    };
+    let vg = |p: &[DVec3], v: &mut [f64], g: &mut [DVec3]| {
+        let mut probes = Vec::with_capacity(p.len() * 7);
+        for &x in p {
+            probes.push(x);
+            for e in [DVec3::X, DVec3::Y, DVec3::Z] {
+                probes.push(x + e * h);
+                probes.push(x - e * h);
+            }
+        }
+        let mut out = vec![0.0; probes.len()];
+        field.values(&probes, &mut out);
+        for (i, s) in out.chunks_exact(7).enumerate() {
+            v[i] = s[0];
+            g[i] = DVec3::new(s[1] - s[2], s[3] - s[4], s[5] - s[6]) / (2.0 * h);
+        }
+    };
+    let vo = |p: &[DVec3], v: &mut [f64]| field.values(p, v);
+    let mut eval = Evaluator {
+        values_gradients: &vg,
+        values: &vo,
+        both_cost: 7,
         evaluations: 0,
         batches: 0,
     };
@@ -803,8 +900,8 @@ fn butterfly_point(mesh: &Mesh, rings: &Rings, a: u32, b: u32, w: f64) -> DVec3 
         (Some(x), None) => x,
         (None, Some(y)) => y,
         (None, None) => {
-            // One end on the boundary and the other regular or on the boundary too: use the
-            // interior end's ring when it has one, else the two wings of the edge.
+            // One end on the boundary, the other interior and regular: the interior end's
+            // stencil (Zorin's rule at k = 6 reads only that end's ring, all inside the mesh).
             if interior(ia) {
                 if let Some(x) = stencil(a, b) {
                     return x;
@@ -815,13 +912,59 @@ fn butterfly_point(mesh: &Mesh, rings: &Rings, a: u32, b: u32, w: f64) -> DVec3 
                     return y;
                 }
             }
-            let wings = wing_vertices(rings, a, b);
-            match wings {
-                Some((c, d)) => (p(a) + p(b)) * 0.375 + (p(c) + p(d)) * 0.125,
-                None => (p(a) + p(b)) * 0.5,
-            }
+            // Both ends on the boundary (an interior edge cutting across a corner or a strip).
+            boundary_butterfly(mesh, rings, a, b, w)
         }
     }
+}
+
+/// The vertex across edge (p, q) from `o`: the third vertex of the other face on (p, q), `None`
+/// when (p, q) is a boundary edge.
+fn across(rings: &Rings, p: u32, q: u32, o: u32) -> Option<u32> {
+    let r = &rings.rings[p as usize];
+    let n = r.len();
+    let i = r.iter().position(|&x| x == q)?;
+    let open = rings.boundary[p as usize];
+    let prev = if i > 0 {
+        Some(r[i - 1])
+    } else if !open {
+        Some(r[n - 1])
+    } else {
+        None
+    };
+    let next = if i + 1 < n {
+        Some(r[i + 1])
+    } else if !open {
+        Some(r[0])
+    } else {
+        None
+    };
+    [prev, next].into_iter().flatten().find(|&z| z != o)
+}
+
+/// The 10-point butterfly on an interior edge (a, b) whose two ends both lie on the boundary.
+/// Stencil vertices that do not exist are replaced by ghost vertices, affine extrapolations from
+/// the mesh: the vertex across edge (x, y) of the butterfly's central faces, missing when (x, y)
+/// is a boundary edge, becomes the reflection x + y − o of the central face's third vertex `o`
+/// (the parallelogram it would complete on a regular lattice), and the two tension points become
+/// 2a − b and 2b − a. The weights still sum to one, so the rule is affine invariant, keeps planar
+/// meshes planar, is symmetric in (a, b) and in the two wings, and gives the exact midpoint on a
+/// regular planar lattice (whose missing vertices are exactly the ghosts).
+fn boundary_butterfly(mesh: &Mesh, rings: &Rings, a: u32, b: u32, w: f64) -> DVec3 {
+    let p = |i: u32| mesh.vertices[i as usize];
+    let Some((c, d)) = wing_vertices(rings, a, b) else {
+        return (p(a) + p(b)) * 0.5;
+    };
+    let far = |x: u32, y: u32, o: u32| match across(rings, x, y, o) {
+        Some(z) => p(z),
+        None => p(x) + p(y) - p(o),
+    };
+    let outer = far(a, c, b) + far(b, c, a) + far(a, d, b) + far(b, d, a);
+    let (pa, pb) = (p(a), p(b));
+    (pa + pb) * (0.5 - w)
+        + (p(c) + p(d)) * (0.125 + 2.0 * w)
+        + outer * (-0.0625 - w)
+        + (pa * 2.0 - pb + pb * 2.0 - pa) * w
 }
 
 /// The vertices opposite edge (a, b) in its two faces, when it has two.
@@ -842,9 +985,10 @@ fn wing_vertices(rings: &Rings, a: u32, b: u32) -> Option<(u32, u32)> {
 /// Edges between two interior vertices of valence 6 use the 10-point stencil (a: 1/2 − w,
 /// b: 1/8 + 2w, c: −1/16 − w, d: w); an end of another valence uses Zorin's stencil of that
 /// vertex (the two stencils averaged when both ends are extraordinary); boundary edges use the
-/// four-point scheme (−1/16, 9/16, 9/16, −1/16). Interior edges joining two boundary vertices
-/// (not covered by those rules) take 3/8 of each end and 1/8 of each wing. Normals are the
-/// area-weighted face normals.
+/// four-point scheme (−1/16, 9/16, 9/16, −1/16); an interior edge with one end on the boundary
+/// uses the stencil of its interior end. An interior edge joining two boundary vertices uses the
+/// 10-point stencil with ghost vertices in place of the missing ones (see `boundary_butterfly`).
+/// Normals are the area-weighted face normals.
 pub fn butterfly(control: &Mesh, levels: usize, w: f64) -> Result<Vec<Mesh>> {
     check_mesh(control)?;
     check_levels(control, levels, Settings::default().memory_limit)?;
@@ -1103,6 +1247,42 @@ mod tests {
     }
 
     #[test]
+    fn difference_gradients_reach_the_surface() {
+        let m = icosahedron();
+        let sphere = Sphere {
+            center: DVec3::ZERO,
+            radius: 0.9,
+        };
+        // Values only: the analytic gradient is never asked for.
+        struct ValuesOnly<'a>(&'a Sphere);
+        impl Field for ValuesOnly<'_> {
+            fn value(&self, p: DVec3) -> f64 {
+                self.0.value(p)
+            }
+            fn gradient(&self, _: DVec3) -> DVec3 {
+                panic!("gradient asked for")
+            }
+            fn gradients(&self, _: &[DVec3], _: &mut [DVec3]) {
+                panic!("gradients asked for")
+            }
+        }
+        let f = ValuesOnly(&sphere);
+        let levels = subdivide_by_differences(&f, &m, 4, &Settings::default(), None).unwrap();
+        let exact = subdivide(&sphere, &m, 4, &Settings::default()).unwrap();
+        for ((mesh, stats), (e, _)) in levels.iter().zip(&exact) {
+            assert_eq!(mesh.triangles, e.triangles);
+            for (p, q) in mesh.vertices.iter().zip(&e.vertices) {
+                assert!((p.length() - 0.9).abs() < 1e-12);
+                assert!((*p - *q).length() < 1e-9);
+            }
+            assert_eq!(stats.not_converged, 0);
+            // Seven values per point for every value-and-gradient evaluation.
+            assert!(stats.evaluations >= 7 * mesh.vertices.len() as u64);
+        }
+        assert!(subdivide_by_differences(&f, &m, 1, &Settings::default(), Some(0.0)).is_err());
+    }
+
+    #[test]
     fn refuses_bad_input() {
         let m = icosahedron();
         let sphere = Sphere {
@@ -1187,7 +1367,27 @@ mod tests {
             i > 0 && i < n && j > 0 && j < n
         };
         let mut checked = 0;
+        let mut corner_edges = 0;
         for (k, &[a, b]) in parents.iter().enumerate() {
+            let on_boundary = |v: u32| !interior(v);
+            let boundary_edge = {
+                let (ia, ja, ib, jb) = (a % (n + 1), a / (n + 1), b % (n + 1), b / (n + 1));
+                (ja == 0 && jb == 0)
+                    || (ja == n && jb == n)
+                    || (ia == 0 && ib == 0)
+                    || (ia == n && ib == n)
+            };
+            if on_boundary(a) && on_boundary(b) && !boundary_edge {
+                // Interior edge across a corner: its ghosts are the lattice's own points.
+                corner_edges += 1;
+                let mid = 0.5 * (g.vertices[a as usize] + g.vertices[b as usize]);
+                let got = levels[1].vertices[g.vertices.len() + k];
+                assert!(
+                    (got - mid).length() < 1e-12,
+                    "corner edge {a}-{b}: {got} vs {mid}"
+                );
+                continue;
+            }
             if !(interior(a) && interior(b)) {
                 continue;
             }
@@ -1197,7 +1397,128 @@ mod tests {
             assert!((got - mid).length() < 1e-12, "edge {a}-{b}: {got} vs {mid}");
         }
         assert!(checked > 50);
+        assert_eq!(corner_edges, 2);
         assert_eq!(levels[1].triangles, s.triangles);
+    }
+
+    /// The six-face open mesh around the interior edge (0, 1), both of whose ends lie on the
+    /// boundary, symmetric under x -> 1 - x and y -> -y: wings 2 (y > 0) and 3 (y < 0), and one
+    /// face across each of the edges (0, 2), (1, 2), (0, 3), (1, 3).
+    fn bent_strip() -> Mesh {
+        let vertices = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.5, 1.0, 0.3),
+            DVec3::new(0.5, -1.0, 0.3),
+            DVec3::new(-0.5, 1.0, 0.7),
+            DVec3::new(1.5, 1.0, 0.7),
+            DVec3::new(-0.5, -1.0, 0.7),
+            DVec3::new(1.5, -1.0, 0.7),
+        ];
+        let triangles = vec![
+            [0, 1, 2],
+            [1, 0, 3],
+            [0, 2, 4],
+            [2, 1, 5],
+            [3, 0, 6],
+            [1, 3, 7],
+        ];
+        Mesh {
+            vertices,
+            triangles,
+            normals: vec![],
+        }
+    }
+
+    #[test]
+    fn butterfly_edge_between_boundary_vertices() {
+        let m = bent_strip();
+        check_mesh(&m).unwrap();
+        let rings = Rings::new(&m).unwrap();
+        assert!((0..8).all(|v| rings.boundary[v]));
+        let p = |i: usize| m.vertices[i];
+        for w in [0.0, 1.0 / 16.0, -0.03] {
+            let got = butterfly_point(&m, &rings, 0, 1, w);
+            // The full stencil: every outer vertex exists here, tension points are 2a - b, 2b - a.
+            let want = (p(0) + p(1)) * (0.5 - w)
+                + (p(2) + p(3)) * (0.125 + 2.0 * w)
+                + (p(4) + p(5) + p(6) + p(7)) * (-0.0625 - w)
+                + (p(0) + p(1)) * w;
+            assert!((got - want).length() < 1e-15, "w {w}: {got} vs {want}");
+            // Symmetric configuration, symmetric answer.
+            assert!((got.x - 0.5).abs() < 1e-15 && got.y.abs() < 1e-15, "{got}");
+            // Either orientation of the edge gives the same point.
+            assert_eq!(got, butterfly_point(&m, &rings, 1, 0, w));
+        }
+        // With the outer faces removed the four outer vertices are ghosts (reflections), and the
+        // single quad's diagonal gets its midpoint whatever the wings.
+        let quad = Mesh {
+            vertices: m.vertices[..4].to_vec(),
+            triangles: vec![[0, 1, 2], [1, 0, 3]],
+            normals: vec![],
+        };
+        let rq = Rings::new(&quad).unwrap();
+        for w in [0.0, 0.05] {
+            let got = butterfly_point(&quad, &rq, 0, 1, w);
+            assert!((got - DVec3::new(0.5, 0.0, 0.0)).length() < 1e-15, "{got}");
+        }
+        // Levels: face counts, the old vertices kept, and the mirror symmetry kept at every level.
+        let levels = butterfly(&m, 3, 0.0).unwrap();
+        for (k, l) in levels.iter().enumerate() {
+            assert_eq!(l.triangles.len(), 6 << (2 * k));
+            assert_eq!(&l.vertices[..8], &m.vertices[..]);
+            let key = |v: DVec3| {
+                (
+                    (v.x * 1e9).round() as i64,
+                    (v.y * 1e9).round() as i64,
+                    (v.z * 1e9).round() as i64,
+                )
+            };
+            let set: std::collections::HashSet<_> = l.vertices.iter().map(|&v| key(v)).collect();
+            for v in &l.vertices {
+                assert!(
+                    set.contains(&key(DVec3::new(1.0 - v.x, v.y, v.z))),
+                    "level {k}: {v}"
+                );
+                assert!(
+                    set.contains(&key(DVec3::new(v.x, -v.y, v.z))),
+                    "level {k}: {v}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn butterfly_strip_stays_planar() {
+        // A zig-zag strip: every vertex on the boundary, every diagonal an interior edge between
+        // two boundary vertices.
+        let n = 7u32;
+        let mut vertices = Vec::new();
+        for i in 0..=n {
+            let x = i as f64 + 0.17 * ((i * 5) % 3) as f64;
+            vertices.push(DVec3::new(x, 0.1 * (i % 2) as f64, -0.5));
+            vertices.push(DVec3::new(x + 0.4, 1.0 + 0.05 * (i % 3) as f64, -0.5));
+        }
+        let mut triangles = Vec::new();
+        for i in 0..n {
+            let (a, b, c, d) = (2 * i, 2 * i + 2, 2 * i + 3, 2 * i + 1);
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+        let strip = Mesh {
+            vertices,
+            triangles,
+            normals: vec![],
+        };
+        for w in [0.0, 1.0 / 16.0] {
+            let levels = butterfly(&strip, 3, w).unwrap();
+            for (k, l) in levels.iter().enumerate() {
+                assert_eq!(l.triangles.len(), strip.triangles.len() << (2 * k));
+                for v in &l.vertices {
+                    assert!((v.z + 0.5).abs() < 1e-12, "w {w}, level {k}: {v}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! `_core.subdivide` and `_core.butterfly`: argument checks, the GIL released around the core's
-//! subdivision, one (vertices, faces, normals[, stats]) tuple per level out.
+//! subdivision, one (vertices, faces, normals[, stats]) tuple per level out. The field may be any
+//! the binding accepts (see [`FieldArg`]): a callable gets difference gradients.
 
 use super::convert::{points, points_to_py, triangles, triangles_to_py};
 use super::errors::value_error;
-use super::variational::PyVariationalSurface;
+use super::field::FieldArg;
 use crate::mesh::Mesh;
 use crate::polygonize::subdivision::{self, Settings, SubdivisionStats, MAX_LEVELS};
 use pyo3::prelude::*;
@@ -57,20 +58,24 @@ fn mesh_tuple<'py>(
     }
 }
 
-/// Subdivides a control mesh onto a variational surface; one tuple
-/// ``(vertices, faces, normals, stats)`` per level 0..levels.
+/// Subdivides a control mesh onto the zero set of a field (a VariationalSurface, a BlobField or
+/// a callable, whose gradients are then taken by central differences with step ``step``, default
+/// 1e-6 × the control mesh's largest side); one tuple ``(vertices, faces, normals, stats)`` per
+/// level 0..levels.
 #[pyfunction]
-#[pyo3(signature = (surface, vertices, faces, levels, *, tolerance=None, max_steps=None))]
+#[pyo3(signature = (field, vertices, faces, levels, *, tolerance=None, max_steps=None, step=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn subdivide<'py>(
     py: Python<'py>,
-    surface: PyRef<'py, PyVariationalSurface>,
+    field: &Bound<'py, PyAny>,
     vertices: &Bound<'py, PyAny>,
     faces: &Bound<'py, PyAny>,
     levels: i64,
     tolerance: Option<f64>,
     max_steps: Option<i64>,
+    step: Option<f64>,
 ) -> PyResult<Bound<'py, PyList>> {
+    let field = FieldArg::extract(field)?;
     let levels = parse_levels(levels)?;
     let control = control_mesh(vertices, faces)?;
     let mut settings = Settings::default();
@@ -86,11 +91,41 @@ pub fn subdivide<'py>(
         }
         settings.max_iterations = m as u32;
     }
-    let s = surface.inner.clone();
-    let result =
-        py.detach(move || subdivision::subdivide_surface(&s, &control, levels, &settings))?;
+    if let Some(h) = step {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(value_error(
+                "step",
+                format!("must be finite and positive, got {h}"),
+            ));
+        }
+        if !field.is_callable() {
+            return Err(value_error(
+                "step",
+                "applies to callables only (the other fields have exact gradients)",
+            ));
+        }
+    }
+    let result = match &field {
+        FieldArg::Variational(s) => {
+            let s = s.clone();
+            py.detach(move || subdivision::subdivide_surface(&s, &control, levels, &settings))
+        }
+        FieldArg::Callable(_) => {
+            let f = field.as_field();
+            py.detach(|| {
+                subdivision::subdivide_by_differences(f, &control, levels, &settings, step)
+            })
+        }
+        FieldArg::Blob(_) => {
+            let f = field.as_field();
+            py.detach(|| subdivision::subdivide(f, &control, levels, &settings))
+        }
+    };
+    if let Some(e) = field.take_error() {
+        return Err(e);
+    }
     let out = PyList::empty(py);
-    for (m, st) in result {
+    for (m, st) in result? {
         out.append(mesh_tuple(py, m, Some(&st))?)?;
     }
     Ok(out)
