@@ -8,7 +8,7 @@ side, with both ambiguity choices. The dense mesh is the reference. What is asse
   components of the dense mesh.
 - Every component found is exactly predicted: the seed cells are recomputed here independently
   (from the cell holding each blob centre, walk along +x to the first cell whose corners change
-  sign, as the docstring of ``polygonize`` says); every dense component with a triangle in a seed
+  sign, other directions when the walk meets the box, as the docstring of ``polygonize`` says); every dense component with a triangle in a seed
   cell is in the tracking mesh, and nothing else is, except components that share a cell with
   one (tracking triangulates whole cells).
 - Where no cavity and no seedless component can exist — disjoint blobs inside the bounds, each
@@ -201,26 +201,32 @@ def crossed_cells(values):
 
 def walk_seeds(centers, radii, values, n):
     """Seed cells as documented: from the cell holding each centre (centres outside the lattice
-    are skipped), walk along +x to the first crossed cell, stopping at the box; for a blob field
-    the walk takes at most ceil(max radius / cell) + 2 steps (``default_starts`` in the binding)."""
+    start from the nearest cell), walk along +x to the first crossed cell; a walk that reaches
+    the side of the lattice first starts again from the same cell along -x, then +y, -y, +z, -z;
+    a walk that runs out of steps inside the lattice ends. For a blob field the walk takes at
+    most ceil(max radius / cell) + 2 steps (``default_starts`` in the binding)."""
     lo, cell = lattice(n)
     crossed = crossed_cells(values)
     max_steps = int(np.ceil(radii.max() / cell.min())) + 2
     seeds = set()
     for p in centers:
-        q = (p - lo) / cell
-        if not np.all(q >= 0):
+        o = np.clip(np.floor((p - lo) / cell), 0, n - 1).astype(np.int64)
+        if crossed[tuple(o)]:
+            seeds.add(tuple(int(v) for v in o))
             continue
-        o = q.astype(np.int64)
-        if np.any(o >= n):
-            continue
-        for s in range(max_steps + 1):
-            x = o[0] + s
-            if x >= n:
-                break
-            if crossed[x, o[1], o[2]]:
-                seeds.add((int(x), int(o[1]), int(o[2])))
-                break
+        for axis, step in ((0, 1), (0, -1), (1, 1), (1, -1), (2, 1), (2, -1)):
+            c = o.copy()
+            for _ in range(max_steps):
+                c[axis] += step
+                if not 0 <= c[axis] < n:
+                    break
+                if crossed[tuple(c)]:
+                    seeds.add(tuple(int(v) for v in c))
+                    break
+            else:
+                break  # out of steps inside the lattice: the walk ends
+            if 0 <= c[axis] < n:
+                break  # found a seed
     return seeds
 
 
@@ -488,14 +494,6 @@ def test_reused_tessellator_equals_one_shot_tracking(cfgs):
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "tracking seeds: a blob whose +x walk leaves the lattice before meeting a crossed cell "
-        "(its sphere crosses the box's +x face), or whose centre lies outside the box, gets no "
-        "seed, so its surface inside the box is dropped although the dense mesh has it"
-    ),
-)
 @pytest.mark.parametrize(
     "center, radius",
     [((0.8, 0.0, 0.0), 0.6), ((1.2, 0.0, 0.0), 0.6), ((-1.1, 0.2, 0.0), 0.5)],

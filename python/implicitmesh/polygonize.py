@@ -75,7 +75,10 @@ def polygonize(
         the surface crosses; the mesh equals the dense mesh on every component that holds a seed.
         Seeds are found by walking along +x from ``seeds`` (default: the primitives' centres
         of a :class:`BlobField`, the data points of a :class:`VariationalSurface`; required for
-        callables) to the first cell the surface crosses.
+        callables) to the first cell the surface crosses; a walk that meets the side of the box
+        first starts again along -x, then ±y, ±z, and seeds outside the box start from the
+        nearest cell. A component no walk reaches (a cavity inside a cluster of blobs; a surface
+        made only by blobs each weaker than the threshold) is not found.
     ambiguity : Ambiguity or {"separate", "join"}
         How ambiguous cube faces are split. Default ``SEPARATE``.
     normals : bool

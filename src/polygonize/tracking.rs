@@ -23,6 +23,20 @@ use std::time::Instant;
 /// Neighbour offsets across the six faces (face f = 2·axis + side).
 const FACE_STEP: [(usize, i64); 6] = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)];
 
+/// The directions a seed walk tries, in order, as faces: +x first (Triquet's Fig. 1), then −x,
+/// ±y, ±z.
+const WALK_ORDER: [usize; 6] = [1, 0, 3, 2, 5, 4];
+
+/// A seed walk: its current cell, the cell it started from, the index into [`WALK_ORDER`] of
+/// its direction and the steps taken in that direction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct Walker {
+    cell: [u32; 3],
+    start: [u32; 3],
+    direction: u8,
+    steps: u32,
+}
+
 /// Caches and buffers kept between calls, for animation: polygonize, move the field, polygonize
 /// again — in steady state nothing is reallocated.
 #[derive(Default)]
@@ -106,8 +120,11 @@ impl Tessellator {
     }
 
     /// Seed cells from points: from the cell holding each point, walk along +x (Triquet's
-    /// Fig. 1) to the first cell the surface crosses, at most `max_steps` cells. Points outside
-    /// the lattice are skipped. All walkers advance together, one batch per step.
+    /// Fig. 1) to the first cell the surface crosses, at most `max_steps` cells. When the walk
+    /// reaches the side of the lattice first (a primitive cut by the box), it starts again from
+    /// the same cell along −x, then ±y, ±z. Points outside the lattice start from the nearest
+    /// cell. All walkers advance together,
+    /// one batch per step.
     pub fn walk_seeds<F: Field + ?Sized>(
         &mut self,
         field: &F,
@@ -118,44 +135,66 @@ impl Tessellator {
         stats: &mut Stats,
     ) -> Result<Vec<[u32; 3]>> {
         let cells = lattice.cells;
-        let mut walkers: Vec<[u32; 3]> = starts
+        let mut walkers: Vec<Walker> = starts
             .iter()
-            .filter_map(|p| {
+            .filter(|p| p.is_finite())
+            .map(|p| {
                 let q = (*p - lattice.origin) / lattice.cell;
-                if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
-                    return None;
+                let c = [0, 1, 2].map(|k| q[k].floor().clamp(0.0, (cells[k] - 1) as f64) as u32);
+                Walker {
+                    cell: c,
+                    start: c,
+                    direction: 0,
+                    steps: 0,
                 }
-                let c = [q.x as u64, q.y as u64, q.z as u64];
-                if c[0] >= cells[0] as u64 || c[1] >= cells[1] as u64 || c[2] >= cells[2] as u64 {
-                    return None;
-                }
-                Some([c[0] as u32, c[1] as u32, c[2] as u32])
             })
             .collect();
         walkers.sort_unstable();
         walkers.dedup();
         let mut seeds = Vec::new();
-        let table = CaseTable::get(settings.ambiguity);
-        for _ in 0..=max_steps {
-            if walkers.is_empty() {
-                break;
-            }
-            self.evaluate_corners(field, lattice, &walkers, settings, stats)?;
+        while !walkers.is_empty() {
+            let cells_now: Vec<[u32; 3]> = walkers.iter().map(|w| w.cell).collect();
+            self.evaluate_corners(field, lattice, &cells_now, settings, stats)?;
             let mut keep = 0;
             for i in 0..walkers.len() {
-                let o = walkers[i];
-                let case = case_index(&self.corners(o));
+                let mut w = walkers[i];
+                let case = case_index(&self.corners(w.cell));
                 if case != 0 && case != 255 {
-                    seeds.push(o);
-                } else if o[0] + 1 < cells[0] {
-                    walkers[keep] = [o[0] + 1, o[1], o[2]];
-                    keep += 1;
+                    seeds.push(w.cell);
+                    continue;
                 }
+                // Next cell along the walker's direction; when the walk is over, the first cell
+                // along the next direction from the start (which is known not to be crossed).
+                let moved = loop {
+                    let (axis, step) = FACE_STEP[WALK_ORDER[w.direction as usize]];
+                    let n = w.cell[axis] as i64 + step;
+                    // Out of steps: the surface is farther than the walk may go (deep inside a
+                    // cluster, which other walks reach); the walk ends. Only a walk cut by the
+                    // box tries the next direction.
+                    if w.steps >= max_steps {
+                        break false;
+                    }
+                    if n >= 0 && n < cells[axis] as i64 {
+                        w.cell[axis] = n as u32;
+                        w.steps += 1;
+                        break true;
+                    }
+                    if w.direction as usize + 1 == WALK_ORDER.len() {
+                        break false;
+                    }
+                    w.direction += 1;
+                    w.cell = w.start;
+                    w.steps = 0;
+                };
+                if !moved {
+                    continue;
+                }
+                walkers[keep] = w;
+                keep += 1;
             }
             walkers.truncate(keep);
             walkers.sort_unstable();
             walkers.dedup();
-            let _ = table;
         }
         seeds.sort_unstable();
         seeds.dedup();
