@@ -10,8 +10,9 @@
 //! Because the lattice, the table and the edge arithmetic are those of the dense polygonizer, the
 //! mesh equals the dense mesh on every component that holds a seed.
 
-use super::bricks::Bricks;
-use super::cell::{case_index, corner_offset, edge_origin, emit_triangles};
+use super::bricks::{Bricks, Slot};
+use super::cell::{case_index, edge_origin, emit_triangles};
+use super::table::EDGES;
 use super::{compute_normals, evaluate, CaseTable, Settings, Stats};
 use crate::error::Result;
 use crate::field::Field;
@@ -46,7 +47,8 @@ pub struct Tessellator {
     wave: Vec<[u32; 3]>,
     next: Vec<[u32; 3]>,
     points: Vec<DVec3>,
-    keys: Vec<[u32; 3]>,
+    /// Where the values of `points` go.
+    slots: Vec<Slot>,
     vals: Vec<f64>,
     mesh: Mesh,
 }
@@ -66,7 +68,7 @@ impl Tessellator {
         self.cache.capacity_bytes()
             + (self.wave.capacity() + self.next.capacity()) * 12
             + self.points.capacity() * 24
-            + self.keys.capacity() * 12
+            + self.slots.capacity() * 4
             + self.vals.capacity() * 8
             + self.mesh.vertices.capacity() * 24
             + self.mesh.normals.capacity() * 24
@@ -90,33 +92,25 @@ impl Tessellator {
         stats: &mut Stats,
     ) -> Result<()> {
         self.points.clear();
-        self.keys.clear();
-        for o in cells {
-            for k in 0..8 {
-                let d = corner_offset(k);
-                let c = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-                if self.cache.claim_value(c) {
-                    self.keys.push(c);
-                    self.points.push(lattice.point(c));
-                }
-            }
+        self.slots.clear();
+        for &o in cells {
+            let (slots, points) = (&mut self.slots, &mut self.points);
+            self.cache.claim_cell(o, |c, slot| {
+                slots.push(slot);
+                points.push(lattice.point(c));
+            });
         }
         self.vals.resize(self.points.len(), 0.0);
         evaluate(field, &self.points, &mut self.vals, settings.batch)?;
         stats.evaluations += self.points.len() as u64;
-        for i in 0..self.keys.len() {
-            self.cache.set_value(self.keys[i], self.vals[i]);
+        for (&slot, &v) in self.slots.iter().zip(&self.vals) {
+            self.cache.set_slot(slot, v);
         }
         Ok(())
     }
 
     fn corners(&mut self, o: [u32; 3]) -> [f64; 8] {
-        let mut v = [0.0; 8];
-        for (k, vk) in v.iter_mut().enumerate() {
-            let d = corner_offset(k);
-            *vk = self.cache.known([o[0] + d[0], o[1] + d[1], o[2] + d[2]]);
-        }
-        v
+        self.cache.cell_values(o)
     }
 
     /// Seed cells from points: from the cell holding each point, walk along +x (Triquet's
@@ -240,28 +234,23 @@ impl Tessellator {
                     continue;
                 }
                 stats.cells_crossed += 1;
-                let cache = &mut self.cache;
-                emit_triangles(
-                    table,
-                    case,
-                    |e| {
-                        let (d, axis) = edge_origin(e);
-                        let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-                        cache.edge(a, axis, |c| {
-                            let mut b = a;
-                            b[axis as usize] += 1;
-                            let (fa, fb) = (c.known(a), c.known(b));
-                            vertices.push(edge_crossing(
-                                lattice.point(a),
-                                lattice.point(b),
-                                fa,
-                                fb,
-                            ));
-                            (vertices.len() - 1) as u32
-                        })
-                    },
-                    &mut triangles,
-                );
+                // The vertex of every crossed edge of the cell, looked up (or made) once.
+                let mut idx = [0u32; 12];
+                for (e, ends) in EDGES.iter().enumerate() {
+                    let (fa, fb) = (v[ends[0] as usize], v[ends[1] as usize]);
+                    if (fa < 0.0) == (fb < 0.0) {
+                        continue;
+                    }
+                    let (d, axis) = edge_origin(e);
+                    let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
+                    idx[e] = self.cache.edge(a, axis, |_| {
+                        let mut b = a;
+                        b[axis as usize] += 1;
+                        vertices.push(edge_crossing(lattice.point(a), lattice.point(b), fa, fb));
+                        (vertices.len() - 1) as u32
+                    });
+                }
+                emit_triangles(table, case, |e| idx[e], &mut triangles);
                 let faces = table.crossed_faces(case);
                 for (f, &(axis, step)) in FACE_STEP.iter().enumerate() {
                     if faces & (1 << f) == 0 {
