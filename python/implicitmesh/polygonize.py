@@ -70,7 +70,9 @@ def polygonize(
         leaves get the same marching cubes, so the mesh equals the dense one wherever no block is
         rejected wrongly. Safe for fields with ``|f| ≤ distance to the surface`` near it: exact
         signed distances, and variational surfaces with w < d (the defaults). For other fields
-        (e.g. ``3 × distance``) raise ``safety`` or check with :func:`compare`.
+        (e.g. ``3 × distance``) raise ``safety`` or check with :func:`compare`. For a
+        :class:`BlobField` the default ``safety`` is a bound on ``|∇f|``, which makes the octree
+        exact but lets it reject little: use ``"dense"`` or ``"tracking"`` for blobs.
         ``"tracking"``: surface tracking (Triquet et al.): from seed cells, visit only the cells
         the surface crosses; the mesh equals the dense mesh on every component that holds a seed.
         Seeds are found by walking along +x from ``seeds`` (default: the primitives' centres
@@ -88,10 +90,14 @@ def polygonize(
     memory_limit : int, optional
         Refuse lattices whose memory estimate exceeds this many bytes (default 8 GiB).
     start_level : int, optional
-        Octree only: level of the first rejection test; 1 (default) tests the root's eight
-        octants (the paper's r = √3/2 when the root is [-1, 1]³), each further level halves r.
+        Octree only: level of the first rejection test; 1 tests the root's eight octants (the
+        paper's r = √3/2 when the root is [-1, 1]³), each further level halves r. Default: the
+        first level whose blocks span at most 1/8 of the lattice's longest side (starting
+        coarser rejected cells wrongly on the shared meshes at some resolutions).
     safety : float, optional
-        Octree only: factor on the circumradius in the rejection test (default 1.0).
+        Octree only: factor on the circumradius in the rejection test (default 1.0; for a
+        :class:`BlobField`, a bound on ``|∇f|``, so that no block the surface crosses is
+        rejected).
     corner_test : bool, optional
         Octree only: also reject leaf cells by the value at their corner shared with the parent
         block (same test, radius = the cell's diagonal) before evaluating their other corners.

@@ -96,6 +96,20 @@ impl VoxelGrid {
         &self.items[self.start[v] as usize..self.start[v + 1] as usize]
     }
 
+    /// The largest sum of `weight(i)` over the primitives `i` of one voxel's list (0 when
+    /// there are no voxels).
+    pub fn max_list_sum(&self, weight: impl Fn(u32) -> f64) -> f64 {
+        self.start
+            .windows(2)
+            .map(|w| {
+                self.items[w[0] as usize..w[1] as usize]
+                    .iter()
+                    .map(|&i| weight(i))
+                    .sum::<f64>()
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// Voxels per axis.
     pub fn dims(&self) -> [u32; 3] {
         self.dims

@@ -35,8 +35,8 @@ fn as_per(v: &Result<f64, Vec<f64>>) -> PerPrimitive<'_> {
 /// threshold : float
 ///     Potential of the surface (positive). Default 0.5.
 /// voxel_size : float, optional
-///     Side of the acceleration voxels as a multiple of the mean radius (default 1.0;
-///     provisional until a sweep on a quiet machine picks it).
+///     Side of the acceleration voxels as a multiple of the mean radius (default 0.5, chosen
+///     from the sweep in ``notebooks/triquet_blobs.ipynb``).
 #[pyclass(name = "BlobField", module = "implicitmesh")]
 pub struct PyBlobField {
     pub inner: BlobField,

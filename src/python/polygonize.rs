@@ -246,7 +246,11 @@ pub fn polygonize<'py>(
             let od = octree::Settings::default();
             let o = octree::Settings {
                 start_level: start_level.or(od.start_level),
-                safety: safety.unwrap_or(od.safety),
+                // A blob field is no distance; its gradient bound makes rejection exact.
+                safety: safety.unwrap_or(match &field {
+                    FieldArg::Blob(b) => od.safety.max(b.inner.gradient_bound()),
+                    _ => od.safety,
+                }),
                 corner_test: corner_test.unwrap_or(od.corner_test),
             };
             py.detach(|| octree::polygonize(f, &lattice, &settings, &o).map(buffers))
