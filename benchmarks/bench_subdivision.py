@@ -67,7 +67,7 @@ def bench(a: argparse.Namespace) -> str:
     started = _dt.datetime.now().astimezone()
     load_before = loadavg()
     snap = cpu_snapshot()
-    level_rows, newton_rows, mc_rows, quality_rows = [], [], [], []
+    level_rows, newton_rows, mc_rows, quality_rows, eval_rows = [], [], [], [], []
     for name in names:
         m = trimesh.load(meshes_dir / f"{name}_800.ply", process=False)
         v, f = np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
@@ -105,6 +105,15 @@ def bench(a: argparse.Namespace) -> str:
             name, f"{n2:,}", fmt_s(t_sub2.median), res, f"{len(mc['dense'].result.faces):,}",
             *(fmt_s(mc[k].median) for k in METHODS), fastest,
             fmt_ratio(mc[fastest].median, t_sub2.median), PAPER.get(name, ""),
+        ])
+        # Exact field work of the same two calls: subdivision's value-and-gradient evaluations of
+        # levels 0-2 (control normals, then Newton) against tracking's values and normal gradients.
+        sub_ev = [lv.stats["evaluations"] for lv in t_sub2.result]
+        st_t = mc["tracking"].result.stats
+        eval_rows.append([
+            name, " + ".join(f"{e:,}" for e in sub_ev), f"{sum(sub_ev):,}",
+            f"{st_t['evaluations']:,}", f"{st_t['normal_evaluations']:,}",
+            f"{st_t['evaluations'] + st_t['normal_evaluations']:,}",
         ])
         qs, qm = t_sub2.result[2].quality(), mc["dense"].result.quality()
         quality_rows.append([
@@ -146,6 +155,15 @@ def bench(a: argparse.Namespace) -> str:
         md_table(["mesh", "subdivision triangles", "subdivision levels 1–2 (s)", "MC cells", "MC triangles",
                   "dense (s)", "octree (s)", "tracking (s)", "fastest MC", "fastest MC / subdivision",
                   "Jin et al. (subdivision; continuation)"], mc_rows),
+        "",
+        "### Field evaluations of the level-2 comparison (exact counts, machine-independent)",
+        "",
+        md_table(["mesh", "subdivision levels 0 + 1 + 2 (value and gradient)", "subdivision total",
+                  "tracking values", "tracking gradients (normals)", "tracking total"], eval_rows),
+        "",
+        "Subdivision evaluates the control vertices once (for the normals that shape Newton's start "
+        "points), then every new vertex from the Hermite midpoint of its edge, about two Newton "
+        "evaluations each.",
         "",
         "### Triangle quality at level 2 (minimum angles) and fit time",
         "",

@@ -5,8 +5,9 @@
 //! surface was fitted to). Each level splits every triangle into four at its edge midpoints
 //! ([`split`]) and moves the new midpoints onto the zero set by Newton steps along the gradient
 //! ([`project`]), the "second way" of Jin §3: every level starts from vertices already on the
-//! surface, so the midpoints start close to it. Old vertices keep their index and their exact
-//! coordinates, so level `k` is a sub-mesh of level `k + 1`.
+//! surface, so the midpoints start close to it; Newton starts from the middle of the Hermite
+//! curve along the edge with the end normals ([`hermite_midpoint`]), closer still. Old vertices
+//! keep their index and their exact coordinates, so level `k` is a sub-mesh of level `k + 1`.
 //!
 //! [`butterfly`] makes the same connectivity with positions from the modified butterfly scheme,
 //! so that vertex `i` of both meshes corresponds and [`blend`] can mix them (Jin §4).
@@ -31,12 +32,22 @@ const BYTES_PER_TRIANGLE: u64 = 96;
 /// previous step are taken as the rounding noise of the field: the point has converged.
 const NOISE_STEP: f64 = 1e-6;
 
+/// A Newton step is taken without a confirming evaluation when the step after it, predicted from
+/// quadratic convergence (`len³ / last²`), times this margin is below the tolerance.
+const PREDICT_MARGIN: f64 = 10.0;
+
+/// ... and when the step is at most this multiple of the local edge length, so that the gradient
+/// of the last evaluation (kept for the normal) is taken that close to the final point.
+const PREDICT_MAX_STEP: f64 = 1e-5;
+
 /// How the new vertices are projected onto the surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settings {
     /// Newton stops when its step is shorter than `tolerance` × the local edge length (half the
-    /// parent edge), or when a step below 1e-6 × that length no longer halves (the rounding
-    /// noise of the field); the bisection fallback stops when its bracket is that short.
+    /// parent edge), when the next step predicted from quadratic convergence is (see
+    /// `PREDICT_MARGIN`; the step is then taken without a confirming evaluation), or when a step
+    /// below 1e-6 × that length no longer halves (the rounding noise of the field); the bisection
+    /// fallback stops when its bracket is that short.
     pub tolerance: f64,
     /// Most Newton steps per vertex and level before the fallback takes over.
     pub max_iterations: u32,
@@ -131,7 +142,9 @@ pub struct SubdivisionStats {
     pub not_converged_max_abs_value: f64,
     /// Largest |f| over the new vertices of this level after projection: for Newton's vertices the
     /// value of their last evaluation, before a final step shorter than the tolerance (so an upper
-    /// bound to rounding), for the fallback's vertices the value at the final point.
+    /// bound to rounding), or, for a final step accepted by its predicted successor (see
+    /// [`Settings::tolerance`]), the value predicted after it, f (len / last)²; for the
+    /// fallback's vertices the value at the final point.
     pub max_abs_value: f64,
     /// Wall-clock seconds for the level (split, projection, normals).
     pub seconds: f64,
@@ -221,18 +234,40 @@ fn check_levels(mesh: &Mesh, levels: usize, memory_limit: u64) -> Result<()> {
 /// [`check_mesh`]).
 pub fn split(mesh: &Mesh) -> (Mesh, Vec<[u32; 2]>) {
     let n = mesh.vertices.len() as u32;
-    let mut edge: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 3 / 2);
-    let mut parents: Vec<[u32; 2]> = Vec::with_capacity(mesh.triangles.len() * 3 / 2);
+    // Edges filed under their smaller vertex: a slot per triangle side in CSR order, of which
+    // each vertex uses as many as it has distinct larger neighbours, searched linearly (a vertex
+    // has few), so no hashing. New vertices are numbered in the order their edges are met.
+    let mut first = vec![0u32; mesh.vertices.len() + 1];
+    for t in &mesh.triangles {
+        for e in 0..3 {
+            first[t[e].min(t[(e + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for v in 0..mesh.vertices.len() {
+        first[v + 1] += first[v];
+    }
+    let mut used = vec![0u32; mesh.vertices.len()];
+    // (larger vertex, new vertex) per slot.
+    let mut slots = vec![(0u32, 0u32); mesh.triangles.len() * 3];
+    let mut parents: Vec<[u32; 2]> = Vec::with_capacity(mesh.triangles.len() * 3 / 2 + 3);
     let mut triangles = Vec::with_capacity(mesh.triangles.len() * 4);
     for t in &mesh.triangles {
         let mut mid = [0u32; 3];
         for e in 0..3 {
             let (a, b) = (t[e], t[(e + 1) % 3]);
-            let key = (a.min(b), a.max(b));
-            mid[e] = *edge.entry(key).or_insert_with(|| {
-                parents.push([key.0, key.1]);
-                n + parents.len() as u32 - 1
-            });
+            let (lo, hi) = (a.min(b), a.max(b));
+            let base = first[lo as usize] as usize;
+            let list = &mut slots[base..base + used[lo as usize] as usize];
+            mid[e] = match list.iter().find(|s| s.0 == hi) {
+                Some(&(_, m)) => m,
+                None => {
+                    let m = n + parents.len() as u32;
+                    parents.push([lo, hi]);
+                    slots[base + used[lo as usize] as usize] = (hi, m);
+                    used[lo as usize] += 1;
+                    m
+                }
+            };
         }
         let [a, b, c] = *t;
         let [ab, bc, ca] = mid;
@@ -313,8 +348,10 @@ pub struct Projection {
     pub fallbacks: usize,
     /// Indices of the points the fallback could not place either.
     pub not_converged: Vec<usize>,
-    /// For points Newton placed: the value and gradient of its last evaluation (at most one step
-    /// shorter than the tolerance away from the final point); `None` for the fallback's points.
+    /// For points Newton placed: the value and gradient of its last evaluation (one final step
+    /// away from the final point: shorter than the tolerance, or than `PREDICT_MAX_STEP` × the
+    /// local edge length when accepted by prediction, and then with the value predicted at the
+    /// final point); `None` for the fallback's points.
     pub last: Vec<Option<(f64, DVec3)>>,
 }
 
@@ -349,6 +386,9 @@ fn project(
     let mut g0 = vec![DVec3::ZERO; n];
     let mut best: Vec<(f64, DVec3)> = starts.iter().map(|&p| (f64::INFINITY, p)).collect();
     let mut last = vec![f64::INFINITY; n];
+    // Gradient of the previous evaluation and the step taken from it (for the secant estimate of
+    // the gradient at a point accepted by prediction).
+    let mut prev: Vec<(DVec3, DVec3)> = vec![(DVec3::ZERO, DVec3::ZERO); n];
     let mut last_eval: Vec<Option<(f64, DVec3)>> = vec![None; n];
     let mut active: Vec<usize> = (0..n).collect();
     let mut pts: Vec<DVec3> = Vec::with_capacity(n);
@@ -400,11 +440,38 @@ fn project(
                 last_eval[i] = Some((f, g));
                 continue;
             }
+            // Converging quadratically (the step at least halved): Newton's error after this step
+            // is about the next step, C len² with C = len / last², so the step is taken and the
+            // point accepted when that prediction, with a margin, is below the tolerance. This
+            // saves the evaluation that would only confirm it. The value kept is the one predicted
+            // at the final point alike, f (len / last)², and the gradient is carried over the step
+            // by the secant of the previous one, g + (g − g_prev) (d·d_prev) / |d_prev|² (the two
+            // steps are nearly parallel, both along the gradient), so that the normal stays that
+            // of the final point to second order.
+            if last[i].is_finite()
+                && len <= 0.5 * last[i]
+                && len <= PREDICT_MAX_STEP * h
+                && PREDICT_MARGIN * len * (len / last[i]).powi(2) <= s.tolerance * h
+            {
+                pos[i] += d;
+                state[i] = State::Done;
+                let (gp, dp) = prev[i];
+                let dd = dp.length_squared();
+                let moved = g + (g - gp) * (d.dot(dp) / dd);
+                let g_final = if dd > 0.0 && moved.is_finite() {
+                    moved
+                } else {
+                    g
+                };
+                last_eval[i] = Some((f * (len / last[i]).powi(2), g_final));
+                continue;
+            }
             last[i] = len;
             if len > s.max_step * h {
                 d *= s.max_step * h / len;
             }
             pos[i] += d;
+            prev[i] = (g, d);
             if (pos[i] - starts[i]).length() > s.max_distance * h {
                 state[i] = State::Failed;
             } else {
@@ -530,6 +597,31 @@ fn project(
     })
 }
 
+/// Newton's start point for the new vertex of edge `ab` (both ends on the surface, unit normals
+/// `na`, `nb`): the middle of the cubic Hermite curve from `a` to `b` whose end tangents are the
+/// edge projected into the two tangent planes, `(a + b) / 2 + c` with
+/// `c = ((e·nb) nb − (e·na) na) / 8` and `e = b − a`, less the part of `c` along the edge (which
+/// would slide the vertex towards one end where the two ends curve differently), so the start
+/// stays in the plane through the midpoint perpendicular to the edge. On a circle of radius R
+/// its distance to the curve is about 0.375 h⁴ / R³ for half edge h, against h² / 2R for the flat
+/// midpoint, so Newton starts much closer. The correction is at most |e| / 4; without both
+/// normals (a vanishing gradient) or for a degenerate edge, the flat midpoint is used.
+fn hermite_midpoint(a: DVec3, b: DVec3, na: DVec3, nb: DVec3) -> DVec3 {
+    let mid = 0.5 * (a + b);
+    let e = b - a;
+    let e2 = e.length_squared();
+    if na == DVec3::ZERO || nb == DVec3::ZERO || !(e2 > 0.0 && e2.is_finite()) {
+        return mid;
+    }
+    let c = (nb * e.dot(nb) - na * e.dot(na)) * 0.125;
+    let p = mid + c - e * (c.dot(e) / e2);
+    if p.is_finite() {
+        p
+    } else {
+        mid
+    }
+}
+
 /// Unit normals from gradients, falling back to face normals where the gradient vanishes.
 fn normals_from_gradients(mesh: &Mesh, g: &[DVec3]) -> Vec<DVec3> {
     let mut fallback: Option<Vec<DVec3>> = None;
@@ -588,7 +680,19 @@ fn subdivide_with(
             .iter()
             .map(|&[a, b]| mesh.normals[a as usize] + mesh.normals[b as usize])
             .collect();
-        let proj = project(eval, &next.vertices[old..], &scales, &hints, settings)?;
+        let starts: Vec<DVec3> = parents
+            .iter()
+            .map(|&[a, b]| {
+                let (a, b) = (a as usize, b as usize);
+                hermite_midpoint(
+                    mesh.vertices[a],
+                    mesh.vertices[b],
+                    mesh.normals[a],
+                    mesh.normals[b],
+                )
+            })
+            .collect();
+        let proj = project(eval, &starts, &scales, &hints, settings)?;
         next.vertices[old..].copy_from_slice(&proj.points);
         // Values and gradients at the final points: the old vertices keep theirs (same points),
         // Newton's points take those of their last evaluation (less than the tolerance away), and
@@ -1180,8 +1284,8 @@ mod tests {
         assert_eq!(boundary(&so), 2 * boundary(&open));
     }
 
-    #[test]
-    fn icosahedron_subdivides_onto_surface() {
+    /// The icosahedron and the variational surface fitted to it with the default settings.
+    fn icosahedron_surface() -> (Mesh, VariationalSurface) {
         let m = icosahedron();
         let s = VariationalSurface::from_mesh(
             &m.vertices,
@@ -1190,6 +1294,12 @@ mod tests {
             &rbf::Settings::default(),
         )
         .unwrap();
+        (m, s)
+    }
+
+    #[test]
+    fn icosahedron_subdivides_onto_surface() {
+        let (m, s) = icosahedron_surface();
         let levels = subdivide_surface(&s, &m, 5, &Settings::default()).unwrap();
         assert_eq!(levels.len(), 6);
         let counts: Vec<usize> = levels.iter().map(|(l, _)| l.triangles.len()).collect();
@@ -1217,6 +1327,64 @@ mod tests {
             }
         }
         assert!(levels[5].1.iterations_mean < 6.0, "{:?}", levels[5].1);
+    }
+
+    #[test]
+    fn hermite_midpoint_is_fourth_order_on_a_circle() {
+        // Two points of the unit circle at ±θ, with their normals: the flat midpoint is θ²/2 off
+        // the circle, the Hermite midpoint about 0.375 θ⁴.
+        for theta in [0.02f64, 0.1, 0.3, 0.6] {
+            let a = DVec3::new(-theta.sin(), theta.cos(), 0.0);
+            let b = DVec3::new(theta.sin(), theta.cos(), 0.0);
+            let p = hermite_midpoint(a, b, a, b);
+            let err = (p.length() - 1.0).abs();
+            assert!(err <= 0.4 * theta.powi(4), "θ = {theta}: {err}");
+            assert!(
+                err < theta * theta * (1.0 - theta.cos()),
+                "θ = {theta}: {err}"
+            );
+            assert!(p.x.abs() < 1e-15 && p.z == 0.0);
+        }
+        // A vanishing normal gives the flat midpoint; a plane gives the midpoint too.
+        let (a, b) = (DVec3::X, DVec3::Y);
+        assert_eq!(hermite_midpoint(a, b, DVec3::ZERO, DVec3::Z), 0.5 * (a + b));
+        assert_eq!(hermite_midpoint(a, b, DVec3::Z, DVec3::Z), 0.5 * (a + b));
+        assert_eq!(hermite_midpoint(a, a, DVec3::Z, DVec3::Z), a);
+        // Ends curving differently: the start stays in the plane perpendicular to the edge
+        // through its midpoint.
+        let (na, nb) = (
+            DVec3::new(-0.3, 0.0, 1.0).normalize(),
+            DVec3::new(0.05, 0.1, 1.0).normalize(),
+        );
+        let (a, b) = (DVec3::new(-0.1, 0.0, 0.0), DVec3::new(0.1, 0.02, 0.01));
+        let p = hermite_midpoint(a, b, na, nb);
+        assert!((p - 0.5 * (a + b)).dot(b - a).abs() < 1e-15);
+        assert!((p - 0.5 * (a + b)).length() > 1e-3);
+    }
+
+    #[test]
+    fn prediction_saves_the_confirming_evaluation() {
+        // Onto a variational sphere: every new vertex of levels 2-4 is placed with about two
+        // evaluations (a step from the Hermite midpoint, then one accepted by prediction), still
+        // on the surface to |f| ≤ 1e-6 with normals that are the unit gradients there.
+        let (m, s) = icosahedron_surface();
+        let levels = subdivide_surface(&s, &m, 4, &Settings::default()).unwrap();
+        for (k, (mesh, stats)) in levels.iter().enumerate().skip(1) {
+            let old = levels[k - 1].0.vertices.len();
+            let new = &mesh.vertices[old..];
+            let mut v = vec![0.0; new.len()];
+            let mut g = vec![DVec3::ZERO; new.len()];
+            s.values_gradients(new, &mut v, &mut g);
+            let worst = v.iter().fold(0.0, |a: f64, x| a.max(x.abs()));
+            assert!(worst <= 1e-6, "level {k}: |f| up to {worst}");
+            for (gi, ni) in g.iter().zip(&mesh.normals[old..]) {
+                assert!((gi.normalize() - *ni).length() < 1e-6, "level {k}");
+            }
+            assert_eq!(stats.fallbacks, 0);
+            if k >= 3 {
+                assert!(stats.iterations_mean <= 2.2, "level {k}: {stats:?}");
+            }
+        }
     }
 
     #[test]
@@ -1523,14 +1691,7 @@ mod tests {
 
     #[test]
     fn butterfly_closed_mesh_and_blend_identities() {
-        let m = icosahedron();
-        let s = VariationalSurface::from_mesh(
-            &m.vertices,
-            &m.triangles,
-            &constraints::Settings::default(),
-            &rbf::Settings::default(),
-        )
-        .unwrap();
+        let (m, s) = icosahedron_surface();
         let imp = subdivide_surface(&s, &m, 3, &Settings::default()).unwrap();
         let bf = butterfly(&m, 3, 0.0).unwrap();
         for k in 0..=3 {
