@@ -77,6 +77,11 @@ def subdivide(
         default ``"triharmonic"``); refused when it is.
     tolerance : float, optional
         Newton stops when its step is below ``tolerance`` × the local edge length (default 1e-9).
+        Newton starts from the middle of the curved edge that the endpoint normals define (in
+        the plane through the midpoint perpendicular to the edge), and a step is accepted
+        without evaluating again when quadratic convergence predicts the next step below the
+        tolerance with a margin of 10 (the step at least halved, and at most 1e-5 × the edge
+        length): about 2 evaluations per new vertex on the shared meshes.
     max_steps : int, optional
         Most Newton steps per vertex and level before the fallback (default 30).
     step : float, optional
@@ -90,8 +95,9 @@ def subdivide(
         (F_k, 3) int64, ``normals`` (V_k, 3) float64 unit gradients, and ``stats``: ``level``,
         ``projected`` (new vertices), ``iterations_mean`` / ``iterations_max`` (Newton
         evaluations per new vertex), ``fallbacks``, ``not_converged`` and
-        ``not_converged_max_abs_value``, ``max_abs_value`` (largest |f| at the new vertices; at
-        level 0, at the control vertices), ``evaluations`` (field values computed, 7 per point
+        ``not_converged_max_abs_value``, ``max_abs_value`` (largest |f| at the new vertices —
+        for vertices accepted by prediction, the predicted |f| after the last step; at level 0,
+        measured at the control vertices), ``evaluations`` (field values computed, 7 per point
         for a callable's value and gradient), ``batches``, ``seconds``.
 
     Raises
