@@ -1,5 +1,6 @@
 //! Times the polygonizers on random blob fields (the benchmark cases), for profiling:
-//! `cargo run --release --example blob_timing -- 200 0.25 128 dense`.
+//! `cargo run --release --example blob_timing -- 200 0.25 128 dense [repeats] [voxel_size]`
+//! (method `dense` or `tracking`; prints the phases of the last run and the median).
 use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
 use implicitmesh::lattice::Lattice;
@@ -62,8 +63,6 @@ fn main() {
         times.push(t.elapsed().as_secs_f64());
         if times.len() == reps {
             println!("{tris} triangles, {:?}", stats.seconds);
-            let mut best = [f64::INFINITY; 8];
-            let _ = &mut best;
         }
     }
     times.sort_by(|a, b| a.partial_cmp(b).unwrap());
