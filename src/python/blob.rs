@@ -1,8 +1,7 @@
 //! `BlobField`: the Python class over the core's blob field.
 
-use super::convert::{points, points_to_py, values, values_to_py};
+use super::convert::{field_gradients, field_values, points, points_to_py, values, values_to_py};
 use crate::field::blob::{self, BlobField, PerPrimitive};
-use crate::field::Field;
 use glam::DVec3;
 use pyo3::prelude::*;
 
@@ -100,15 +99,7 @@ impl PyBlobField {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let p = self::points(points, "points")?;
-        crate::error::check_finite_points("points", &p)?;
-        let b = &self.inner;
-        let out = py.detach(|| {
-            let mut out = vec![0.0; p.len()];
-            b.values(&p, &mut out);
-            out
-        });
-        Ok(values_to_py(py, out))
+        field_values(py, &self.inner, points)
     }
 
     /// The potential Σ A (1 − d²/R²)² at points: (N, 3) float64 → (N,) float64.
@@ -130,15 +121,7 @@ impl PyBlobField {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let p = self::points(points, "points")?;
-        crate::error::check_finite_points("points", &p)?;
-        let b = &self.inner;
-        let out = py.detach(|| {
-            let mut out = vec![DVec3::ZERO; p.len()];
-            b.gradients(&p, &mut out);
-            out
-        });
-        points_to_py(py, out)
+        field_gradients(py, &self.inner, points)
     }
 
     fn __call__<'py>(

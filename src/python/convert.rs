@@ -103,6 +103,39 @@ pub fn triangles(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[u3
     Ok(out)
 }
 
+/// Points given from Python, checked, then `eval(points, out)` without the GIL.
+fn batch<T: Clone + Default + Send>(
+    py: Python<'_>,
+    obj: &Bound<'_, PyAny>,
+    eval: impl Fn(&[DVec3], &mut [T]) + Sync,
+) -> PyResult<Vec<T>> {
+    let p = points(obj, "points")?;
+    crate::error::check_finite_points("points", &p)?;
+    Ok(py.detach(|| {
+        let mut out = vec![T::default(); p.len()];
+        eval(&p, &mut out);
+        out
+    }))
+}
+
+/// `field.values` at points given from Python: (N, 3) → (N,) float64.
+pub fn field_values<'py, F: crate::field::Field + ?Sized>(
+    py: Python<'py>,
+    field: &F,
+    obj: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    Ok(values_to_py(py, batch(py, obj, |p, o| field.values(p, o))?))
+}
+
+/// `field.gradients` at points given from Python: (N, 3) → (N, 3) float64.
+pub fn field_gradients<'py, F: crate::field::Field + ?Sized>(
+    py: Python<'py>,
+    field: &F,
+    obj: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    points_to_py(py, batch(py, obj, |p, o| field.gradients(p, o))?)
+}
+
 /// (N, 3) float64 array from points (the buffer is handed to numpy, not copied).
 pub fn points_to_py<'py>(py: Python<'py>, p: Vec<DVec3>) -> PyResult<Bound<'py, PyAny>> {
     let n = p.len();

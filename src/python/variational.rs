@@ -1,11 +1,12 @@
 //! `VariationalSurface`: the Python class over the core's fitted surface.
 
-use super::convert::{points, points_to_py, triangles, values, values_to_py};
+use super::convert::{
+    field_gradients, field_values, points, points_to_py, triangles, values, values_to_py,
+};
 use super::errors::value_error;
 use crate::field::constraints;
 use crate::field::kernel::Kernel;
 use crate::field::rbf::{self, VariationalSurface};
-use crate::field::Field;
 use glam::DVec3;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -196,15 +197,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let p = self::points(points, "points")?;
-        crate::error::check_finite_points("points", &p)?;
-        let s = self.inner.clone();
-        let out = py.detach(move || {
-            let mut out = vec![0.0; p.len()];
-            s.values(&p, &mut out);
-            out
-        });
-        Ok(values_to_py(py, out))
+        field_values(py, self.inner.as_ref(), points)
     }
 
     /// ∇f at points.
@@ -221,15 +214,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let p = self::points(points, "points")?;
-        crate::error::check_finite_points("points", &p)?;
-        let s = self.inner.clone();
-        let out = py.detach(move || {
-            let mut out = vec![DVec3::ZERO; p.len()];
-            s.gradients(&p, &mut out);
-            out
-        });
-        points_to_py(py, out)
+        field_gradients(py, self.inner.as_ref(), points)
     }
 
     /// Same as :meth:`evaluate`, so that the surface can be used where a callable is expected.
