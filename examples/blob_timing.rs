@@ -14,7 +14,9 @@ fn main() {
     let res: u32 = a.get(3).map_or(128, |s| s.parse().unwrap());
     let method = a.get(4).map_or("dense", |s| s.as_str());
     let reps: usize = a.get(5).map_or(20, |s| s.parse().unwrap());
-    let voxel_size: f64 = a.get(6).map_or(BlobSettings::default().voxel_size, |s| s.parse().unwrap());
+    let voxel_size: f64 = a
+        .get(6)
+        .map_or(BlobSettings::default().voxel_size, |s| s.parse().unwrap());
     // A small deterministic generator (splitmix64).
     let mut state = 12345u64;
     let mut next = || {

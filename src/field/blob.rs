@@ -245,7 +245,12 @@ impl BlobField {
             Some((lo.max(0.0) as usize, (hi as usize).min(n - 1)))
         };
         for i in 0..self.centers.len() {
-            let (c, r, inv, a) = (self.centers[i], self.radii[i], self.inv_r2[i], self.strengths[i]);
+            let (c, r, inv, a) = (
+                self.centers[i],
+                self.radii[i],
+                self.inv_r2[i],
+                self.strengths[i],
+            );
             let dz = z - c.z;
             let dz2 = dz * dz;
             // (dx² + dy²) + dz² ≥ dz² in floating point too, so no point of the plane is
@@ -281,7 +286,14 @@ impl BlobField {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn splat_plane_avx512(&self, l: &Lattice, xs: &[f64], ys: &[f64], z: f64, s: &mut [f64]) {
+    unsafe fn splat_plane_avx512(
+        &self,
+        l: &Lattice,
+        xs: &[f64],
+        ys: &[f64],
+        z: f64,
+        s: &mut [f64],
+    ) {
         self.splat_plane(l, xs, ys, z, s)
     }
 
@@ -483,7 +495,10 @@ mod tests {
                 .iter()
                 .map(|p| b.gradient(*p).length())
                 .fold(0.0, f64::max);
-            assert!(worst > 0.0 && worst <= bound, "n={n}: |∇f| {worst} > bound {bound}");
+            assert!(
+                worst > 0.0 && worst <= bound,
+                "n={n}: |∇f| {worst} > bound {bound}"
+            );
         }
         // One primitive: the bound is attained on the sphere d = R/√3.
         let one = BlobField::new(

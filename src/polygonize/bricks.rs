@@ -255,5 +255,9 @@ impl Slot {
 /// Lattice point of corner `k` of the cell with lower corner `o`.
 #[inline]
 fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
-    [o[0] + (k & 1) as u32, o[1] + ((k >> 1) & 1) as u32, o[2] + ((k >> 2) & 1) as u32]
+    [
+        o[0] + (k & 1) as u32,
+        o[1] + ((k >> 1) & 1) as u32,
+        o[2] + ((k >> 2) & 1) as u32,
+    ]
 }

@@ -220,7 +220,14 @@ fn layer_vertices(lattice: &Lattice, k: u32, lo: Plane, hi: Plane, layer: &mut L
         }
     }
     layer.vertices.clear();
-    plane_edges(lattice, k + 1, hi, &mut layer.x, &mut layer.y, &mut layer.vertices);
+    plane_edges(
+        lattice,
+        k + 1,
+        hi,
+        &mut layer.x,
+        &mut layer.y,
+        &mut layer.vertices,
+    );
     let b = Bits::new(pxu);
     for j in 0..pyu {
         if !may_cross(lo.rows[j], hi.rows[j]) {
@@ -368,9 +375,16 @@ impl Workspace {
             + self
                 .layers
                 .iter()
-                .map(|l| (l.x.capacity() + l.y.capacity() + l.z.capacity()) * 4 + l.vertices.capacity() * 24)
+                .map(|l| {
+                    (l.x.capacity() + l.y.capacity() + l.z.capacity()) * 4
+                        + l.vertices.capacity() * 24
+                })
                 .sum::<usize>()
-            + self.triangles.iter().map(|t| t.capacity() * 12).sum::<usize>()
+            + self
+                .triangles
+                .iter()
+                .map(|t| t.capacity() * 12)
+                .sum::<usize>()
     }
 }
 
@@ -410,12 +424,16 @@ pub fn polygonize<F: Field + ?Sized>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Stats)> {
-    let plane = lattice.points_per_axis()[..2].iter().map(|&p| p as u64).product::<u64>();
+    let plane = lattice.points_per_axis()[..2]
+        .iter()
+        .map(|&p| p as u64)
+        .product::<u64>();
     let per_group = layers_per_group(lattice, settings) as u64;
     // Working memory: the group's values, sign bits, edge indices and row kinds, the points of
     // one batch (for fields that build them); plus the output.
-    let working =
-        (per_group + 1) * plane * 10 + per_group * plane * 12 + (settings.batch as u64).max(plane) * 24;
+    let working = (per_group + 1) * plane * 10
+        + per_group * plane * 12
+        + (settings.batch as u64).max(plane) * 24;
     check_memory(
         working + estimate_triangles(lattice) * super::BYTES_PER_TRIANGLE,
         settings.memory_limit,
@@ -429,7 +447,9 @@ pub fn polygonize<F: Field + ?Sized>(
     };
     let mut mesh = Mesh::default();
     let mut ws = take_workspace();
-    let r = sweep(field, lattice, settings, table, &mut ws, &mut mesh, &mut stats);
+    let r = sweep(
+        field, lattice, settings, table, &mut ws, &mut mesh, &mut stats,
+    );
     return_workspace(ws);
     r?;
     debug_assert!(mesh
@@ -519,14 +539,7 @@ fn sweep<F: Field + ?Sized>(
             })
             .collect();
         if g0 == 0 {
-            plane_edges(
-                lattice,
-                0,
-                planes[0],
-                carry_x,
-                carry_y,
-                &mut mesh.vertices,
-            );
+            plane_edges(lattice, 0, planes[0], carry_x, carry_y, &mut mesh.vertices);
         }
         if layers.len() < n_layers {
             layers.resize_with(n_layers, Layer::default);

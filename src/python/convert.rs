@@ -185,11 +185,21 @@ impl MeshBuffers {
 
     /// (vertices (V, 3), faces (F, 3), normals (V, 3) or (0, 3)) numpy arrays.
     pub fn to_py<'py>(self, py: Python<'py>) -> PyResult<[Bound<'py, PyAny>; 3]> {
-        let (nv, nf, nn) = (self.vertices.len() / 3, self.faces.len() / 3, self.normals.len() / 3);
+        let (nv, nf, nn) = (
+            self.vertices.len() / 3,
+            self.faces.len() / 3,
+            self.normals.len() / 3,
+        );
         Ok([
-            PyArray1::from_vec(py, self.vertices).reshape([nv, 3])?.into_any(),
-            PyArray1::from_vec(py, self.faces).reshape([nf, 3])?.into_any(),
-            PyArray1::from_vec(py, self.normals).reshape([nn, 3])?.into_any(),
+            PyArray1::from_vec(py, self.vertices)
+                .reshape([nv, 3])?
+                .into_any(),
+            PyArray1::from_vec(py, self.faces)
+                .reshape([nf, 3])?
+                .into_any(),
+            PyArray1::from_vec(py, self.normals)
+                .reshape([nn, 3])?
+                .into_any(),
         ])
     }
 }
