@@ -35,6 +35,7 @@ __all__ = [
     "fmt_ratio",
     "run_worker",
     "blas_env",
+    "run_section",
 ]
 
 
@@ -272,3 +273,21 @@ def run_worker(script: str, args: Sequence[str], threads: int | None, timeout: f
         subprocess.run(cmd, env=blas_env(threads), check=True, timeout=timeout, stdout=sys.stderr)
         with open(out) as f:
             return json.load(f)
+
+
+def run_section(bench: Callable[[Any], str], name: str, description: str, quick_help: str | None = None) -> int:
+    """The ``main`` of a ``bench_NAME.py``: parses ``--quick`` and ``--output`` (default
+    ``benchmarks/results/NAME.md``), runs ``bench(args)``, prints its markdown section and writes
+    it to the output."""
+    import argparse
+    from pathlib import Path
+
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--quick", action="store_true", help=quick_help)
+    p.add_argument("--output", default=str(Path(__file__).resolve().parent / "results" / f"{name}.md"))
+    a = p.parse_args()
+    md = bench(a)
+    print(md)
+    Path(a.output).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.output).write_text(md)
+    return 0

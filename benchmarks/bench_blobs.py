@@ -26,6 +26,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 from _timing import (  # noqa: E402
+    run_section,
     Timing,
     cpu_snapshot,
     foreign_load,
@@ -589,15 +590,7 @@ def bench(a: argparse.Namespace) -> str:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="1-2 runs, 20³ and 128³ only, 30 frames")
-    p.add_argument("--output", default=str(HERE / "results" / "blobs.md"))
-    a = p.parse_args()
-    md = bench(a)
-    print(md)
-    Path(a.output).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.output).write_text(md)
-    return 0
+    return run_section(bench, "blobs", __doc__.split("\n")[0], quick_help="1-2 runs, 20³ and 128³ only, 30 frames")
 
 
 if __name__ == "__main__":

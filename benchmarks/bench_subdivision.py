@@ -22,6 +22,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 from _timing import (  # noqa: E402
+    run_section,
     cpu_snapshot,
     foreign_load,
     fmt_ratio,
@@ -175,15 +176,7 @@ def bench(a: argparse.Namespace) -> str:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--output", default=str(HERE / "results" / "subdivision.md"))
-    a = p.parse_args()
-    md = bench(a)
-    print(md)
-    Path(a.output).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.output).write_text(md)
-    return 0
+    return run_section(bench, "subdivision", __doc__)
 
 
 if __name__ == "__main__":
