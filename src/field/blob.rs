@@ -6,7 +6,7 @@
 //! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`]).
 
 use super::voxels::VoxelGrid;
-use super::Field;
+use super::{Field, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
 use glam::DVec3;
@@ -216,12 +216,28 @@ impl BlobField {
         q.strength * t * t
     }
 
-    /// Potential F(p) from the voxel lists.
-    #[inline]
+    /// ∇f(p) = −∇F(p) from the voxel lists.
+    #[inline(always)]
+    fn gradient_at(&self, p: DVec3) -> DVec3 {
+        let mut g = DVec3::ZERO;
+        for &i in self.grid.candidates(p) {
+            let q = &self.packed[i as usize];
+            let d = p - q.center;
+            let t = (1.0 - d.length_squared() * q.inv_r2).max(0.0);
+            g += d * (q.grad * t);
+        }
+        g
+    }
+
+    /// Potential F(p) from the voxel lists (the same terms in the same order as
+    /// [`BlobField::potential_brute_force`] minus those that cannot reach `p`).
+    #[inline(always)]
     pub fn potential(&self, p: DVec3) -> f64 {
         let mut f = 0.0;
         for &i in self.grid.candidates(p) {
-            f += self.term(i as usize, p);
+            let q = &self.packed[i as usize];
+            let t = (1.0 - (p - q.center).length_squared() * q.inv_r2).max(0.0);
+            f += q.strength * t * t;
         }
         f
     }
@@ -325,6 +341,10 @@ impl BlobField {
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
+    /// Bytes held by the voxel grid (capacity, not length).
+    pub fn capacity_bytes(&self) -> usize {
+        self.grid.capacity_bytes()
+    }
     pub fn grid(&self) -> &VoxelGrid {
         &self.grid
     }
@@ -416,15 +436,35 @@ impl Field for BlobField {
         self.threshold - self.potential(p)
     }
 
+    #[inline]
     fn gradient(&self, p: DVec3) -> DVec3 {
-        let mut g = DVec3::ZERO;
-        for &i in self.grid.candidates(p) {
-            let q = &self.packed[i as usize];
-            let d = p - q.center;
-            let t = (1.0 - d.length_squared() * q.inv_r2).max(0.0);
-            g += d * (q.grad * t);
-        }
-        g
+        self.gradient_at(p)
+    }
+
+    /// The batch loops call the point functions inlined: a call per point (the trait's default)
+    /// costs as much as the terms themselves here.
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        assert_eq!(points.len(), out.len());
+        points
+            .par_chunks(PAR_CHUNK)
+            .zip(out.par_chunks_mut(PAR_CHUNK))
+            .for_each(|(p, o)| {
+                for (pi, oi) in p.iter().zip(o.iter_mut()) {
+                    *oi = self.threshold - self.potential(*pi);
+                }
+            });
+    }
+
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        assert_eq!(points.len(), out.len());
+        points
+            .par_chunks(PAR_CHUNK)
+            .zip(out.par_chunks_mut(PAR_CHUNK))
+            .for_each(|(p, o)| {
+                for (pi, oi) in p.iter().zip(o.iter_mut()) {
+                    *oi = self.gradient_at(*pi);
+                }
+            });
     }
 }
 
@@ -523,7 +563,7 @@ mod tests {
     #[test]
     fn update_moves_without_reallocating() {
         let mut b = random_blobs(200, 21);
-        let before = b.grid().capacity_bytes();
+        let before = b.capacity_bytes();
         for k in 0..20 {
             let c: Vec<DVec3> = b
                 .centers()
@@ -533,7 +573,7 @@ mod tests {
             b.update(&c, None, None).unwrap();
         }
         // Capacity may settle after the first rebuilds but must not keep growing.
-        let mid = b.grid().capacity_bytes();
+        let mid = b.capacity_bytes();
         for k in 0..20 {
             let c: Vec<DVec3> = b
                 .centers()
@@ -542,7 +582,7 @@ mod tests {
                 .collect();
             b.update(&c, None, None).unwrap();
         }
-        assert!(b.grid().capacity_bytes() <= mid.max(before) * 2);
+        assert!(b.capacity_bytes() <= mid.max(before) * 2);
         for p in random_points(500, -1.0, 1.0, 2) {
             assert!((b.potential(p) - b.potential_brute_force(p)).abs() < 1e-12);
         }

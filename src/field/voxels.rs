@@ -10,6 +10,8 @@ use glam::DVec3;
 pub struct VoxelGrid {
     origin: DVec3,
     size: f64,
+    /// 1 / size (a voxel lookup multiplies instead of dividing).
+    inv_size: f64,
     dims: [u32; 3],
     /// `start[v]..start[v + 1]` indexes `items` for voxel v.
     start: Vec<u32>,
@@ -50,6 +52,7 @@ impl VoxelGrid {
         self.dims = [dims.x as u32, dims.y as u32, dims.z as u32];
         self.origin = lo;
         self.size = size;
+        self.inv_size = 1.0 / size;
         let nvox = self.dims.iter().map(|&d| d as usize).product::<usize>();
         // Counting pass, then fill pass (the same voxel ranges twice).
         self.start.clear();
@@ -83,17 +86,29 @@ impl VoxelGrid {
     /// The primitives that may influence point `p` (empty outside the grid).
     #[inline]
     pub fn candidates(&self, p: DVec3) -> &[u32] {
-        let q = (p - self.origin) / self.size;
+        &self.items[self.range(p)]
+    }
+
+    /// Where the list of the voxel holding `p` lies in [`VoxelGrid::items`] (empty outside the
+    /// grid).
+    #[inline]
+    pub fn range(&self, p: DVec3) -> std::ops::Range<usize> {
+        let q = (p - self.origin) * self.inv_size;
         if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
-            return &[];
+            return 0..0;
         }
         let (x, y, z) = (q.x as u32, q.y as u32, q.z as u32);
         let [dx, dy, dz] = self.dims;
         if x >= dx || y >= dy || z >= dz {
-            return &[];
+            return 0..0;
         }
         let v = (x as usize) + dx as usize * (y as usize + dy as usize * z as usize);
-        &self.items[self.start[v] as usize..self.start[v + 1] as usize]
+        self.start[v] as usize..self.start[v + 1] as usize
+    }
+
+    /// All voxel lists one after the other (list `v` is `items[start[v]..start[v + 1]]`).
+    pub fn items(&self) -> &[u32] {
+        &self.items
     }
 
     /// The largest sum of `weight(i)` over the primitives `i` of one voxel's list (0 when

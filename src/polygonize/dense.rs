@@ -136,7 +136,6 @@ struct Layer {
     y: Vec<u32>,
     /// z-edge from point `(i, j)` of the bottom plane at `j * px + i`.
     z: Vec<u32>,
-    vertices: Vec<DVec3>,
     /// Global index of the layer's first vertex.
     base: u32,
 }
@@ -205,9 +204,15 @@ fn plane_edges(
     }
 }
 
-/// Makes the vertices layer `k` owns: the crossed x- and y-edges of plane `k + 1` and the
-/// crossed z-edges between planes `k` and `k + 1`.
-fn layer_vertices(lattice: &Lattice, k: u32, lo: Plane, hi: Plane, layer: &mut Layer) {
+/// Makes the vertices layer `k` owns, into `vertices`: the crossed x- and y-edges of plane
+/// `k + 1` and the crossed z-edges between planes `k` and `k + 1`.
+fn layer_vertices(
+    lattice: &Lattice,
+    k: u32,
+    (lo, hi): (Plane, Plane),
+    layer: &mut Layer,
+    vertices: &mut Vec<DVec3>,
+) {
     let [nx, ny, _] = lattice.cells;
     let (nxu, pxu, pyu) = (nx as usize, nx as usize + 1, ny as usize + 1);
     for (a, n) in [
@@ -219,15 +224,8 @@ fn layer_vertices(lattice: &Lattice, k: u32, lo: Plane, hi: Plane, layer: &mut L
             *a = vec![0; n];
         }
     }
-    layer.vertices.clear();
-    plane_edges(
-        lattice,
-        k + 1,
-        hi,
-        &mut layer.x,
-        &mut layer.y,
-        &mut layer.vertices,
-    );
+    vertices.clear();
+    plane_edges(lattice, k + 1, hi, &mut layer.x, &mut layer.y, vertices);
     let b = Bits::new(pxu);
     for j in 0..pyu {
         if !may_cross(lo.rows[j], hi.rows[j]) {
@@ -239,12 +237,10 @@ fn layer_vertices(lattice: &Lattice, k: u32, lo: Plane, hi: Plane, layer: &mut L
             |w| r0[w] ^ r1[w],
             |i| {
                 let idx = j * pxu + i;
-                layer.z[idx] = layer.vertices.len() as u32;
+                layer.z[idx] = vertices.len() as u32;
                 let pa = lattice.point([i as u32, j as u32, k]);
                 let pb = lattice.point([i as u32, j as u32, k + 1]);
-                layer
-                    .vertices
-                    .push(edge_crossing(pa, pb, lo.values[idx], hi.values[idx]));
+                vertices.push(edge_crossing(pa, pb, lo.values[idx], hi.values[idx]));
             },
         );
     }
@@ -282,7 +278,20 @@ fn triangulate_layer(
             hi.bit_row(b, j),
             hi.bit_row(b, j + 1),
         ];
-        let bit = |r: &[u64], i: usize| ((r[i >> 6] >> (i & 63)) & 1) as u8;
+        // Bits i and i + 1 of a row (the two corners of cell i along x).
+        let pair = |r: &[u64], i: usize| -> u8 {
+            let (w, s) = (i >> 6, i & 63);
+            if s < 63 {
+                ((r[w] >> s) & 3) as u8
+            } else {
+                ((r[w] >> 63) | ((r[w + 1] & 1) << 1)) as u8
+            }
+        };
+        // Each cell edge's index row for this cell row, and the number to add.
+        let edge_rows: [(&[u32], u32); 12] = std::array::from_fn(|e| {
+            let (slot, dx, dy) = EDGE_SLOT[e];
+            (&arrays[slot][(j + dy) * strides[slot] + dx..], bases[slot])
+        });
         for_each_bit(
             b.words,
             |w| {
@@ -296,14 +305,14 @@ fn triangulate_layer(
                 any & !all & Bits::below(w, nxu)
             },
             |i| {
-                let mut case = 0u8;
-                for (q, r) in rows.iter().enumerate() {
-                    case |= (bit(r, i) | bit(r, i + 1) << 1) << (2 * q);
-                }
+                let case = pair(rows[0], i)
+                    | pair(rows[1], i) << 2
+                    | pair(rows[2], i) << 4
+                    | pair(rows[3], i) << 6;
                 crossed += 1;
                 let vertex = |e: u8| {
-                    let (slot, dx, dy) = EDGE_SLOT[e as usize];
-                    arrays[slot][(j + dy) * strides[slot] + i + dx].wrapping_add(bases[slot])
+                    let (row, base) = edge_rows[e as usize];
+                    row[i].wrapping_add(base)
                 };
                 for t in table.triangles(case) {
                     out.push([vertex(t[0]), vertex(t[1]), vertex(t[2])]);
@@ -359,6 +368,9 @@ struct Workspace {
     rows: Vec<u8>,
     points: Vec<DVec3>,
     layers: Vec<Layer>,
+    /// Per cell layer of the lattice (plus the bottom plane first): its vertices and triangles,
+    /// gathered into the mesh at the end.
+    vertices: Vec<Vec<DVec3>>,
     triangles: Vec<Vec<[u32; 3]>>,
     carry_x: Vec<u32>,
     carry_y: Vec<u32>,
@@ -375,10 +387,12 @@ impl Workspace {
             + self
                 .layers
                 .iter()
-                .map(|l| {
-                    (l.x.capacity() + l.y.capacity() + l.z.capacity()) * 4
-                        + l.vertices.capacity() * 24
-                })
+                .map(|l| (l.x.capacity() + l.y.capacity() + l.z.capacity()) * 4)
+                .sum::<usize>()
+            + self
+                .vertices
+                .iter()
+                .map(|v| v.capacity() * 24)
                 .sum::<usize>()
             + self
                 .triangles
@@ -461,6 +475,34 @@ pub fn polygonize<F: Field + ?Sized>(
     Ok((mesh, stats))
 }
 
+/// Concatenates `parts` into one new vector, copying in parallel into its uninitialised
+/// capacity: its fresh pages are first touched (and faulted in) by all threads at once, and
+/// nothing is written twice.
+pub(crate) fn gather<T: Copy + Send + Sync>(parts: &[Vec<T>]) -> Vec<T> {
+    let total: usize = parts.iter().map(Vec::len).sum();
+    let mut out: Vec<T> = Vec::with_capacity(total);
+    let mut rest = &mut out.spare_capacity_mut()[..total];
+    let mut slices = Vec::with_capacity(parts.len());
+    for p in parts {
+        let (a, b) = rest.split_at_mut(p.len());
+        slices.push(a);
+        rest = b;
+    }
+    slices
+        .into_par_iter()
+        .zip(parts.par_iter())
+        .with_min_len(4)
+        .for_each(|(d, s)| {
+            for (di, si) in d.iter_mut().zip(s) {
+                di.write(*si);
+            }
+        });
+    // SAFETY: the slices cover out[..total] exactly (their lengths sum to total) and every
+    // element was written above.
+    unsafe { out.set_len(total) };
+    out
+}
+
 /// The sweep over the groups of planes (see the module documentation).
 fn sweep<F: Field + ?Sized>(
     field: &F,
@@ -484,6 +526,7 @@ fn sweep<F: Field + ?Sized>(
         rows,
         points,
         layers,
+        vertices,
         triangles,
         carry_x,
         carry_y,
@@ -491,7 +534,16 @@ fn sweep<F: Field + ?Sized>(
     // Global vertex indices of the x- and y-edges of the group's bottom plane.
     carry_x.resize(nxu * pyu, 0);
     carry_y.resize(pxu * (pyu - 1), 0);
+    // vertices[0]: the bottom plane's; vertices[k + 1]: cell layer k's.
+    let nzu = nz as usize;
+    if vertices.len() < nzu + 1 {
+        vertices.resize_with(nzu + 1, Vec::new);
+    }
+    if triangles.len() < nzu {
+        triangles.resize_with(nzu, Vec::new);
+    }
     values.clear();
+    let mut next_base = 0u32;
     let mut g0 = 0u32;
     while g0 < nz {
         let g1 = (g0 + per_group).min(nz);
@@ -539,29 +591,29 @@ fn sweep<F: Field + ?Sized>(
             })
             .collect();
         if g0 == 0 {
-            plane_edges(lattice, 0, planes[0], carry_x, carry_y, &mut mesh.vertices);
+            vertices[0].clear();
+            plane_edges(lattice, 0, planes[0], carry_x, carry_y, &mut vertices[0]);
+            next_base = vertices[0].len() as u32;
         }
         if layers.len() < n_layers {
             layers.resize_with(n_layers, Layer::default);
-            triangles.resize_with(n_layers, Vec::new);
         }
+        let group_vertices = &mut vertices[g0 as usize + 1..g1 as usize + 1];
         layers[..n_layers]
             .par_iter_mut()
+            .zip(group_vertices.par_iter_mut())
             .enumerate()
-            .for_each(|(l, layer)| {
-                layer_vertices(lattice, g0 + l as u32, planes[l], planes[l + 1], layer)
+            .for_each(|(l, (layer, v))| {
+                layer_vertices(lattice, g0 + l as u32, (planes[l], planes[l + 1]), layer, v)
             });
-        let new_vertices: usize = layers[..n_layers].iter().map(|l| l.vertices.len()).sum();
-        mesh.vertices.reserve(new_vertices);
-        // A closed surface has about twice as many triangles as vertices.
-        mesh.triangles.reserve(2 * new_vertices + new_vertices / 8);
-        for layer in layers[..n_layers].iter_mut() {
-            layer.base = mesh.vertices.len() as u32;
-            mesh.vertices.extend_from_slice(&layer.vertices);
+        for (layer, v) in layers[..n_layers].iter_mut().zip(group_vertices.iter()) {
+            layer.base = next_base;
+            next_base = u32::try_from(next_base as usize + v.len())
+                .map_err(|_| crate::Error::invalid("resolution", "more than 2³² vertices"))?;
         }
         let done: &[Layer] = &layers[..n_layers];
         let (cx, cy) = (&carry_x[..], &carry_y[..]);
-        stats.cells_crossed += triangles[..n_layers]
+        stats.cells_crossed += triangles[g0 as usize..g1 as usize]
             .par_iter_mut()
             .enumerate()
             .map(|(l, out)| {
@@ -580,9 +632,6 @@ fn sweep<F: Field + ?Sized>(
                 )
             })
             .sum::<u64>();
-        for t in &triangles[..n_layers] {
-            mesh.triangles.extend_from_slice(t);
-        }
         let top = &layers[n_layers - 1];
         for (c, &i) in carry_x.iter_mut().zip(&top.x) {
             *c = i.wrapping_add(top.base);
@@ -593,6 +642,10 @@ fn sweep<F: Field + ?Sized>(
         stats.add_time("triangulate", t);
         g0 = g1;
     }
+    let t = Instant::now();
+    mesh.vertices = gather(&vertices[..nzu + 1]);
+    mesh.triangles = gather(&triangles[..nzu]);
+    stats.add_time("triangulate", t);
     Ok(())
 }
 

@@ -19,6 +19,7 @@ use crate::field::{gradients_by_differences, Field};
 use crate::lattice::Lattice;
 use crate::mesh::Mesh;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Settings shared by the polygonizers.
@@ -147,7 +148,12 @@ pub fn compute_normals<F: Field + ?Sized>(
         mesh.normals.clear();
         return Ok(());
     }
-    let mut g = vec![DVec3::ZERO; mesh.vertices.len()];
+    // Zeroed in parallel: the fresh pages are faulted in by all threads.
+    let mut g: Vec<DVec3> = Vec::new();
+    (0..mesh.vertices.len())
+        .into_par_iter()
+        .map(|_| DVec3::ZERO)
+        .collect_into_vec(&mut g);
     let batch = settings.batch.max(1);
     match settings.difference_gradients {
         Some(frac) => {
@@ -165,7 +171,7 @@ pub fn compute_normals<F: Field + ?Sized>(
             stats.normal_evaluations += mesh.vertices.len() as u64;
         }
     }
-    if let Some(i) = g.iter().position(|v| !v.is_finite()) {
+    if let Some(i) = g.par_iter().position_first(|v| !v.is_finite()) {
         let p = mesh.vertices[i];
         return Err(Error::FieldNotFinite {
             x: p.x,
@@ -173,14 +179,26 @@ pub fn compute_normals<F: Field + ?Sized>(
             z: p.z,
         });
     }
-    let mut fallback: Option<Vec<DVec3>> = None;
-    for (i, gi) in g.iter_mut().enumerate() {
-        let l = gi.length();
-        if l > 0.0 {
-            *gi /= l;
-        } else {
-            let f = fallback.get_or_insert_with(|| mesh.face_normals_at_vertices());
-            *gi = f[i];
+    let zero: usize = g
+        .par_iter_mut()
+        .with_min_len(1024)
+        .map(|gi| {
+            let l = gi.length();
+            if l > 0.0 {
+                *gi /= l;
+                0
+            } else {
+                1
+            }
+        })
+        .sum();
+    if zero > 0 {
+        // Where the gradient vanishes, the mean normal of the vertex's triangles.
+        let f = mesh.face_normals_at_vertices();
+        for (gi, fi) in g.iter_mut().zip(f) {
+            if *gi == DVec3::ZERO {
+                *gi = fi;
+            }
         }
     }
     mesh.normals = g;
