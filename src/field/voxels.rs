@@ -155,6 +155,9 @@ fn voxels_touching(
     r: f64,
     mut f: impl FnMut(usize),
 ) {
+    // The radius gets a relative margin of 1e-9 so that rounding can only add a voxel (a
+    // primitive listed in a voxel it misses adds +0.0 to a sum), never drop one.
+    let r = r * (1.0 + 1e-9);
     let lo = ((c - DVec3::splat(r) - origin) / size)
         .floor()
         .max(DVec3::ZERO);
@@ -170,19 +173,87 @@ fn voxels_touching(
         clamp(hi.y, dims[1]),
         clamp(hi.z, dims[2]),
     );
+    // Row by row: the voxels of row (y, z) that the sphere reaches form one run in x, from the
+    // distance between the centre and the row's box in y and z.
     let r2 = r * r;
+    let gap = |c: f64, lo: f64| (lo - c).max(c - (lo + size)).max(0.0);
     for z in z0..=z1 {
+        let gz = gap(c.z, origin.z + z as f64 * size);
         for y in y0..=y1 {
-            for x in x0..=x1 {
-                // Distance from the centre to the voxel box.
-                let bmin = origin + DVec3::new(x as f64, y as f64, z as f64) * size;
-                let bmax = bmin + DVec3::splat(size);
-                let q = c.clamp(bmin, bmax);
-                if (q - c).length_squared() <= r2 {
-                    f(
-                        x as usize
-                            + dims[0] as usize * (y as usize + dims[1] as usize * z as usize),
-                    );
+            let gy = gap(c.y, origin.y + y as f64 * size);
+            let rest = r2 - gy * gy - gz * gz;
+            if rest < 0.0 {
+                continue;
+            }
+            let h = rest.sqrt();
+            let xa = clamp(((c.x - h - origin.x) / size).floor().max(0.0), dims[0]).max(x0);
+            let xb = clamp(((c.x + h - origin.x) / size).floor(), dims[0]).min(x1);
+            let row = dims[0] as usize * (y as usize + dims[1] as usize * z as usize);
+            for x in xa..=xb {
+                f(x as usize + row);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Distance from `c` to the box of voxel `v`.
+    fn distance(g: &VoxelGrid, v: usize, c: DVec3) -> f64 {
+        let [dx, dy, _] = g.dims;
+        let (dx, dy) = (dx as usize, dy as usize);
+        let idx = DVec3::new(
+            (v % dx) as f64,
+            ((v / dx) % dy) as f64,
+            (v / (dx * dy)) as f64,
+        );
+        let lo = g.origin + idx * g.size;
+        (c.clamp(lo, lo + DVec3::splat(g.size)) - c).length()
+    }
+
+    #[test]
+    fn lists_hold_exactly_the_voxels_each_sphere_touches() {
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let centers: Vec<DVec3> = (0..300)
+            .map(|_| DVec3::new(next(), next(), next()) * 2.0 - 1.0)
+            .collect();
+        let radii: Vec<f64> = (0..300).map(|_| 0.02 + 0.3 * next()).collect();
+        for size in [0.04, 0.1, 0.37] {
+            let mut g = VoxelGrid::default();
+            g.rebuild(&centers, &radii, size);
+            let nvox = g.dims.iter().map(|&d| d as usize).product::<usize>();
+            for v in 0..nvox {
+                let list = &g.items[g.start[v] as usize..g.start[v + 1] as usize];
+                assert!(list.windows(2).all(|w| w[0] < w[1]), "in primitive order");
+                for (i, (c, r)) in centers.iter().zip(&radii).enumerate() {
+                    let d = distance(&g, v, *c);
+                    let listed = list.binary_search(&(i as u32)).is_ok();
+                    if d <= *r {
+                        assert!(
+                            listed,
+                            "voxel {v} misses primitive {i} (distance {d}, r {r})"
+                        );
+                    } else if listed {
+                        assert!(d <= r * (1.0 + 1e-6), "voxel {v} lists far primitive {i}");
+                    }
+                }
+            }
+            // Point lookups land in the voxel whose box holds the point.
+            for _ in 0..1000 {
+                let p = DVec3::new(next(), next(), next()) * 2.6 - 1.3;
+                let list = g.candidates(p);
+                for (i, (c, r)) in centers.iter().zip(&radii).enumerate() {
+                    if (p - *c).length() < *r {
+                        assert!(list.contains(&(i as u32)), "point {p} misses primitive {i}");
+                    }
                 }
             }
         }

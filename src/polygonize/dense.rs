@@ -425,11 +425,14 @@ fn return_workspace(w: Workspace) {
 }
 
 /// Cell layers per group: as many planes as one batch holds, at least a few for parallel work.
+/// The groups are balanced: 64 layers in batches of 62 make two groups of 32, not 62 and 2.
 fn layers_per_group(lattice: &Lattice, settings: &Settings) -> u32 {
     let [px, py, _] = lattice.points_per_axis();
-    (settings.batch as u64 / (px as u64 * py as u64))
+    let nz = lattice.cells[2] as u64;
+    let most = (settings.batch as u64 / (px as u64 * py as u64))
         .max(MIN_LAYERS_PER_GROUP as u64)
-        .min(lattice.cells[2] as u64) as u32
+        .min(nz);
+    nz.div_ceil(nz.div_ceil(most)) as u32
 }
 
 /// Polygonizes `field` over every cell of `lattice` with plain marching cubes.
