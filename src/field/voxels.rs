@@ -176,6 +176,7 @@ fn voxels_touching(
     // Row by row: the voxels of row (y, z) that the sphere reaches form one run in x, from the
     // distance between the centre and the row's box in y and z.
     let r2 = r * r;
+    let inv = 1.0 / size;
     let gap = |c: f64, lo: f64| (lo - c).max(c - (lo + size)).max(0.0);
     for z in z0..=z1 {
         let gz = gap(c.z, origin.z + z as f64 * size);
@@ -186,8 +187,9 @@ fn voxels_touching(
                 continue;
             }
             let h = rest.sqrt();
-            let xa = clamp(((c.x - h - origin.x) / size).floor().max(0.0), dims[0]).max(x0);
-            let xb = clamp(((c.x + h - origin.x) / size).floor(), dims[0]).min(x1);
+            // Truncation is floor here: both are clamped at 0 first (no libm call per row).
+            let xa = clamp(((c.x - h - origin.x) * inv).max(0.0), dims[0]).max(x0);
+            let xb = clamp(((c.x + h - origin.x) * inv).max(0.0), dims[0]).min(x1);
             let row = dims[0] as usize * (y as usize + dims[1] as usize * z as usize);
             for x in xa..=xb {
                 f(x as usize + row);
