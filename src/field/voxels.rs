@@ -84,14 +84,14 @@ impl VoxelGrid {
     }
 
     /// The primitives that may influence point `p` (empty outside the grid).
-    #[inline]
+    #[inline(always)]
     pub fn candidates(&self, p: DVec3) -> &[u32] {
         &self.items[self.range(p)]
     }
 
     /// Where the list of the voxel holding `p` lies in [`VoxelGrid::items`] (empty outside the
     /// grid).
-    #[inline]
+    #[inline(always)]
     pub fn range(&self, p: DVec3) -> std::ops::Range<usize> {
         let q = (p - self.origin) * self.inv_size;
         if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {

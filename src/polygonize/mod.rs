@@ -171,7 +171,40 @@ pub fn compute_normals<F: Field + ?Sized>(
             stats.normal_evaluations += mesh.vertices.len() as u64;
         }
     }
-    if let Some(i) = g.par_iter().position_first(|v| !v.is_finite()) {
+    // Normalise in parallel chunks; count vanishing gradients and find the first non-finite one.
+    const CHUNK: usize = 4096;
+    let (zero, bad) = g
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let (mut zero, mut bad) = (0usize, None);
+            for (k, gi) in chunk.iter_mut().enumerate() {
+                if !gi.is_finite() {
+                    bad = bad.or(Some(c * CHUNK + k));
+                    continue;
+                }
+                let l = gi.length();
+                if l > 0.0 {
+                    *gi *= 1.0 / l;
+                } else {
+                    zero += 1;
+                }
+            }
+            (zero, bad)
+        })
+        .reduce(
+            || (0, None),
+            |a, b| {
+                (
+                    a.0 + b.0,
+                    match (a.1, b.1) {
+                        (Some(x), Some(y)) => Some(x.min(y)),
+                        (x, y) => x.or(y),
+                    },
+                )
+            },
+        );
+    if let Some(i) = bad {
         let p = mesh.vertices[i];
         return Err(Error::FieldNotFinite {
             x: p.x,
@@ -179,19 +212,6 @@ pub fn compute_normals<F: Field + ?Sized>(
             z: p.z,
         });
     }
-    let zero: usize = g
-        .par_iter_mut()
-        .with_min_len(1024)
-        .map(|gi| {
-            let l = gi.length();
-            if l > 0.0 {
-                *gi /= l;
-                0
-            } else {
-                1
-            }
-        })
-        .sum();
     if zero > 0 {
         // Where the gradient vanishes, the mean normal of the vertex's triangles.
         let f = mesh.face_normals_at_vertices();
