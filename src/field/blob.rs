@@ -386,6 +386,9 @@ impl BlobField {
     }
 }
 
+/// Point batches smaller than this are evaluated on the calling thread (about 0.1 ms of work).
+const SERIAL_BELOW: usize = 2048;
+
 /// One primitive's term along one lattice row: x-centre, dy², dz², 1/R², A.
 struct RowTerm {
     cx: f64,
@@ -518,28 +521,38 @@ impl Field for BlobField {
 
     /// The batch loops call the point functions inlined: a call per point (the trait's default)
     /// costs as much as the terms themselves here.
+    /// Batches below [`SERIAL_BELOW`] points run on the calling thread: handing them to the
+    /// pool costs more than it saves (the tracking polygonizer's waves are often that small).
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
         assert_eq!(points.len(), out.len());
+        let run = |p: &[DVec3], o: &mut [f64]| {
+            for (pi, oi) in p.iter().zip(o.iter_mut()) {
+                *oi = self.threshold - self.potential(*pi);
+            }
+        };
+        if points.len() < SERIAL_BELOW {
+            return run(points, out);
+        }
         points
             .par_chunks(PAR_CHUNK)
             .zip(out.par_chunks_mut(PAR_CHUNK))
-            .for_each(|(p, o)| {
-                for (pi, oi) in p.iter().zip(o.iter_mut()) {
-                    *oi = self.threshold - self.potential(*pi);
-                }
-            });
+            .for_each(|(p, o)| run(p, o));
     }
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         assert_eq!(points.len(), out.len());
+        let run = |p: &[DVec3], o: &mut [DVec3]| {
+            for (pi, oi) in p.iter().zip(o.iter_mut()) {
+                *oi = self.gradient_at(*pi);
+            }
+        };
+        if points.len() < SERIAL_BELOW {
+            return run(points, out);
+        }
         points
             .par_chunks(PAR_CHUNK)
             .zip(out.par_chunks_mut(PAR_CHUNK))
-            .for_each(|(p, o)| {
-                for (pi, oi) in p.iter().zip(o.iter_mut()) {
-                    *oi = self.gradient_at(*pi);
-                }
-            });
+            .for_each(|(p, o)| run(p, o));
     }
 }
 
