@@ -10,17 +10,23 @@
 //! shared case table and edge vertices — so wherever nothing was rejected wrongly, the mesh is
 //! exactly the dense mesh.
 //!
-//! All the centres of one level are evaluated in one batched field call, then all the leaf
-//! corners in one more; a cache keyed by lattice coordinates guarantees that no point is evaluated
-//! twice (coarse centres are corners of leaf cells).
+//! All the centres of one level are evaluated in one batched field call, then the leaves' parent
+//! corners (the corner test) in one more, then all the leaf corners in one more; no point is
+//! evaluated twice (coarse centres are corners of leaf cells). The values live in a block-sparse
+//! store: a dense table of bricks of 8³ lattice points, each brick an array of indices into the
+//! values, so finding, claiming and reading a point is array indexing, and memory grows with the
+//! surface, not with the lattice. Leaves are triangulated in order, their cases found in parallel,
+//! each edge vertex indexed through the value index of the edge's lower end.
 
-use super::cell::{case_index, corner_offset, edge_origin, emit_triangles};
+use super::cell::{case_index, corner_offset, emit_triangles};
+use super::table::{EDGES, EDGE_AXIS};
 use super::{check_memory, compute_normals, estimate_triangles, evaluate, CaseTable, Stats};
 use crate::error::Result;
 use crate::field::Field;
-use crate::lattice::{edge_crossing, KeyMap, Lattice};
+use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Octree-specific settings.
@@ -62,31 +68,176 @@ pub fn levels(lattice: &Lattice) -> u32 {
     n.next_power_of_two().trailing_zeros()
 }
 
-/// Evaluates, in one batched call, the lattice points of `wanted` not yet in `cache` (each once)
-/// and adds them to it.
-fn fill_cache<F: Field + ?Sized>(
-    field: &F,
-    lattice: &Lattice,
-    cache: &mut KeyMap<f64>,
-    wanted: impl Iterator<Item = [u32; 3]>,
-    settings: &super::Settings,
-    stats: &mut Stats,
-) -> Result<()> {
-    let mut keys = Vec::new();
-    let mut points = Vec::new();
-    for c in wanted {
-        let key = Lattice::key(c);
-        if let std::collections::hash_map::Entry::Vacant(e) = cache.entry(key) {
-            e.insert(f64::NAN);
-            keys.push(key);
-            points.push(lattice.point(c));
+/// Lattice points per side of a brick of the value store, as a power of two: 8.
+const BRICK_BITS: u32 = 3;
+const BRICK: u32 = 1 << BRICK_BITS;
+const BRICK_POINTS: usize = 1 << (3 * BRICK_BITS);
+/// Offsets within a brick of the eight corners of a cell, in case-bit order (x fastest).
+const CORNER_SLOTS: [usize; 8] = {
+    let mut s = [0; 8];
+    let mut k = 0;
+    while k < 8 {
+        s[k] = (k & 1) | ((k >> 1) & 1) << BRICK_BITS | ((k >> 2) & 1) << (2 * BRICK_BITS);
+        k += 1;
+    }
+    s
+};
+/// Working memory per output triangle at its peak (after the leaf corners are evaluated): slots,
+/// values, leaves with their corner indices, and the points being evaluated. Measured on the
+/// shared meshes at 64³ to 256³: 140 to 170 bytes.
+const BYTES_PER_TRIANGLE_STORE: u64 = 192;
+/// An empty brick-table entry, slot or edge.
+const NONE: u32 = u32::MAX;
+
+/// The values of one call, in evaluation order, and where each lattice point's value is: the
+/// lattice points are split into bricks of 8³, a dense table (one entry per brick) gives each
+/// brick touched its block of slots, and a slot holds the index of the point's value in `values`
+/// (or `NONE`). So finding, claiming or reading a point is array indexing, and memory grows with
+/// the bricks the kept blocks touch and with the evaluations, not with the lattice (the table
+/// has one `u32` per 512 lattice points).
+struct Store {
+    /// Bricks per axis.
+    dims: [usize; 3],
+    /// Brick position → brick number (its slots start at number × 512), or `NONE`.
+    table: Vec<u32>,
+    slots: Vec<u32>,
+    /// Every value evaluated, in evaluation order.
+    values: Vec<f64>,
+}
+
+impl Store {
+    /// Bricks per axis of a lattice.
+    fn dims(lattice: &Lattice) -> [usize; 3] {
+        lattice
+            .points_per_axis()
+            .map(|p| p.div_ceil(BRICK) as usize)
+    }
+
+    /// Bytes of the brick table of a lattice.
+    fn table_bytes(lattice: &Lattice) -> u64 {
+        Self::dims(lattice)
+            .iter()
+            .map(|&d| d as u64)
+            .product::<u64>()
+            * 4
+    }
+
+    fn new(lattice: &Lattice) -> Self {
+        let dims = Self::dims(lattice);
+        Store {
+            dims,
+            table: vec![NONE; dims.iter().product()],
+            slots: Vec::new(),
+            values: Vec::new(),
         }
     }
-    let mut values = vec![0.0; points.len()];
-    evaluate(field, &points, &mut values, settings.batch)?;
-    stats.evaluations += points.len() as u64;
-    cache.extend(keys.into_iter().zip(values));
-    Ok(())
+
+    /// Table entry and offset within its brick of lattice point `p`.
+    #[inline]
+    fn locate(&self, p: [u32; 3]) -> (usize, usize) {
+        let b = p.map(|c| (c >> BRICK_BITS) as usize);
+        let m = BRICK - 1;
+        let l = (p[0] & m) as usize
+            | ((p[1] & m) as usize) << BRICK_BITS
+            | ((p[2] & m) as usize) << (2 * BRICK_BITS);
+        (b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2]), l)
+    }
+
+    /// Index in `slots` of lattice point `p`, giving its brick slots on first touch.
+    #[inline]
+    fn slot_mut(&mut self, p: [u32; 3]) -> usize {
+        let (t, l) = self.locate(p);
+        let mut b = self.table[t];
+        if b == NONE {
+            b = (self.slots.len() / BRICK_POINTS) as u32;
+            self.table[t] = b;
+            self.slots.resize(self.slots.len() + BRICK_POINTS, NONE);
+        }
+        b as usize * BRICK_POINTS + l
+    }
+
+    /// Index in `slots` of lattice point `p`, whose brick has slots.
+    #[inline]
+    fn slot(&self, p: [u32; 3]) -> usize {
+        let (t, l) = self.locate(p);
+        self.table[t] as usize * BRICK_POINTS + l
+    }
+
+    /// Index in `values` of the value at `p`, which is known.
+    #[inline]
+    fn index(&self, p: [u32; 3]) -> u32 {
+        self.slots[self.slot(p)]
+    }
+
+    /// Queues `p` for evaluation unless its value is known or queued already: its value will be
+    /// `values[values.len() + points.len()]` once `points` are evaluated.
+    #[inline]
+    fn claim(&mut self, p: [u32; 3], lattice: &Lattice, points: &mut Vec<DVec3>) -> u32 {
+        let s = self.slot_mut(p);
+        if self.slots[s] == NONE {
+            self.slots[s] = (self.values.len() + points.len()) as u32;
+            points.push(lattice.point(p));
+        }
+        self.slots[s]
+    }
+
+    /// Whether the whole cell with lower corner `o` lies in one brick.
+    #[inline]
+    fn cell_in_brick(o: [u32; 3]) -> bool {
+        o.iter().all(|&c| c & (BRICK - 1) != BRICK - 1)
+    }
+
+    /// [`Store::claim`] for the eight corners of the cell with lower corner `o`, in case-bit
+    /// order; returns their indices in `values` (to be, for those queued now).
+    #[inline]
+    fn claim_cell(&mut self, o: [u32; 3], lattice: &Lattice, points: &mut Vec<DVec3>) -> [u32; 8] {
+        let mut idx = [0; 8];
+        if Self::cell_in_brick(o) {
+            let s = self.slot_mut(o);
+            for (k, d) in CORNER_SLOTS.iter().enumerate() {
+                let slot = &mut self.slots[s + d];
+                if *slot == NONE {
+                    *slot = (self.values.len() + points.len()) as u32;
+                    points.push(lattice.point(corner(o, k)));
+                }
+                idx[k] = *slot;
+            }
+        } else {
+            for (k, i) in idx.iter_mut().enumerate() {
+                *i = self.claim(corner(o, k), lattice, points);
+            }
+        }
+        idx
+    }
+
+    /// Evaluates `points` (queued by [`Store::claim`]) in batches and appends their values.
+    fn evaluate<F: Field + ?Sized>(
+        &mut self,
+        field: &F,
+        points: &[DVec3],
+        settings: &super::Settings,
+        stats: &mut Stats,
+    ) -> Result<()> {
+        let start = self.values.len();
+        if start + points.len() >= NONE as usize {
+            return Err(crate::Error::TooMuchMemory {
+                name: "resolution",
+                needed_mib: ((start + points.len()) as u64 * 8).div_ceil(1 << 20),
+                limit_mib: (NONE as u64 * 8) >> 20,
+            });
+        }
+        self.values.resize(start + points.len(), 0.0);
+        evaluate(field, points, &mut self.values[start..], settings.batch)?;
+        stats.evaluations += points.len() as u64;
+        Ok(())
+    }
+}
+
+/// Lattice point of corner `k` of the cell with lower corner `o`.
+#[inline]
+fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
+    let d = corner_offset(k);
+    [o[0] + d[0], o[1] + d[1], o[2] + d[2]]
 }
 
 /// Polygonizes `field` over `lattice` with hierarchical rejection; leaves are single cells.
@@ -102,10 +253,11 @@ pub fn polygonize<F: Field + ?Sized>(
             format!("must be positive and finite, got {}", octree.safety),
         ));
     }
-    let tris = estimate_triangles(lattice);
-    // Output plus the value cache (a few lattice points per triangle, key + value + slack).
+    // Output, working memory (see BYTES_PER_TRIANGLE_STORE) and the brick table.
     check_memory(
-        tris * (super::BYTES_PER_TRIANGLE + 4 * 32),
+        estimate_triangles(lattice)
+            .saturating_mul(super::BYTES_PER_TRIANGLE + BYTES_PER_TRIANGLE_STORE)
+            .saturating_add(Store::table_bytes(lattice)),
         settings.memory_limit,
     )?;
 
@@ -117,10 +269,8 @@ pub fn polygonize<F: Field + ?Sized>(
     let cells = lattice.cells;
     let inside = |o: [u32; 3]| o[0] < cells[0] && o[1] < cells[1] && o[2] < cells[2];
     let levels = levels(lattice);
-    let mut cache: KeyMap<f64> = KeyMap::default();
+    let mut store = Store::new(lattice);
     let mut points: Vec<DVec3> = Vec::new();
-    let mut keys: Vec<u64> = Vec::new();
-    let mut values: Vec<f64> = Vec::new();
 
     // Blocks of the current level, by their lowest lattice corner.
     let largest = *cells.iter().max().unwrap();
@@ -134,22 +284,29 @@ pub fn polygonize<F: Field + ?Sized>(
         let s = 1u32 << (levels - level);
         if level >= start_level {
             let t = Instant::now();
+            // Centres are never shared: those of one level are distinct, and those of different
+            // levels are odd multiples of different powers of two.
             points.clear();
-            keys.clear();
-            for o in &blocks {
-                let c = [o[0] + s / 2, o[1] + s / 2, o[2] + s / 2];
-                keys.push(Lattice::key(c));
-                points.push(lattice.point(c));
-            }
-            values.resize(points.len(), 0.0);
-            evaluate(field, &points, &mut values, settings.batch)?;
-            stats.evaluations += points.len() as u64;
+            points.extend(
+                blocks
+                    .iter()
+                    .map(|o| lattice.point([o[0] + s / 2, o[1] + s / 2, o[2] + s / 2])),
+            );
+            let base = store.values.len();
+            store.evaluate(field, &points, settings, &mut stats)?;
             let r = octree.safety * lattice.block_radius(s);
             let mut kept = 0;
             for i in 0..blocks.len() {
-                cache.insert(keys[i], values[i]);
-                if values[i].abs() <= r {
-                    blocks[kept] = blocks[i];
+                let o = blocks[i];
+                if store.values[base + i].abs() <= r {
+                    // Only kept blocks hold leaves, and a centre lies inside its own block, so
+                    // only kept centres can be leaf corners (those inside the lattice).
+                    let c = [o[0] + s / 2, o[1] + s / 2, o[2] + s / 2];
+                    if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
+                        let slot = store.slot_mut(c);
+                        store.slots[slot] = (base + i) as u32;
+                    }
+                    blocks[kept] = o;
                     kept += 1;
                 }
             }
@@ -176,57 +333,66 @@ pub fn polygonize<F: Field + ?Sized>(
         // Each leaf's corner with even coordinates is a corner of its parent block; evaluate the
         // unknown ones in one batch and reject leaves whose corner is provably far.
         let even = |o: &[u32; 3]| [o[0] + (o[0] & 1), o[1] + (o[1] & 1), o[2] + (o[2] & 1)];
-        fill_cache(
-            field,
-            lattice,
-            &mut cache,
-            blocks.iter().map(even),
-            settings,
-            &mut stats,
-        )?;
+        points.clear();
+        for o in &blocks {
+            store.claim(even(o), lattice, &mut points);
+        }
+        store.evaluate(field, &points, settings, &mut stats)?;
         let diag = octree.safety * lattice.cell.length();
-        blocks.retain(|o| cache[&Lattice::key(even(o))].abs() <= diag);
+        blocks.retain(|o| store.values[store.index(even(o)) as usize].abs() <= diag);
     }
     // Evaluate the leaves' corners not yet known, in one batch.
-    let corners = blocks.iter().flat_map(|o| {
-        (0..8).map(move |k| {
-            let d = corner_offset(k);
-            [o[0] + d[0], o[1] + d[1], o[2] + d[2]]
-        })
-    });
-    fill_cache(field, lattice, &mut cache, corners, settings, &mut stats)?;
+    points.clear();
+    points.reserve(blocks.len() * 2);
+    let corners: Vec<[u32; 8]> = blocks
+        .iter()
+        .map(|&o| store.claim_cell(o, lattice, &mut points))
+        .collect();
+    store.evaluate(field, &points, settings, &mut stats)?;
+    drop(points);
     stats.cells_per_level.push(blocks.len() as u64);
     stats.cells_visited = blocks.len() as u64;
     stats.add_time("sample", t);
 
     let t = Instant::now();
+    // From here on, values are found through the leaves' corner indices only.
+    let values = std::mem::take(&mut store.values);
+    drop(store);
     let mut mesh = Mesh::default();
-    let mut edges: KeyMap<u32> = KeyMap::default();
-    for o in &blocks {
-        let mut v = [0.0; 8];
-        for (k, vk) in v.iter_mut().enumerate() {
-            let d = corner_offset(k);
-            *vk = cache[&Lattice::key([o[0] + d[0], o[1] + d[1], o[2] + d[2]])];
-        }
-        let case = case_index(&v);
-        if case == 0 || case == 255 {
-            continue;
-        }
-        stats.cells_crossed += 1;
+    // The vertices on the three edges that start at each point evaluated, by value index.
+    let mut edges: Vec<[u32; 3]> = vec![[NONE; 3]; values.len()];
+    // The crossed leaves with their case, found in parallel (in leaf order); then their
+    // triangles, in order, each edge vertex made on first use: the vertices and triangles of
+    // the serial loop over the leaves, in the same order.
+    let crossed: Vec<(u32, u8)> = corners
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, idx)| {
+            let case = case_index(&idx.map(|i| values[i as usize]));
+            (case != 0 && case != 255).then_some((i as u32, case))
+        })
+        .collect();
+    stats.cells_crossed = crossed.len() as u64;
+    mesh.vertices.reserve(crossed.len() + crossed.len() / 8);
+    mesh.triangles
+        .reserve(2 * crossed.len() + crossed.len() / 4);
+    for &(i, case) in &crossed {
+        let (o, idx) = (blocks[i as usize], &corners[i as usize]);
         emit_triangles(
             table,
             case,
             |e| {
-                let (d, axis) = edge_origin(e);
-                let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-                *edges.entry(Lattice::edge_key(a, axis)).or_insert_with(|| {
-                    let mut b = a;
-                    b[axis as usize] += 1;
-                    let (fa, fb) = (cache[&Lattice::key(a)], cache[&Lattice::key(b)]);
+                let [ka, kb] = EDGES[e].map(|k| k as usize);
+                let axis = EDGE_AXIS[e] as usize;
+                let vertex = &mut edges[idx[ka] as usize][axis];
+                if *vertex == NONE {
+                    let (a, b) = (corner(o, ka), corner(o, kb));
+                    let (fa, fb) = (values[idx[ka] as usize], values[idx[kb] as usize]);
                     mesh.vertices
                         .push(edge_crossing(lattice.point(a), lattice.point(b), fa, fb));
-                    (mesh.vertices.len() - 1) as u32
-                })
+                    *vertex = (mesh.vertices.len() - 1) as u32;
+                }
+                *vertex
             },
             &mut mesh.triangles,
         );
@@ -293,6 +459,40 @@ mod tests {
         )
         .unwrap();
         check_equal(&s, &l, Ambiguity::Separate);
+    }
+
+    #[test]
+    fn tiny_lattices_and_brick_boundaries() {
+        // Lattices of one or a few cells, and sides just below, at and above the 8-point bricks
+        // of the value store; the surface is cut by the box, so the meshes are open.
+        let s = Sphere {
+            center: DVec3::new(0.1, -0.05, 0.02),
+            radius: 0.5,
+        };
+        for cells in [
+            [1, 1, 1],
+            [2, 1, 3],
+            [1, 7, 9],
+            [7, 8, 9],
+            [15, 16, 17],
+            [31, 1, 33],
+        ] {
+            let l = Lattice::new(DVec3::splat(-0.2), DVec3::splat(0.8), cells).unwrap();
+            let set = crate::polygonize::Settings::default();
+            let (d, _) = dense::polygonize(&s, &l, &set).unwrap();
+            assert!(!d.triangles.is_empty(), "{cells:?}");
+            for corner_test in [true, false] {
+                let counting = Counting::new(&s);
+                let o = Settings {
+                    corner_test,
+                    ..Default::default()
+                };
+                let (m, st) = polygonize(&counting, &l, &set, &o).unwrap();
+                let c = d.compare(&m);
+                assert_eq!((c.missing, c.extra), (0, 0), "{cells:?}");
+                assert_eq!(counting.evaluations(), st.evaluations, "{cells:?}");
+            }
+        }
     }
 
     #[test]
