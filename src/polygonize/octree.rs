@@ -72,15 +72,75 @@ pub fn levels(lattice: &Lattice) -> u32 {
 const BRICK_BITS: u32 = 3;
 const BRICK: u32 = 1 << BRICK_BITS;
 const BRICK_POINTS: usize = 1 << (3 * BRICK_BITS);
-/// Offsets within a brick of the eight corners of a cell, in case-bit order (x fastest).
-const CORNER_SLOTS: [usize; 8] = {
-    let mut s = [0; 8];
-    let mut k = 0;
-    while k < 8 {
-        s[k] = (k & 1) | ((k >> 1) & 1) << BRICK_BITS | ((k >> 2) & 1) << (2 * BRICK_BITS);
-        k += 1;
+/// The 3 × 3 × 3 lattice points of a block of 2 × 2 × 2 cells (a parent of leaves), numbered
+/// x fastest: point `x + 3y + 9z`.
+const fn block_point(x: usize, y: usize, z: usize) -> usize {
+    x + 3 * y + 9 * z
+}
+/// `LEAF_CORNERS[d][k]`: the block point of corner k of child cell d (both in case-bit order).
+const LEAF_CORNERS: [[u8; 8]; 8] = {
+    let mut t = [[0; 8]; 8];
+    let mut d = 0;
+    while d < 8 {
+        let mut k = 0;
+        while k < 8 {
+            t[d][k] = block_point(
+                (d & 1) + (k & 1),
+                ((d >> 1) & 1) + ((k >> 1) & 1),
+                ((d >> 2) & 1) + ((k >> 2) & 1),
+            ) as u8;
+            k += 1;
+        }
+        d += 1;
     }
-    s
+    t
+};
+/// `LEAF_POINTS[m]`: the block points that the children in mask `m` need (bit per point).
+const LEAF_POINTS: [u32; 256] = {
+    let mut t = [0; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut d = 0;
+        while d < 8 {
+            if m & (1 << d) != 0 {
+                let mut k = 0;
+                while k < 8 {
+                    t[m] |= 1 << LEAF_CORNERS[d][k];
+                    k += 1;
+                }
+            }
+            d += 1;
+        }
+        m += 1;
+    }
+    t
+};
+/// `PARENT_CORNERS[m]`: the block's corners shared with the children in mask `m` (child d's
+/// corner 2d).
+const PARENT_CORNERS: [u32; 256] = {
+    let mut t = [0; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut d = 0;
+        while d < 8 {
+            if m & (1 << d) != 0 {
+                t[m] |= 1 << LEAF_CORNERS[d][d];
+            }
+            d += 1;
+        }
+        m += 1;
+    }
+    t
+};
+/// Offsets within a brick of the block points, when the whole block lies in one brick.
+const BLOCK_SLOTS: [usize; 27] = {
+    let mut t = [0; 27];
+    let mut p = 0;
+    while p < 27 {
+        t[p] = (p % 3) | ((p / 3) % 3) << BRICK_BITS | (p / 9) << (2 * BRICK_BITS);
+        p += 1;
+    }
+    t
 };
 /// Working memory per output triangle at its peak (after the leaf corners are evaluated): slots,
 /// values, leaves with their corner indices, and the points being evaluated. Measured on the
@@ -100,6 +160,7 @@ struct Store {
     dims: [usize; 3],
     /// Brick position → brick number (its slots start at number × 512), or `NONE`.
     table: Vec<u32>,
+    /// Per brick, a slot per lattice point (x fastest): the index of its value, or `NONE`.
     slots: Vec<u32>,
     /// Every value evaluated, in evaluation order.
     values: Vec<f64>,
@@ -156,19 +217,6 @@ impl Store {
         b as usize * BRICK_POINTS + l
     }
 
-    /// Index in `slots` of lattice point `p`, whose brick has slots.
-    #[inline]
-    fn slot(&self, p: [u32; 3]) -> usize {
-        let (t, l) = self.locate(p);
-        self.table[t] as usize * BRICK_POINTS + l
-    }
-
-    /// Index in `values` of the value at `p`, which is known.
-    #[inline]
-    fn index(&self, p: [u32; 3]) -> u32 {
-        self.slots[self.slot(p)]
-    }
-
     /// Queues `p` for evaluation unless its value is known or queued already: its value will be
     /// `values[values.len() + points.len()]` once `points` are evaluated.
     #[inline]
@@ -181,30 +229,37 @@ impl Store {
         self.slots[s]
     }
 
-    /// Whether the whole cell with lower corner `o` lies in one brick.
+    /// [`Store::claim`] for the points in `wanted` (bits, as in [`block_point`]) of the block
+    /// of 2 × 2 × 2 cells with lower corner `o`, in increasing order; returns their indices in
+    /// `values` (those of the other points are `NONE`).
     #[inline]
-    fn cell_in_brick(o: [u32; 3]) -> bool {
-        o.iter().all(|&c| c & (BRICK - 1) != BRICK - 1)
-    }
-
-    /// [`Store::claim`] for the eight corners of the cell with lower corner `o`, in case-bit
-    /// order; returns their indices in `values` (to be, for those queued now).
-    #[inline]
-    fn claim_cell(&mut self, o: [u32; 3], lattice: &Lattice, points: &mut Vec<DVec3>) -> [u32; 8] {
-        let mut idx = [0; 8];
-        if Self::cell_in_brick(o) {
+    fn claim_block(
+        &mut self,
+        o: [u32; 3],
+        wanted: u32,
+        lattice: &Lattice,
+        points: &mut Vec<DVec3>,
+    ) -> [u32; 27] {
+        let mut idx = [NONE; 27];
+        let mut m = wanted;
+        if o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3) {
+            // The whole block in the brick of `o`.
             let s = self.slot_mut(o);
-            for (k, d) in CORNER_SLOTS.iter().enumerate() {
-                let slot = &mut self.slots[s + d];
+            while m != 0 {
+                let p = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let slot = &mut self.slots[s + BLOCK_SLOTS[p]];
                 if *slot == NONE {
                     *slot = (self.values.len() + points.len()) as u32;
-                    points.push(lattice.point(corner(o, k)));
+                    points.push(lattice.point(block_offset(o, p)));
                 }
-                idx[k] = *slot;
+                idx[p] = *slot;
             }
         } else {
-            for (k, i) in idx.iter_mut().enumerate() {
-                *i = self.claim(corner(o, k), lattice, points);
+            while m != 0 {
+                let p = m.trailing_zeros() as usize;
+                m &= m - 1;
+                idx[p] = self.claim(block_offset(o, p), lattice, points);
             }
         }
         idx
@@ -238,6 +293,22 @@ impl Store {
 fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
     let d = corner_offset(k);
     [o[0] + d[0], o[1] + d[1], o[2] + d[2]]
+}
+
+/// The set bits of a child mask, in increasing order.
+#[inline]
+fn bits(m: u8) -> impl Iterator<Item = usize> {
+    (0..8).filter(move |d| m & (1 << d) != 0)
+}
+
+/// Lattice point of block point `p` (see [`block_point`]) of the block with lower corner `o`.
+#[inline]
+fn block_offset(o: [u32; 3], p: usize) -> [u32; 3] {
+    [
+        o[0] + (p % 3) as u32,
+        o[1] + ((p / 3) % 3) as u32,
+        o[2] + (p / 9) as u32,
+    ]
 }
 
 /// Polygonizes `field` over `lattice` with hierarchical rejection; leaves are single cells.
@@ -314,6 +385,10 @@ pub fn polygonize<F: Field + ?Sized>(
             stats.add_time("sample", t);
         }
         stats.cells_per_level.push(blocks.len() as u64);
+        if s == 2 {
+            // Blocks of 2 × 2 × 2 cells: their children, the leaves, are made below.
+            break;
+        }
         let h = s / 2;
         let mut next = Vec::with_capacity(blocks.len() * 8);
         for o in &blocks {
@@ -327,31 +402,59 @@ pub fn polygonize<F: Field + ?Sized>(
         }
         blocks = next;
     }
-    // `blocks` now holds the leaf cells.
+    // `blocks` now holds the blocks of 2 × 2 × 2 cells that hold the leaves (or, for a lattice
+    // of one cell, the root, whose only child inside is that cell): each with the mask of its
+    // children inside the lattice, in case-bit order.
     let t = Instant::now();
+    let mut masks: Vec<u8> = blocks
+        .iter()
+        .map(|o| {
+            (0..8)
+                .filter(|&d| inside(corner(*o, d)))
+                .fold(0, |m, d| m | 1 << d)
+        })
+        .collect();
     if octree.corner_test && levels > 0 {
-        // Each leaf's corner with even coordinates is a corner of its parent block; evaluate the
-        // unknown ones in one batch and reject leaves whose corner is provably far.
-        let even = |o: &[u32; 3]| [o[0] + (o[0] & 1), o[1] + (o[1] & 1), o[2] + (o[2] & 1)];
+        // Each leaf's corner shared with its parent block (the one with even coordinates, at
+        // 2d from the block's lower corner for child d): evaluate the unknown ones in one batch,
+        // and reject leaves whose corner is provably far.
         points.clear();
-        for o in &blocks {
-            store.claim(even(o), lattice, &mut points);
+        let mut shared = Vec::with_capacity(blocks.len() * 8);
+        for (&o, &m) in blocks.iter().zip(&masks) {
+            let idx = store.claim_block(o, PARENT_CORNERS[m as usize], lattice, &mut points);
+            shared.extend(bits(m).map(|d| idx[LEAF_CORNERS[d][d] as usize]));
         }
         store.evaluate(field, &points, settings, &mut stats)?;
         let diag = octree.safety * lattice.cell.length();
-        blocks.retain(|o| store.values[store.index(even(o)) as usize].abs() <= diag);
+        let mut shared = shared.into_iter();
+        for m in &mut masks {
+            *m = bits(*m)
+                .filter(|_| store.values[shared.next().unwrap() as usize].abs() <= diag)
+                .fold(0, |k, d| k | 1 << d);
+        }
     }
-    // Evaluate the leaves' corners not yet known, in one batch.
+    // The leaves, and all their corners not yet known evaluated in one batch; the leaves of a
+    // block claim its points at once.
+    let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
+    let mut leaves: Vec<[u32; 3]> = Vec::with_capacity(n);
+    let mut corners: Vec<[u32; 8]> = Vec::with_capacity(n);
     points.clear();
-    points.reserve(blocks.len() * 2);
-    let corners: Vec<[u32; 8]> = blocks
-        .iter()
-        .map(|&o| store.claim_cell(o, lattice, &mut points))
-        .collect();
+    points.reserve(2 * n);
+    for (&o, &m) in blocks.iter().zip(&masks) {
+        if m == 0 {
+            continue;
+        }
+        let idx = store.claim_block(o, LEAF_POINTS[m as usize], lattice, &mut points);
+        for d in bits(m) {
+            leaves.push(corner(o, d));
+            corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
+        }
+    }
+    drop((blocks, masks));
     store.evaluate(field, &points, settings, &mut stats)?;
     drop(points);
-    stats.cells_per_level.push(blocks.len() as u64);
-    stats.cells_visited = blocks.len() as u64;
+    stats.cells_per_level.push(leaves.len() as u64);
+    stats.cells_visited = leaves.len() as u64;
     stats.add_time("sample", t);
 
     let t = Instant::now();
@@ -377,7 +480,7 @@ pub fn polygonize<F: Field + ?Sized>(
     mesh.triangles
         .reserve(2 * crossed.len() + crossed.len() / 4);
     for &(i, case) in &crossed {
-        let (o, idx) = (blocks[i as usize], &corners[i as usize]);
+        let (o, idx) = (leaves[i as usize], &corners[i as usize]);
         emit_triangles(
             table,
             case,
