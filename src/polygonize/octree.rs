@@ -426,11 +426,16 @@ pub fn polygonize<F: Field + ?Sized>(
         }
         store.evaluate(field, &points, settings, &mut stats)?;
         let diag = octree.safety * lattice.cell.length();
-        let mut shared = shared.into_iter();
+        let mut next = 0;
         for m in &mut masks {
-            *m = bits(*m)
-                .filter(|_| store.values[shared.next().unwrap() as usize].abs() <= diag)
-                .fold(0, |k, d| k | 1 << d);
+            let mut kept = 0;
+            for d in bits(*m) {
+                if store.values[shared[next] as usize].abs() <= diag {
+                    kept |= 1 << d;
+                }
+                next += 1;
+            }
+            *m = kept;
         }
     }
     // The leaves, and all their corners not yet known evaluated in one batch; the leaves of a
