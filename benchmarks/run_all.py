@@ -58,15 +58,17 @@ def git_describe() -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description="Run all benchmarks and write BENCHMARKS.md.")
     p.add_argument("--quick", action="store_true", help="pass --quick to every bench (smoke test)")
-    p.add_argument("--only", nargs="*", default=None, help="bench names to run (bench_NAME.py), default all")
+    p.add_argument("--only", nargs="*", default=None, help="bench names to run (bench_NAME.py), default all; the other sections are "
+                        "copied from their last results in benchmarks/results/")
     p.add_argument("--output", default=str(ROOT / "BENCHMARKS.md"), help="combined markdown (default BENCHMARKS.md)")
     p.add_argument("--wait-idle", type=float, default=0.0, metavar="SECONDS",
                    help="before each bench, wait up to SECONDS for other processes to use < 0.3 cores")
     a = p.parse_args(argv)
 
-    scripts = sorted(HERE.glob("bench_*.py"))
+    every = sorted(HERE.glob("bench_*.py"))
+    scripts = every
     if a.only:
-        scripts = [s for s in scripts if s.stem[len("bench_"):] in a.only]
+        scripts = [s for s in every if s.stem[len("bench_"):] in a.only]
     if not scripts:
         print("no bench_*.py selected", file=sys.stderr)
         return 2
@@ -94,6 +96,18 @@ def main(argv=None) -> int:
         else:
             sections.append(out.read_text() if out.exists() else proc.stdout)
             summary.append(f"`{script.name}` {dt:.0f} s")
+    if a.only:
+        # Sections not re-run keep their last results (each section states its own run date).
+        kept = {}
+        for script in every:
+            name = script.stem[len("bench_"):]
+            old = results / f"{name}.md"
+            if script not in scripts and old.exists():
+                kept[name] = old.read_text()
+                summary.append(f"`{script.name}` not re-run (section from its last run, dated inside)")
+        order = [s.stem[len("bench_"):] for s in every]
+        ran = {s.stem[len("bench_"):]: sec for s, sec in zip(scripts, sections)}
+        sections = [ran[n] if n in ran else kept[n] for n in order if n in ran or n in kept]
     total = time.perf_counter() - t0
     load_after = loadavg()
     other = foreign_load(snap, cpu_snapshot())
