@@ -235,9 +235,7 @@ impl BlobField {
     pub fn potential(&self, p: DVec3) -> f64 {
         let mut f = 0.0;
         for &i in self.grid.candidates(p) {
-            let q = &self.packed[i as usize];
-            let t = (1.0 - (p - q.center).length_squared() * q.inv_r2).max(0.0);
-            f += q.strength * t * t;
+            f += self.term(i as usize, p);
         }
         f
     }
@@ -360,10 +358,6 @@ impl BlobField {
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
-    /// Bytes held by the voxel grid (capacity, not length).
-    pub fn capacity_bytes(&self) -> usize {
-        self.grid.capacity_bytes()
-    }
     pub fn grid(&self) -> &VoxelGrid {
         &self.grid
     }
@@ -388,6 +382,26 @@ impl BlobField {
 
 /// Point batches smaller than this are evaluated on the calling thread (about 0.1 ms of work).
 const SERIAL_BELOW: usize = 2048;
+
+/// `out[i] = f(points[i])`, in parallel chunks. Batches below [`SERIAL_BELOW`] points run on the
+/// calling thread: handing them to the pool costs more than it saves (the tracking
+/// polygonizer's waves are often that small).
+#[inline(always)]
+fn map_points<T: Send>(points: &[DVec3], out: &mut [T], f: impl Fn(DVec3) -> T + Sync) {
+    assert_eq!(points.len(), out.len());
+    let run = |p: &[DVec3], o: &mut [T]| {
+        for (pi, oi) in p.iter().zip(o.iter_mut()) {
+            *oi = f(*pi);
+        }
+    };
+    if points.len() < SERIAL_BELOW {
+        return run(points, out);
+    }
+    points
+        .par_chunks(PAR_CHUNK)
+        .zip(out.par_chunks_mut(PAR_CHUNK))
+        .for_each(|(p, o)| run(p, o));
+}
 
 /// One primitive's term along one lattice row: x-centre, dy², dz², 1/R², A.
 struct RowTerm {
@@ -521,38 +535,12 @@ impl Field for BlobField {
 
     /// The batch loops call the point functions inlined: a call per point (the trait's default)
     /// costs as much as the terms themselves here.
-    /// Batches below [`SERIAL_BELOW`] points run on the calling thread: handing them to the
-    /// pool costs more than it saves (the tracking polygonizer's waves are often that small).
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
-        assert_eq!(points.len(), out.len());
-        let run = |p: &[DVec3], o: &mut [f64]| {
-            for (pi, oi) in p.iter().zip(o.iter_mut()) {
-                *oi = self.threshold - self.potential(*pi);
-            }
-        };
-        if points.len() < SERIAL_BELOW {
-            return run(points, out);
-        }
-        points
-            .par_chunks(PAR_CHUNK)
-            .zip(out.par_chunks_mut(PAR_CHUNK))
-            .for_each(|(p, o)| run(p, o));
+        map_points(points, out, |p| self.threshold - self.potential(p));
     }
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
-        assert_eq!(points.len(), out.len());
-        let run = |p: &[DVec3], o: &mut [DVec3]| {
-            for (pi, oi) in p.iter().zip(o.iter_mut()) {
-                *oi = self.gradient_at(*pi);
-            }
-        };
-        if points.len() < SERIAL_BELOW {
-            return run(points, out);
-        }
-        points
-            .par_chunks(PAR_CHUNK)
-            .zip(out.par_chunks_mut(PAR_CHUNK))
-            .for_each(|(p, o)| run(p, o));
+        map_points(points, out, |p| self.gradient_at(p));
     }
 }
 
@@ -651,7 +639,7 @@ mod tests {
     #[test]
     fn update_moves_without_reallocating() {
         let mut b = random_blobs(200, 21);
-        let before = b.capacity_bytes();
+        let before = b.grid().capacity_bytes();
         for k in 0..20 {
             let c: Vec<DVec3> = b
                 .centers()
@@ -661,7 +649,7 @@ mod tests {
             b.update(&c, None, None).unwrap();
         }
         // Capacity may settle after the first rebuilds but must not keep growing.
-        let mid = b.capacity_bytes();
+        let mid = b.grid().capacity_bytes();
         for k in 0..20 {
             let c: Vec<DVec3> = b
                 .centers()
@@ -670,7 +658,7 @@ mod tests {
                 .collect();
             b.update(&c, None, None).unwrap();
         }
-        assert!(b.capacity_bytes() <= mid.max(before) * 2);
+        assert!(b.grid().capacity_bytes() <= mid.max(before) * 2);
         for p in random_points(500, -1.0, 1.0, 2) {
             assert!((b.potential(p) - b.potential_brute_force(p)).abs() < 1e-12);
         }

@@ -86,29 +86,17 @@ impl VoxelGrid {
     /// The primitives that may influence point `p` (empty outside the grid).
     #[inline(always)]
     pub fn candidates(&self, p: DVec3) -> &[u32] {
-        &self.items[self.range(p)]
-    }
-
-    /// Where the list of the voxel holding `p` lies in [`VoxelGrid::items`] (empty outside the
-    /// grid).
-    #[inline(always)]
-    pub fn range(&self, p: DVec3) -> std::ops::Range<usize> {
         let q = (p - self.origin) * self.inv_size;
         if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
-            return 0..0;
+            return &[];
         }
         let (x, y, z) = (q.x as u32, q.y as u32, q.z as u32);
         let [dx, dy, dz] = self.dims;
         if x >= dx || y >= dy || z >= dz {
-            return 0..0;
+            return &[];
         }
         let v = (x as usize) + dx as usize * (y as usize + dy as usize * z as usize);
-        self.start[v] as usize..self.start[v + 1] as usize
-    }
-
-    /// All voxel lists one after the other (list `v` is `items[start[v]..start[v + 1]]`).
-    pub fn items(&self) -> &[u32] {
-        &self.items
+        &self.items[self.start[v] as usize..self.start[v + 1] as usize]
     }
 
     /// The largest sum of `weight(i)` over the primitives `i` of one voxel's list (0 when

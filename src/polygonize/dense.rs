@@ -481,7 +481,7 @@ pub fn polygonize<F: Field + ?Sized>(
 /// Concatenates `parts` into one new vector, copying in parallel into its uninitialised
 /// capacity: its fresh pages are first touched (and faulted in) by all threads at once, and
 /// nothing is written twice.
-pub(crate) fn gather<T: Copy + Send + Sync>(parts: &[Vec<T>]) -> Vec<T> {
+fn gather<T: Copy + Send + Sync>(parts: &[Vec<T>]) -> Vec<T> {
     let total: usize = parts.iter().map(Vec::len).sum();
     let mut out: Vec<T> = Vec::with_capacity(total);
     let mut rest = &mut out.spare_capacity_mut()[..total];

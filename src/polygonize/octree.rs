@@ -95,8 +95,9 @@ const LEAF_CORNERS: [[u8; 8]; 8] = {
     }
     t
 };
-/// `LEAF_POINTS[m]`: the block points that the children in mask `m` need (bit per point).
-const LEAF_POINTS: [u32; 256] = {
+/// For every mask m of children, the union over the children d in m of the block points
+/// `LEAF_CORNERS[d][k]` (all eight corners k, or only k = d, the corner shared with the block).
+const fn children_points(only_shared: bool) -> [u32; 256] {
     let mut t = [0; 256];
     let mut m = 0;
     while m < 256 {
@@ -105,7 +106,9 @@ const LEAF_POINTS: [u32; 256] = {
             if m & (1 << d) != 0 {
                 let mut k = 0;
                 while k < 8 {
-                    t[m] |= 1 << LEAF_CORNERS[d][k];
+                    if !only_shared || k == d {
+                        t[m] |= 1 << LEAF_CORNERS[d][k];
+                    }
                     k += 1;
                 }
             }
@@ -114,24 +117,12 @@ const LEAF_POINTS: [u32; 256] = {
         m += 1;
     }
     t
-};
+}
+/// `LEAF_POINTS[m]`: the block points that the children in mask `m` need (bit per point).
+const LEAF_POINTS: [u32; 256] = children_points(false);
 /// `PARENT_CORNERS[m]`: the block's corners shared with the children in mask `m` (child d's
-/// corner 2d).
-const PARENT_CORNERS: [u32; 256] = {
-    let mut t = [0; 256];
-    let mut m = 0;
-    while m < 256 {
-        let mut d = 0;
-        while d < 8 {
-            if m & (1 << d) != 0 {
-                t[m] |= 1 << LEAF_CORNERS[d][d];
-            }
-            d += 1;
-        }
-        m += 1;
-    }
-    t
-};
+/// corner d).
+const PARENT_CORNERS: [u32; 256] = children_points(true);
 /// Offsets within a brick of the block points, when the whole block lies in one brick.
 const BLOCK_SLOTS: [usize; 27] = {
     let mut t = [0; 27];
