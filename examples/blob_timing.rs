@@ -1,10 +1,10 @@
 //! Times the polygonizers on random blob fields (the benchmark cases), for profiling:
 //! `cargo run --release --example blob_timing -- 200 0.25 128 dense [repeats] [voxel_size]`
-//! (method `dense` or `tracking`; prints the phases of the last run and the median).
+//! (method `dense`, `sparse` or `tracking`; prints the phases of the last run and the median).
 use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
 use implicitmesh::lattice::Lattice;
-use implicitmesh::polygonize::{dense, tracking, Settings};
+use implicitmesh::polygonize::{dense, sparse, tracking, Settings};
 use std::time::Instant;
 
 fn main() {
@@ -57,6 +57,10 @@ fn main() {
                     .unwrap();
                 (m.triangles.len(), s)
             }
+            "sparse" => {
+                let (m, s) = sparse::polygonize(&field, &lattice, &settings).unwrap();
+                (m.triangles.len(), s)
+            }
             _ => {
                 let (m, s) = dense::polygonize(&field, &lattice, &settings).unwrap();
                 (m.triangles.len(), s)
@@ -64,7 +68,10 @@ fn main() {
         };
         times.push(t.elapsed().as_secs_f64());
         if times.len() == reps {
-            println!("{tris} triangles, {:?}", stats.seconds);
+            println!(
+                "{tris} triangles, {} evaluations, {:?}",
+                stats.evaluations, stats.seconds
+            );
         }
     }
     times.sort_by(|a, b| a.partial_cmp(b).unwrap());

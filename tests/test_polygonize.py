@@ -468,6 +468,17 @@ def test_every_method_reproduces_dense(sphere_32, method):
     """Every polygonizer listed in METHODS works on the same lattice as the dense one and finds
     the same triangles on a simple closed surface (method names are case-insensitive)."""
     assert "dense" in implicitmesh.METHODS
+    if method == "sparse":
+        # Sparse bounds the field over blocks: blob fields only; a blob is a sphere too.
+        with pytest.raises(ValueError, match="method.*BlobField"):
+            polygonize(shapes.Sphere(radius=0.7), bounds=BOX, resolution=32, method="SPARSE")
+        blob = implicitmesh.BlobField([[0.01, 0.02, 0.03]], 1.3)
+        ref = polygonize(blob, bounds=BOX, resolution=32)
+        mesh = polygonize(blob, bounds=BOX, resolution=32, method="SPARSE")
+        assert mesh.stats["method"] == method
+        assert compare(ref, mesh) == {"missing": 0, "extra": 0, "common": len(ref.faces)}
+        assert len(ref.faces) > 1000
+        return
     # Tracking needs seeds for a callable: the sphere's centre.
     extra = {"seeds": [[0.01, 0.02, 0.03]]} if method == "tracking" else {}
     mesh = polygonize(

@@ -6,7 +6,7 @@
 //! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`]).
 
 use super::voxels::VoxelGrid;
-use super::{Field, PAR_CHUNK};
+use super::{BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
 use glam::DVec3;
@@ -219,8 +219,15 @@ impl BlobField {
     /// ∇f(p) = −∇F(p) from the voxel lists.
     #[inline(always)]
     fn gradient_at(&self, p: DVec3) -> DVec3 {
+        self.gradient_over(self.grid.candidates(p), p)
+    }
+
+    /// ∇f(p) summed over the primitives `list` (in index order: the same terms, in the same
+    /// order, as any other list that holds every primitive reaching `p`).
+    #[inline(always)]
+    fn gradient_over(&self, list: &[u32], p: DVec3) -> DVec3 {
         let mut g = DVec3::ZERO;
-        for &i in self.grid.candidates(p) {
+        for &i in list {
             let q = &self.packed[i as usize];
             let d = p - q.center;
             let t = (1.0 - d.length_squared() * q.inv_r2).max(0.0);
@@ -290,21 +297,12 @@ impl BlobField {
                 continue;
             };
             for y in y0..=y1 {
-                let dy = ys[y] - c.y;
-                let dy2 = dy * dy;
-                if 1.0 - (dy2 + dz2) * inv <= 0.0 {
-                    continue;
-                }
-                let half = (r * r - dy2 - dz2).max(0.0).sqrt();
-                let Some((x0, x1)) = range(c.x, half, lattice.origin.x, inv_h.x, px) else {
+                let Some(term) = RowTerm::new(c, inv, a, ys[y], dz2) else {
                     continue;
                 };
-                let term = RowTerm {
-                    cx: c.x,
-                    dy2,
-                    dz2,
-                    inv,
-                    a,
+                let half = (r * r - term.dy2 - dz2).max(0.0).sqrt();
+                let Some((x0, x1)) = range(c.x, half, lattice.origin.x, inv_h.x, px) else {
+                    continue;
                 };
                 row_fn(&mut slab[y * px + x0..=y * px + x1], &xs[x0..=x1], &term);
             }
@@ -334,6 +332,104 @@ impl BlobField {
     #[target_feature(enable = "avx2")]
     unsafe fn splat_plane_avx2(&self, l: &Lattice, xs: &[f64], ys: &[f64], z: f64, s: &mut [f64]) {
         self.splat_plane(l, xs, ys, z, s)
+    }
+
+    /// Fills a block of values (see [`BlockField::block_values`]) by splatting the primitives of
+    /// `list` row by row: the dense splat's arithmetic and order, so the same bits.
+    #[inline(always)]
+    fn splat_block_with(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        out: &mut [f64; 512],
+        row_fn: impl Fn(&mut [f64], &[f64], &RowTerm),
+    ) {
+        let BlockCoords { xs, ys, zs, n } = block;
+        let [nx, ny, nz] = n.map(|v| v as usize);
+        out.fill(0.0);
+        for &i in list {
+            let i = i as usize;
+            let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
+            for k in 0..nz {
+                let dz = zs[k] - c.z;
+                let dz2 = dz * dz;
+                if 1.0 - dz2 * inv <= 0.0 {
+                    continue;
+                }
+                for j in 0..ny {
+                    let Some(term) = RowTerm::new(c, inv, a, ys[j], dz2) else {
+                        continue;
+                    };
+                    let row = &mut out[8 * j + 64 * k..8 * j + 64 * k + nx];
+                    row_fn(row, &xs[..nx], &term);
+                }
+            }
+        }
+        for k in 0..nz {
+            for j in 0..ny {
+                for v in &mut out[8 * j + 64 * k..8 * j + 64 * k + nx] {
+                    *v = self.threshold - *v;
+                }
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn splat_block_avx512(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
+        // SAFETY: this function only runs where AVX-512F is available.
+        self.splat_block_with(list, block, out, |r, x, t| unsafe {
+            splat_row_avx512(r, x, t)
+        })
+    }
+
+    /// [`BlobField::gradient_over`] for eight points per step (`points.len()` a multiple of 8).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn gradients8_avx512(&self, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        use std::arch::x86_64::*;
+        let (one, zero) = (_mm512_set1_pd(1.0), _mm512_setzero_pd());
+        for (p8, o8) in points.chunks_exact(8).zip(out.chunks_exact_mut(8)) {
+            let lane = |f: fn(&DVec3) -> f64| -> [f64; 8] { std::array::from_fn(|k| f(&p8[k])) };
+            let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
+            // SAFETY: the arrays hold eight f64 each.
+            let (px, py, pz) = unsafe {
+                (
+                    _mm512_loadu_pd(x.as_ptr()),
+                    _mm512_loadu_pd(y.as_ptr()),
+                    _mm512_loadu_pd(z.as_ptr()),
+                )
+            };
+            let (mut gx, mut gy, mut gz) = (zero, zero, zero);
+            for &i in list {
+                let q = &self.packed[i as usize];
+                let dx = _mm512_sub_pd(px, _mm512_set1_pd(q.center.x));
+                let dy = _mm512_sub_pd(py, _mm512_set1_pd(q.center.y));
+                let dz = _mm512_sub_pd(pz, _mm512_set1_pd(q.center.z));
+                let s = _mm512_add_pd(
+                    _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
+                    _mm512_mul_pd(dz, dz),
+                );
+                let t = _mm512_max_pd(
+                    _mm512_sub_pd(one, _mm512_mul_pd(s, _mm512_set1_pd(q.inv_r2))),
+                    zero,
+                );
+                let k = _mm512_mul_pd(_mm512_set1_pd(q.grad), t);
+                gx = _mm512_add_pd(gx, _mm512_mul_pd(dx, k));
+                gy = _mm512_add_pd(gy, _mm512_mul_pd(dy, k));
+                gz = _mm512_add_pd(gz, _mm512_mul_pd(dz, k));
+            }
+            let (mut ox, mut oy, mut oz) = ([0.0; 8], [0.0; 8], [0.0; 8]);
+            // SAFETY: the arrays hold eight f64 each.
+            unsafe {
+                _mm512_storeu_pd(ox.as_mut_ptr(), gx);
+                _mm512_storeu_pd(oy.as_mut_ptr(), gy);
+                _mm512_storeu_pd(oz.as_mut_ptr(), gz);
+            }
+            for (k, o) in o8.iter_mut().enumerate() {
+                *o = DVec3::new(ox[k], oy[k], oz[k]);
+            }
+        }
     }
 
     /// An upper bound on |∇f| over all space: one primitive's gradient is largest at
@@ -412,6 +508,24 @@ struct RowTerm {
     a: f64,
 }
 
+impl RowTerm {
+    /// The term of the primitive at `c` (1/R² `inv`, strength `a`) along the row at `y` in a
+    /// plane at squared z-distance `dz2`; None when it reaches no point of the row:
+    /// (dx² + dy²) + dz² ≥ dy² + dz² in floating point too.
+    #[inline(always)]
+    fn new(c: DVec3, inv: f64, a: f64, y: f64, dz2: f64) -> Option<RowTerm> {
+        let dy = y - c.y;
+        let dy2 = dy * dy;
+        (1.0 - (dy2 + dz2) * inv > 0.0).then_some(RowTerm {
+            cx: c.x,
+            dy2,
+            dz2,
+            inv,
+            a,
+        })
+    }
+}
+
 /// Adds the term A·t², t = max(1 − ((dx² + dy²) + dz²)/R², 0), to each value of a row (`row[k]`
 /// at x = `xs[k]`). The order of operations is that of [`BlobField::potential`], without fused
 /// multiply-adds, so the values are bit-identical to point evaluation.
@@ -470,7 +584,14 @@ enum Isa {
 }
 
 impl Isa {
+    /// The instruction set, detected once per process (`IMPLICITMESH_NO_AVX512` set at start-up
+    /// turns AVX-512 off).
     fn detect() -> Isa {
+        static ISA: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
+        *ISA.get_or_init(Isa::probe)
+    }
+
+    fn probe() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
             if std::env::var_os("IMPLICITMESH_NO_AVX512").is_none()
@@ -541,6 +662,201 @@ impl Field for BlobField {
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         map_points(points, out, |p| self.gradient_at(p));
+    }
+}
+
+/// Which primitives reach which block of a lattice (for [`BlockField`]): one compressed list per
+/// z-layer of blocks, each block's primitives in index order.
+pub struct BlockLists {
+    /// Blocks per axis.
+    dims: [u32; 3],
+    /// Per z-layer: `start` (one more than the layer's blocks) and `items`.
+    layers: Vec<(Vec<u32>, Vec<u32>)>,
+}
+
+impl BlockLists {
+    /// The primitives that may reach block `b`, in index order.
+    #[inline]
+    pub fn list(&self, b: [u32; 3]) -> &[u32] {
+        let (start, items) = &self.layers[b[2] as usize];
+        let k = (b[0] + self.dims[0] * b[1]) as usize;
+        &items[start[k] as usize..start[k + 1] as usize]
+    }
+
+    /// Total entries over all lists.
+    pub fn entries(&self) -> usize {
+        self.layers.iter().map(|(_, i)| i.len()).sum()
+    }
+}
+
+/// The lattice coordinates of a block's points per axis, and its points per axis.
+struct BlockCoords {
+    xs: [f64; BLOCK_POINTS],
+    ys: [f64; BLOCK_POINTS],
+    zs: [f64; BLOCK_POINTS],
+    n: [u32; 3],
+}
+
+/// Box of the lattice points of a block: its lowest point and its highest.
+fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
+    let step = (BLOCK_POINTS - 1) as u32;
+    let last = lattice.cells;
+    let lo = [b[0] * step, b[1] * step, b[2] * step];
+    let hi = std::array::from_fn(|a| (lo[a] + step).min(last[a]));
+    (lattice.point(lo), lattice.point(hi))
+}
+
+/// Squared distances from `c` to the nearest and the farthest point of the box `[lo, hi]`.
+#[inline(always)]
+fn box_distances2(c: DVec3, lo: DVec3, hi: DVec3) -> (f64, f64) {
+    let near = (lo - c).max(c - hi).max(DVec3::ZERO);
+    let far = (c - lo).abs().max((hi - c).abs());
+    (near.length_squared(), far.length_squared())
+}
+
+impl BlockField for BlobField {
+    type Blocks = BlockLists;
+
+    /// Lists, per block, the primitives whose sphere of influence reaches its box (with a
+    /// relative margin of 1e-9 on R², so that rounding never leaves out a primitive that adds
+    /// a non-zero term at one of its points). Built per z-layer of blocks in parallel.
+    fn blocks(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
+        let step = (BLOCK_POINTS - 1) as f64;
+        let h = lattice.cell;
+        let layers = (0..dims[2])
+            .into_par_iter()
+            .map(|bz| {
+                let per_layer = (dims[0] * dims[1]) as usize;
+                let mut pairs: Vec<(u32, u32)> = Vec::new();
+                let (zlo, zhi) = {
+                    let (a, b) = block_box(lattice, [0, 0, bz]);
+                    (a.z, b.z)
+                };
+                for (i, (c, r)) in self.centers.iter().zip(&self.radii).enumerate() {
+                    if c.z + r < zlo || c.z - r > zhi {
+                        continue;
+                    }
+                    // Candidate block ranges along x and y (a block more on each side for
+                    // rounding), then the exact sphere-box test.
+                    let range = |a: usize| -> (u32, u32) {
+                        let o = lattice.origin[a];
+                        let lo = (((c[a] - r - o) / (h[a] * step)).floor() - 1.0).max(0.0);
+                        let hi = ((c[a] + r - o) / (h[a] * step)).floor() + 1.0;
+                        let hi = hi.min((dims[a] - 1) as f64);
+                        (lo as u32, hi.max(-1.0) as u32)
+                    };
+                    let ((x0, x1), (y0, y1)) = (range(0), range(1));
+                    if c.x + r < lattice.origin.x || c.y + r < lattice.origin.y {
+                        continue;
+                    }
+                    let r2 = r * r * (1.0 + 1e-9);
+                    for by in y0..=y1 {
+                        for bx in x0..=x1 {
+                            let (lo, hi) = block_box(lattice, [bx, by, bz]);
+                            if box_distances2(*c, lo, hi).0 <= r2 {
+                                pairs.push((bx + dims[0] * by, i as u32));
+                            }
+                        }
+                    }
+                }
+                // Counting sort by block, stable: each list stays in index order.
+                let mut start = vec![0u32; per_layer + 1];
+                for &(k, _) in &pairs {
+                    start[k as usize + 1] += 1;
+                }
+                for k in 0..per_layer {
+                    start[k + 1] += start[k];
+                }
+                let mut items = vec![0u32; pairs.len()];
+                let mut cursor = start.clone();
+                for &(k, i) in &pairs {
+                    items[cursor[k as usize] as usize] = i;
+                    cursor[k as usize] += 1;
+                }
+                (start, items)
+            })
+            .collect();
+        BlockLists { dims, layers }
+    }
+
+    /// Bounds F over the block from each listed primitive's nearest and farthest distance to
+    /// the block's box; when the bounds leave the threshold out (by a margin of 1e-9 of the
+    /// strengths' sum, far above rounding), the block has one sign. Otherwise splats the listed
+    /// primitives row by row, with the same arithmetic and order as the dense splat.
+    fn block_values(
+        &self,
+        blocks: &BlockLists,
+        lattice: &Lattice,
+        b: [u32; 3],
+        lo: [u32; 3],
+        n: [u32; 3],
+        out: &mut [f64; 512],
+    ) -> BlockSign {
+        let list = blocks.list(b);
+        let (plo, phi) = block_box(lattice, b);
+        let (mut fmin, mut fmax, mut scale) = (0.0f64, 0.0f64, self.threshold.abs());
+        for &i in list {
+            let i = i as usize;
+            let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
+            let (near, far) = box_distances2(c, plo, phi);
+            let t_near = (1.0 - near * inv).max(0.0);
+            let t_far = (1.0 - far * inv).max(0.0);
+            let (big, small) = (a * t_near * t_near, a * t_far * t_far);
+            fmax += big.max(small);
+            fmin += big.min(small);
+            scale += a.abs();
+        }
+        let margin = 1e-9 * scale;
+        if fmax < self.threshold - margin {
+            return BlockSign::Outside;
+        }
+        if fmin > self.threshold + margin {
+            return BlockSign::Inside;
+        }
+        // Coordinates exactly as Lattice::point computes them (repeating the last point).
+        let coord = |a: usize| -> [f64; BLOCK_POINTS] {
+            std::array::from_fn(|i| {
+                let mut g = [0; 3];
+                g[a] = lo[a] + (i as u32).min(n[a] - 1);
+                lattice.point(g)[a]
+            })
+        };
+        let block = BlockCoords {
+            xs: coord(0),
+            ys: coord(1),
+            zs: coord(2),
+            n,
+        };
+        match Isa::detect() {
+            // SAFETY: the variant is only chosen when the CPU has the feature.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { self.splat_block_avx512(list, &block, out) },
+            _ => self.splat_block_with(list, &block, out, splat_row),
+        }
+        BlockSign::Mixed
+    }
+
+    /// Eight points at a time over the block's list where AVX-512 is available (the same
+    /// operations in the same order as [`Field::gradient`], so the same bits).
+    fn block_gradients(
+        &self,
+        blocks: &BlockLists,
+        b: [u32; 3],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) {
+        let list = blocks.list(b);
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if let Isa::Avx512 = Isa::detect() {
+            let full = points.len() / 8 * 8;
+            // SAFETY: AVX-512F is available (detected).
+            unsafe { self.gradients8_avx512(list, &points[..full], &mut out[..full]) };
+            done = full;
+        }
+        for (p, o) in points[done..].iter().zip(&mut out[done..]) {
+            *o = self.gradient_over(list, *p);
+        }
     }
 }
 

@@ -89,6 +89,63 @@ pub trait Field: Sync {
     }
 }
 
+/// Points per axis of one block of the sparse polygonizer: blocks of 7³ cells, 8³ points, so that
+/// a block's point row is one vector of eight `f64` and a z-plane's signs are one `u64`.
+pub const BLOCK_POINTS: usize = 8;
+
+/// What a [`BlockField`] tells about one block of lattice points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlockSign {
+    /// Every point of the block is outside (f > 0): no cell of the block is crossed.
+    Outside,
+    /// Every point of the block is inside (f < 0).
+    Inside,
+    /// The values were written: the surface may cross the block.
+    Mixed,
+}
+
+/// A field that can bound its values over a box of lattice points cheaply, so that the sparse
+/// polygonizer ([`crate::polygonize::sparse`]) skips the blocks of the lattice that the surface
+/// cannot cross. The values it writes must have the same bits as [`Field::values`] (and the
+/// same as [`Field::lattice_values`]), so that the sparse mesh equals the dense one.
+pub trait BlockField: Field {
+    /// What the field prepares once per lattice (e.g. which primitives reach which block).
+    type Blocks: Send + Sync;
+
+    /// Prepares the blocks of `lattice`: block `(bx, by, bz)` holds the lattice points
+    /// `7·b .. 7·b + 8` along each axis (fewer at the lattice's upper sides), `blocks` per axis.
+    fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks;
+
+    /// For block `b` with lowest lattice point `lo` and `n` points per axis (each at most
+    /// [`BLOCK_POINTS`]): [`BlockSign::Outside`] or [`BlockSign::Inside`] when every point
+    /// provably has that sign, otherwise the values at point `lo + (i, j, k)` written to
+    /// `out[i + 8 j + 64 k]` and [`BlockSign::Mixed`].
+    fn block_values(
+        &self,
+        blocks: &Self::Blocks,
+        lattice: &Lattice,
+        b: [u32; 3],
+        lo: [u32; 3],
+        n: [u32; 3],
+        out: &mut [f64; 512],
+    ) -> BlockSign;
+
+    /// Gradients at `points`, all inside block `b` (the vertices it owns), as [`Field::gradients`]
+    /// computes them.
+    fn block_gradients(
+        &self,
+        blocks: &Self::Blocks,
+        b: [u32; 3],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) {
+        let _ = (blocks, b);
+        for (p, o) in points.iter().zip(out) {
+            *o = self.gradient(*p);
+        }
+    }
+}
+
 impl<F: Field + ?Sized> Field for &F {
     fn value(&self, p: DVec3) -> f64 {
         (**self).value(p)
@@ -236,6 +293,20 @@ pub(crate) mod testing {
             worst = worst.max(err);
         }
         worst
+    }
+
+    /// `n` blobs of radius `r` (strength 1, threshold 0.5) at random centres in [-0.8, 0.8]³.
+    pub fn random_blobs(n: usize, r: f64, seed: u64) -> super::blob::BlobField {
+        use super::blob::{BlobField, PerPrimitive, Settings};
+        let c = random_points(n, -0.8, 0.8, seed);
+        BlobField::new(
+            &c,
+            PerPrimitive::All(r),
+            PerPrimitive::All(1.0),
+            0.5,
+            Settings::default(),
+        )
+        .unwrap()
     }
 
     /// Deterministic pseudo-random points in a box (xorshift), for tests.

@@ -16,7 +16,9 @@
 //! triangle order included) does not depend on the number of threads. The working memory grows
 //! with one group of planes, not with the lattice.
 
-use super::{check_memory, compute_normals, estimate_triangles, CaseTable, Settings, Stats};
+use super::{
+    check_memory, compute_normals, estimate_triangles, gather, CaseTable, Settings, Stats,
+};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
@@ -476,34 +478,6 @@ pub fn polygonize<F: Field + ?Sized>(
         .all(|&v| (v as usize) < mesh.vertices.len()));
     compute_normals(field, lattice, &mut mesh, settings, &mut stats)?;
     Ok((mesh, stats))
-}
-
-/// Concatenates `parts` into one new vector, copying in parallel into its uninitialised
-/// capacity: its fresh pages are first touched (and faulted in) by all threads at once, and
-/// nothing is written twice.
-fn gather<T: Copy + Send + Sync>(parts: &[Vec<T>]) -> Vec<T> {
-    let total: usize = parts.iter().map(Vec::len).sum();
-    let mut out: Vec<T> = Vec::with_capacity(total);
-    let mut rest = &mut out.spare_capacity_mut()[..total];
-    let mut slices = Vec::with_capacity(parts.len());
-    for p in parts {
-        let (a, b) = rest.split_at_mut(p.len());
-        slices.push(a);
-        rest = b;
-    }
-    slices
-        .into_par_iter()
-        .zip(parts.par_iter())
-        .with_min_len(4)
-        .for_each(|(d, s)| {
-            for (di, si) in d.iter_mut().zip(s) {
-                di.write(*si);
-            }
-        });
-    // SAFETY: the slices cover out[..total] exactly (their lengths sum to total) and every
-    // element was written above.
-    unsafe { out.set_len(total) };
-    out
 }
 
 /// The sweep over the groups of planes (see the module documentation).

@@ -8,6 +8,7 @@ pub mod bricks;
 pub mod cell;
 pub mod dense;
 pub mod octree;
+pub mod sparse;
 pub mod subdivision;
 pub mod table;
 pub mod tracking;
@@ -134,6 +135,19 @@ pub fn evaluate<F: Field + ?Sized>(
     Ok(())
 }
 
+/// Where a normal is zero (the gradient vanishes), the mean normal of the vertex's triangles.
+pub fn fill_vanishing_normals(mesh: &mut Mesh) {
+    if !mesh.normals.contains(&DVec3::ZERO) {
+        return;
+    }
+    let f = mesh.face_normals_at_vertices();
+    for (gi, fi) in mesh.normals.iter_mut().zip(f) {
+        if *gi == DVec3::ZERO {
+            *gi = fi;
+        }
+    }
+}
+
 /// Fills `mesh.normals` from the field's gradient (batched), falling back to face normals where
 /// the gradient vanishes.
 pub fn compute_normals<F: Field + ?Sized>(
@@ -212,16 +226,38 @@ pub fn compute_normals<F: Field + ?Sized>(
             z: p.z,
         });
     }
-    if zero > 0 {
-        // Where the gradient vanishes, the mean normal of the vertex's triangles.
-        let f = mesh.face_normals_at_vertices();
-        for (gi, fi) in g.iter_mut().zip(f) {
-            if *gi == DVec3::ZERO {
-                *gi = fi;
-            }
-        }
-    }
     mesh.normals = g;
+    if zero > 0 {
+        fill_vanishing_normals(mesh);
+    }
     stats.add_time("normals", t);
     Ok(())
+}
+
+/// Concatenates `parts` into one new vector, copying in parallel into its uninitialised
+/// capacity: its fresh pages are first touched (and faulted in) by all threads at once, and
+/// nothing is written twice.
+pub(crate) fn gather<T: Copy + Send + Sync, P: AsRef<[T]> + Sync>(parts: &[P]) -> Vec<T> {
+    let total: usize = parts.iter().map(|p| p.as_ref().len()).sum();
+    let mut out: Vec<T> = Vec::with_capacity(total);
+    let mut rest = &mut out.spare_capacity_mut()[..total];
+    let mut slices = Vec::with_capacity(parts.len());
+    for p in parts {
+        let (a, b) = rest.split_at_mut(p.as_ref().len());
+        slices.push(a);
+        rest = b;
+    }
+    slices
+        .into_par_iter()
+        .zip(parts.par_iter())
+        .with_min_len(4)
+        .for_each(|(d, s)| {
+            for (di, si) in d.iter_mut().zip(s.as_ref()) {
+                di.write(*si);
+            }
+        });
+    // SAFETY: the slices cover out[..total] exactly (their lengths sum to total) and every
+    // element was written above.
+    unsafe { out.set_len(total) };
+    out
 }

@@ -326,22 +326,9 @@ pub fn polygonize<F: Field + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
-    use crate::field::testing::random_points;
+    use crate::field::testing::random_blobs as blobs;
     use crate::field::Counting;
     use crate::polygonize::{dense, Ambiguity};
-
-    fn blobs(n: usize, r: f64, seed: u64) -> BlobField {
-        let c = random_points(n, -0.8, 0.8, seed);
-        BlobField::new(
-            &c,
-            PerPrimitive::All(r),
-            PerPrimitive::All(1.0),
-            0.5,
-            BlobSettings::default(),
-        )
-        .unwrap()
-    }
 
     #[test]
     fn tracking_equals_dense_on_blobs() {

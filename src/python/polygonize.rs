@@ -4,7 +4,7 @@ use super::convert::{points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
-use crate::polygonize::{dense, octree, tracking, Ambiguity, Settings, Stats};
+use crate::polygonize::{dense, octree, sparse, tracking, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
 
@@ -190,6 +190,19 @@ fn mesh_to_py<'py>(
     PyTuple::new(py, [v, f, n, stats_py.into_any()])
 }
 
+/// Methods of [`polygonize`].
+const METHODS: [&str; 4] = ["dense", "sparse", "octree", "tracking"];
+
+fn unknown_method(method: &str) -> PyErr {
+    value_error(
+        "method",
+        format!(
+            "unknown method {method:?}; available: {}",
+            METHODS.map(|m| format!("{m:?}")).join(", ")
+        ),
+    )
+}
+
 /// Low-level polygonizer entry point; use :func:`implicitmesh.polygonize`.
 ///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
@@ -216,11 +229,8 @@ pub fn polygonize<'py>(
     let lattice = parse_lattice(bounds, resolution)?;
     let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
-    if !["dense", "octree", "tracking"].contains(&method.as_str()) {
-        return Err(value_error(
-            "method",
-            format!("unknown method {method:?}; available: \"dense\", \"octree\", \"tracking\""),
-        ));
+    if !METHODS.contains(&method.as_str()) {
+        return Err(unknown_method(&method));
     }
     if method != "octree" {
         for (name, given) in [
@@ -259,14 +269,19 @@ pub fn polygonize<'py>(
             let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
             py.detach(|| tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers))
         }
-        _ => {
-            return Err(value_error(
-                "method",
-                format!(
-                    "unknown method {method:?}; available: \"dense\", \"octree\", \"tracking\""
-                ),
-            ))
-        }
+        "sparse" => match &field {
+            FieldArg::Blob(b) => {
+                let blobs = &b.inner;
+                py.detach(|| sparse::polygonize(blobs, &lattice, &settings).map(buffers))
+            }
+            _ => {
+                return Err(value_error(
+                    "method",
+                    "method=\"sparse\" needs a BlobField (it bounds the field over blocks of the lattice); use \"dense\" or \"octree\"",
+                ))
+            }
+        },
+        _ => return Err(unknown_method(&method)),
     };
     if let Some(e) = field.take_error() {
         return Err(e);

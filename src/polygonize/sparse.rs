@@ -1,0 +1,620 @@
+//! Sparse marching cubes: the lattice is cut into blocks of 7³ cells (8³ points, the faces
+//! shared), and a block is skipped when its field proves that all its points have one sign
+//! ([`BlockField::block_values`]: for a blob field, bounds on each primitive's term over the
+//! block's box). Only the blocks the surface may cross are evaluated and triangulated, so the
+//! work grows with the surface, not with the lattice, and every component is found (no seeds).
+//!
+//! The mesh is the dense polygonizer's, triangle for triangle and bit for bit: a crossed edge
+//! has ends of both signs, so every block holding it is evaluated, with the same values
+//! ([`BlockField`] requires the same bits as [`Field::values`]); vertices come from the edge's
+//! lower end with [`edge_crossing`] and cells go through the shared case table. Only the order
+//! of vertices and triangles differs (block by block instead of layer by layer).
+//!
+//! Two parallel passes:
+//! 1. per block: values (or a sign), then the signs as eight 64-bit words (one per z-plane,
+//!    bit `i + 8j`), the crossed edges the block owns as bit words, and their vertices (and
+//!    normals, from the field's gradient over the block's own primitive list). A block owns the
+//!    edges starting at its points below its upper faces (at the lattice's upper sides, those
+//!    on them too), so every lattice edge has one owner.
+//! 2. per evaluated block: its crossed cells, found eight words at a time; a triangle corner on
+//!    an edge another block owns looks up that block's rank of the edge (a popcount).
+//!
+//! The output does not depend on the number of threads.
+//!
+//! ```
+//! use glam::DVec3;
+//! use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+//! use implicitmesh::lattice::Lattice;
+//! use implicitmesh::polygonize::{dense, sparse, Settings};
+//!
+//! let centers = [DVec3::new(-0.2, 0.0, 0.0), DVec3::new(0.25, 0.05, 0.0)];
+//! let blobs = BlobField::new(
+//!     &centers,
+//!     PerPrimitive::All(0.5),
+//!     PerPrimitive::All(1.0),
+//!     0.5,
+//!     BlobSettings::default(),
+//! )
+//! .unwrap();
+//! let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 48).unwrap();
+//! let (mesh, stats) = sparse::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
+//! let (reference, _) = dense::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
+//! assert_eq!(mesh.triangles.len(), reference.triangles.len());
+//! assert!(mesh.is_closed_oriented());
+//! assert!(stats.evaluations < stats.lattice_points / 2);
+//! ```
+
+use super::{
+    check_memory, estimate_triangles, fill_vanishing_normals, gather, CaseTable, Settings, Stats,
+    BYTES_PER_TRIANGLE,
+};
+use crate::error::{Error, Result};
+use crate::field::{BlockField, BlockSign, BLOCK_POINTS};
+use crate::lattice::{edge_crossing, Lattice};
+use crate::mesh::Mesh;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Cells per block side.
+const STEP: u32 = BLOCK_POINTS as u32 - 1;
+/// Blocks per task of the first pass (most blocks are skipped after a few bounds).
+const BLOCKS_PER_TASK: usize = 64;
+/// Evaluated blocks per task of the second pass.
+const ACTIVE_PER_TASK: usize = 16;
+/// No evaluated block here.
+const NONE: u32 = u32::MAX;
+
+/// An evaluated block: what the second pass needs of it.
+#[derive(Clone, Copy)]
+struct Active {
+    block: [u32; 3],
+    /// Points per axis (2..=8).
+    n: [u8; 3],
+    /// Whether the block is the last along each axis (it then owns its upper faces).
+    last: [bool; 3],
+    /// Signs per z-plane: bit `i + 8j` of word `k` set when point (i, j, k) is inside.
+    signs: [u64; 8],
+    /// Crossed edges the block owns, per axis and z-plane of their lower end (word `8a + k`).
+    edges: [u64; 24],
+    /// Vertices of the block before word `w` of `edges`.
+    before: [u16; 24],
+    /// Index of the block's first vertex (global after the first pass's prefix sum).
+    base: u32,
+}
+
+impl Active {
+    /// Index of the vertex on the owned crossed edge along `axis` from local point `l`.
+    #[inline(always)]
+    fn vertex(&self, axis: usize, l: [u32; 3]) -> u32 {
+        let w = axis * 8 + l[2] as usize;
+        let bit = l[0] + 8 * l[1];
+        let below = self.edges[w] & ((1u64 << bit) - 1);
+        self.base + self.before[w] as u32 + below.count_ones()
+    }
+}
+
+/// Bits `i + 8j` for `i < x` and `j < y` (a block's 8 × 8 plane).
+#[inline]
+fn plane_mask(x: u32, y: u32) -> u64 {
+    let row = if x >= 8 { 0xff } else { (1u64 << x) - 1 };
+    (0..y.min(8)).fold(0, |m, j| m | row << (8 * j))
+}
+
+/// What one task of the first pass produces.
+#[derive(Default)]
+struct Part {
+    active: Vec<Active>,
+    vertices: Vec<DVec3>,
+    normals: Vec<DVec3>,
+    evaluations: u64,
+}
+
+/// Buffers kept between calls (an animation allocates nothing in steady state).
+#[derive(Default)]
+struct Workspace {
+    parts: Vec<Part>,
+    active: Vec<Active>,
+    map: Vec<u32>,
+    triangles: Vec<Vec<[u32; 3]>>,
+}
+
+static WORKSPACES: std::sync::Mutex<Vec<Workspace>> = std::sync::Mutex::new(Vec::new());
+/// Workspaces above this are dropped after the call.
+const KEEP_BYTES: usize = 64 << 20;
+
+impl Workspace {
+    fn bytes(&self) -> usize {
+        self.parts
+            .iter()
+            .map(|p| {
+                p.active.capacity() * std::mem::size_of::<Active>()
+                    + (p.vertices.capacity() + p.normals.capacity()) * 24
+            })
+            .sum::<usize>()
+            + self.active.capacity() * std::mem::size_of::<Active>()
+            + self.map.capacity() * 4
+            + self
+                .triangles
+                .iter()
+                .map(|t| t.capacity() * 12)
+                .sum::<usize>()
+    }
+}
+
+/// Blocks per axis of a lattice.
+pub fn block_dims(lattice: &Lattice) -> [u32; 3] {
+    lattice.cells.map(|c| c.div_ceil(STEP))
+}
+
+/// Polygonizes `field` over the blocks of `lattice` it cannot rule out; the mesh equals
+/// [`super::dense::polygonize`]'s (up to the order of vertices and triangles).
+pub fn polygonize<F: BlockField + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+) -> Result<(Mesh, Stats)> {
+    let dims = block_dims(lattice);
+    let num_blocks = dims.iter().map(|&d| d as u64).product::<u64>();
+    check_memory(
+        num_blocks * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
+        settings.memory_limit,
+    )?;
+    let mut ws = WORKSPACES
+        .lock()
+        .ok()
+        .and_then(|mut w| w.pop())
+        .unwrap_or_default();
+    let r = run(field, lattice, settings, dims, &mut ws);
+    if ws.bytes() <= KEEP_BYTES {
+        if let Ok(mut pool) = WORKSPACES.lock() {
+            if pool.len() < 2 {
+                pool.push(ws);
+            }
+        }
+    }
+    r
+}
+
+fn run<F: BlockField + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+    dims: [u32; 3],
+    ws: &mut Workspace,
+) -> Result<(Mesh, Stats)> {
+    let table = CaseTable::get(settings.ambiguity);
+    let mut stats = Stats {
+        lattice_points: lattice.num_points(),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let blocks = field.blocks(lattice, dims);
+    stats.add_time("blocks", t);
+
+    // Pass 1: values, signs, owned vertices (and normals) per block.
+    let t = Instant::now();
+    let num_blocks = dims.iter().map(|&d| d as usize).product::<usize>();
+    let tasks = num_blocks.div_ceil(BLOCKS_PER_TASK);
+    ws.parts.resize_with(tasks, Part::default);
+    let points = lattice.points_per_axis();
+    let normals = settings.normals;
+    ws.parts
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(task, part)| {
+            part.active.clear();
+            part.vertices.clear();
+            part.normals.clear();
+            part.evaluations = 0;
+            let mut values = [0.0f64; 512];
+            let end = ((task + 1) * BLOCKS_PER_TASK).min(num_blocks);
+            for index in task * BLOCKS_PER_TASK..end {
+                let i = index as u32;
+                let b = [
+                    i % dims[0],
+                    (i / dims[0]) % dims[1],
+                    i / (dims[0] * dims[1]),
+                ];
+                let lo = b.map(|v| v * STEP);
+                let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
+                if field.block_values(&blocks, lattice, b, lo, n, &mut values) != BlockSign::Mixed {
+                    continue;
+                }
+                part.evaluations += (n[0] * n[1] * n[2]) as u64;
+                let first = part.vertices.len();
+                let active = block_vertices(lattice, b, lo, n, dims, &values, &mut part.vertices);
+                part.active.push(Active {
+                    base: first as u32,
+                    ..active
+                });
+                if normals {
+                    let new = &part.vertices[first..];
+                    part.normals.resize(part.vertices.len(), DVec3::ZERO);
+                    let out = &mut part.normals[first..];
+                    field.block_gradients(&blocks, b, new, out);
+                    for g in out.iter_mut() {
+                        let l = g.length();
+                        if l > 0.0 {
+                            *g *= 1.0 / l;
+                        }
+                    }
+                }
+            }
+        });
+    // Prefix sum: global vertex indices, one list of evaluated blocks, the block map.
+    ws.active.clear();
+    ws.map.clear();
+    ws.map.resize(num_blocks, NONE);
+    let mut vertices = 0usize;
+    for part in &ws.parts {
+        for a in &part.active {
+            let i = a.block[0] + dims[0] * (a.block[1] + dims[1] * a.block[2]);
+            ws.map[i as usize] = ws.active.len() as u32;
+            let base = u32::try_from(vertices + a.base as usize)
+                .map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
+            ws.active.push(Active { base, ..*a });
+        }
+        vertices += part.vertices.len();
+        stats.evaluations += part.evaluations;
+    }
+    stats.cells_visited = ws
+        .active
+        .iter()
+        .map(|a| a.n.iter().map(|&v| v as u64 - 1).product::<u64>())
+        .sum();
+    let mut mesh = Mesh {
+        vertices: gather(&ws.parts.iter().map(|p| &p.vertices[..]).collect::<Vec<_>>()),
+        ..Default::default()
+    };
+    if normals {
+        mesh.normals = gather(&ws.parts.iter().map(|p| &p.normals[..]).collect::<Vec<_>>());
+    }
+    stats.add_time("evaluate", t);
+
+    // Pass 2: triangles per evaluated block.
+    let t = Instant::now();
+    let tasks = ws.active.len().div_ceil(ACTIVE_PER_TASK);
+    ws.triangles.resize_with(tasks, Vec::new);
+    let (active, map) = (&ws.active[..], &ws.map[..]);
+    stats.cells_crossed = ws.triangles[..tasks]
+        .par_iter_mut()
+        .enumerate()
+        .map(|(task, out)| {
+            out.clear();
+            let end = ((task + 1) * ACTIVE_PER_TASK).min(active.len());
+            active[task * ACTIVE_PER_TASK..end]
+                .iter()
+                .map(|a| triangulate_block(table, a, active, map, dims, out))
+                .sum::<Option<u64>>()
+        })
+        .sum::<Option<u64>>()
+        .ok_or_else(|| {
+            Error::invalid(
+                "field",
+                "its block bounds ruled out a block that the surface crosses",
+            )
+        })?;
+    mesh.triangles = gather(&ws.triangles[..tasks]);
+    stats.add_time("triangulate", t);
+
+    if normals {
+        let t = Instant::now();
+        if let Some(i) = mesh.normals.iter().position(|g| !g.is_finite()) {
+            let p = mesh.vertices[i];
+            return Err(Error::FieldNotFinite {
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            });
+        }
+        fill_vanishing_normals(&mut mesh);
+        stats.normal_evaluations = mesh.vertices.len() as u64;
+        stats.add_time("normals", t);
+    }
+    Ok((mesh, stats))
+}
+
+/// Signs and owned crossed edges of an evaluated block; appends its vertices in rank order.
+fn block_vertices(
+    lattice: &Lattice,
+    b: [u32; 3],
+    lo: [u32; 3],
+    n: [u32; 3],
+    dims: [u32; 3],
+    values: &[f64; 512],
+    vertices: &mut Vec<DVec3>,
+) -> Active {
+    let last: [bool; 3] = std::array::from_fn(|a| b[a] + 1 == dims[a]);
+    // Owned coordinates per axis: below the upper face, or all at the lattice's upper side.
+    let own: [u32; 3] = std::array::from_fn(|a| if last[a] { n[a] } else { STEP });
+    // Points beyond the lattice hold 0.0 (outside); their bits are masked off below.
+    let mut signs = [0u64; 8];
+    for (k, s) in signs.iter_mut().enumerate().take(n[2] as usize) {
+        let mut w = 0u64;
+        for j in 0..8 {
+            let row: &[f64; 8] = values[64 * k + 8 * j..64 * k + 8 * j + 8]
+                .try_into()
+                .unwrap();
+            let mut byte = 0u64;
+            for (i, v) in row.iter().enumerate() {
+                byte |= ((*v < 0.0) as u64) << i;
+            }
+            w |= byte << (8 * j);
+        }
+        *s = w & plane_mask(n[0], n[1]);
+    }
+    let mut edges = [0u64; 24];
+    let x_mask = plane_mask(n[0] - 1, own[1]);
+    let y_mask = plane_mask(own[0], n[1] - 1);
+    let z_mask = plane_mask(own[0], own[1]);
+    for k in 0..own[2].min(n[2]) as usize {
+        let w = signs[k];
+        edges[k] = (w ^ (w >> 1)) & x_mask;
+        edges[8 + k] = (w ^ (w >> 8)) & y_mask;
+        if k + 1 < n[2] as usize {
+            edges[16 + k] = (w ^ signs[k + 1]) & z_mask;
+        }
+    }
+    let mut before = [0u16; 24];
+    let mut count = 0u16;
+    for (w, e) in edges.iter().enumerate() {
+        before[w] = count;
+        count += e.count_ones() as u16;
+    }
+    // Coordinates of the block's points (and one beyond) per axis, as Lattice::point makes them.
+    let coords: [[f64; 9]; 3] = std::array::from_fn(|a| {
+        std::array::from_fn(|i| {
+            let mut g = [0; 3];
+            g[a] = lo[a] + i as u32;
+            lattice.point(g)[a]
+        })
+    });
+    const STRIDE: [usize; 3] = [1, 8, 64];
+    for (w, &e) in edges.iter().enumerate() {
+        let (axis, k) = (w / 8, w % 8);
+        let mut m = e;
+        while m != 0 {
+            let bit = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let (i, j) = (bit & 7, bit >> 3);
+            let idx = bit + 64 * k;
+            let pa = DVec3::new(coords[0][i], coords[1][j], coords[2][k]);
+            let pb = match axis {
+                0 => DVec3::new(coords[0][i + 1], pa.y, pa.z),
+                1 => DVec3::new(pa.x, coords[1][j + 1], pa.z),
+                _ => DVec3::new(pa.x, pa.y, coords[2][k + 1]),
+            };
+            vertices.push(edge_crossing(
+                pa,
+                pb,
+                values[idx],
+                values[idx + STRIDE[axis]],
+            ));
+        }
+    }
+    Active {
+        block: b,
+        n: n.map(|v| v as u8),
+        last,
+        signs,
+        edges,
+        before,
+        base: 0,
+    }
+}
+
+/// Offset of each cell edge's entry in a block's vertex table (`axis · 512 + x + 8y + 64z` of
+/// its lower end, relative to the cell's lower corner).
+const EDGE_ENTRY: [usize; 12] = {
+    let mut t = [0usize; 12];
+    let mut e = 0;
+    while e < 12 {
+        let c = super::table::CORNERS[super::table::EDGES[e][0] as usize];
+        t[e] = super::table::EDGE_AXIS[e] as usize * 512
+            + c[0] as usize
+            + 8 * c[1] as usize
+            + 64 * c[2] as usize;
+        e += 1;
+    }
+    t
+};
+
+/// Triangulates the crossed cells of block `a`; returns their number (None when a crossed edge
+/// lies in a block the field ruled out, which a correct [`BlockField`] never does). First fills a table of
+/// the vertex index of every crossed edge its cells use (its own, then those on its upper faces
+/// that neighbours own), then reads the triangles' corners from it.
+fn triangulate_block(
+    table: &CaseTable,
+    a: &Active,
+    active: &[Active],
+    map: &[u32],
+    dims: [u32; 3],
+    out: &mut Vec<[u32; 3]>,
+) -> Option<u64> {
+    let [nx, ny, nz] = a.n.map(|v| v as u32);
+    let mut ids = [0u32; 1536];
+    let mut next = a.base;
+    for (w, &e) in a.edges.iter().enumerate() {
+        let mut m = e;
+        while m != 0 {
+            let bit = m.trailing_zeros() as usize;
+            m &= m - 1;
+            ids[(w / 8) * 512 + (w % 8) * 64 + bit] = next;
+            next += 1;
+        }
+    }
+    // Crossed edges of the block that a neighbour owns (lower end on an upper face).
+    let masks = [
+        plane_mask(nx - 1, ny),
+        plane_mask(nx, ny - 1),
+        plane_mask(nx, ny),
+    ];
+    for axis in 0..3 {
+        for k in 0..nz as usize {
+            let w = a.signs[k];
+            let crossed = match axis {
+                0 => w ^ (w >> 1),
+                1 => w ^ (w >> 8),
+                _ if k + 1 < nz as usize => w ^ a.signs[k + 1],
+                _ => 0,
+            } & masks[axis];
+            let mut m = crossed & !a.edges[axis * 8 + k];
+            while m != 0 {
+                let bit = m.trailing_zeros();
+                m &= m - 1;
+                let mut l = [bit & 7, bit >> 3, k as u32];
+                let mut b = a.block;
+                for d in 0..3 {
+                    if l[d] == STEP && !a.last[d] {
+                        b[d] += 1;
+                        l[d] = 0;
+                    }
+                }
+                let i = map[(b[0] + dims[0] * (b[1] + dims[1] * b[2])) as usize];
+                // A crossed edge in a skipped block: the field's bounds were wrong.
+                let Some(owner) = active.get(i as usize) else {
+                    return None;
+                };
+                ids[axis * 512 + k * 64 + bit as usize] = owner.vertex(axis, l);
+            }
+        }
+    }
+    let cells = plane_mask(nx - 1, ny - 1);
+    let mut crossed = 0;
+    for k in 0..nz as usize - 1 {
+        let (lo, hi) = (a.signs[k], a.signs[k + 1]);
+        let (mut any, mut all) = (0u64, !0u64);
+        for s in [0, 1, 8, 9] {
+            any |= (lo >> s) | (hi >> s);
+            all &= (lo >> s) & (hi >> s);
+        }
+        let mut m = any & !all & cells;
+        while m != 0 {
+            let c = m.trailing_zeros();
+            m &= m - 1;
+            let case = ((lo >> c) & 3)
+                | ((lo >> (c + 8)) & 3) << 2
+                | ((hi >> c) & 3) << 4
+                | ((hi >> (c + 8)) & 3) << 6;
+            crossed += 1;
+            let cell = &ids[64 * k + c as usize..];
+            for t in table.triangles(case as u8) {
+                out.push(t.map(|e| cell[EDGE_ENTRY[e as usize]]));
+            }
+        }
+    }
+    Some(crossed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::dense;
+    use super::*;
+    use crate::field::blob::BlobField;
+    use crate::field::testing::random_blobs as blobs;
+    use crate::polygonize::Ambiguity;
+
+    /// Triangles as sorted triples of vertex bit patterns (order-free, bit-exact).
+    fn canonical(m: &Mesh) -> Vec<[[u64; 3]; 3]> {
+        let key = |v: u32| m.vertices[v as usize].to_array().map(f64::to_bits);
+        let mut t: Vec<[[u64; 3]; 3]> = m
+            .triangles
+            .iter()
+            .map(|t| {
+                // Rotate so the smallest vertex comes first (keeps the orientation).
+                let k = t.map(key);
+                let s = (0..3).min_by_key(|&i| k[i]).unwrap();
+                [k[s], k[(s + 1) % 3], k[(s + 2) % 3]]
+            })
+            .collect();
+        t.sort_unstable();
+        t
+    }
+
+    fn check_equal(field: &BlobField, lattice: &Lattice, ambiguity: Ambiguity) -> Stats {
+        let s = Settings {
+            ambiguity,
+            ..Default::default()
+        };
+        let (a, st) = polygonize(field, lattice, &s).unwrap();
+        let (b, _) = dense::polygonize(field, lattice, &s).unwrap();
+        assert_eq!(a.vertices.len(), b.vertices.len());
+        assert_eq!(canonical(&a), canonical(&b));
+        // Normals are the field's gradient at the same vertex: the same bits.
+        let pairs = |m: &Mesh| {
+            let mut p: Vec<_> = m
+                .vertices
+                .iter()
+                .zip(&m.normals)
+                .map(|(v, n)| {
+                    (
+                        v.to_array().map(f64::to_bits),
+                        n.to_array().map(f64::to_bits),
+                    )
+                })
+                .collect();
+            p.sort_unstable();
+            p
+        };
+        let (na, nb) = (pairs(&a), pairs(&b));
+        assert_eq!(na, nb);
+        st
+    }
+
+    #[test]
+    fn equals_dense_on_random_blobs() {
+        for (n, r, res, seed) in [
+            (200, 0.25, 64, 1),
+            (60, 0.12, 37, 2),
+            (500, 0.08, 50, 3),
+            (5, 0.6, 22, 4),
+            (1, 0.3, 7, 5),
+            (30, 0.2, 8, 6),
+        ] {
+            let f = blobs(n, r, seed);
+            let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), res).unwrap();
+            for amb in [Ambiguity::Separate, Ambiguity::Join] {
+                let st = check_equal(&f, &l, amb);
+                assert!(st.evaluations <= st.lattice_points * 2);
+            }
+        }
+    }
+
+    #[test]
+    fn anisotropic_and_cut_lattices() {
+        let f = blobs(40, 0.3, 9);
+        // Odd cell counts (partial blocks on every axis) and a box that cuts the surface.
+        let l = Lattice::new(
+            DVec3::new(-1.0, -0.7, -0.3),
+            DVec3::new(0.9, 1.0, 0.4),
+            [29, 15, 10],
+        )
+        .unwrap();
+        check_equal(&f, &l, Ambiguity::Separate);
+    }
+
+    #[test]
+    fn skips_most_blocks_and_is_closed() {
+        let f = blobs(20, 0.3, 11);
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 96).unwrap();
+        let (m, st) = polygonize(&f, &l, &Settings::default()).unwrap();
+        assert!(m.is_closed_oriented());
+        assert!(
+            st.evaluations * 3 < st.lattice_points,
+            "{} of {}",
+            st.evaluations,
+            st.lattice_points
+        );
+    }
+
+    #[test]
+    fn empty_field_gives_empty_mesh() {
+        let f = blobs(3, 0.2, 12);
+        // A box far from every blob.
+        let l = Lattice::cubic(DVec3::splat(5.0), DVec3::splat(6.0), 16).unwrap();
+        let (m, st) = polygonize(&f, &l, &Settings::default()).unwrap();
+        assert!(m.triangles.is_empty() && m.vertices.is_empty());
+        assert_eq!(st.evaluations, 0);
+    }
+}
