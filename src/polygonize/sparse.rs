@@ -282,10 +282,11 @@ fn run<F: BlockField + ?Sized>(
         .enumerate()
         .map(|(task, out)| {
             out.clear();
+            let mut ids = [0u32; 1536];
             let end = ((task + 1) * ACTIVE_PER_TASK).min(active.len());
             active[task * ACTIVE_PER_TASK..end]
                 .iter()
-                .map(|a| triangulate_block(table, a, active, map, dims, out))
+                .map(|a| triangulate_block(table, a, active, map, dims, &mut ids, out))
                 .sum::<Option<u64>>()
         })
         .sum::<Option<u64>>()
@@ -315,6 +316,43 @@ fn run<F: BlockField + ?Sized>(
     Ok((mesh, stats))
 }
 
+/// Bit `i + 8j` of word `k` set when `values[i + 8j + 64k] < 0`, for the first `planes` planes.
+#[inline]
+fn inside_bits(values: &[f64; 512], planes: usize) -> [u64; 8] {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { inside_bits_avx512(values, planes) };
+    }
+    let mut signs = [0u64; 8];
+    for (k, s) in signs.iter_mut().enumerate().take(planes) {
+        for (j, row) in values[64 * k..64 * k + 64].chunks_exact(8).enumerate() {
+            let mut byte = 0u64;
+            for (i, v) in row.iter().enumerate() {
+                byte |= ((*v < 0.0) as u64) << i;
+            }
+            *s |= byte << (8 * j);
+        }
+    }
+    signs
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn inside_bits_avx512(values: &[f64; 512], planes: usize) -> [u64; 8] {
+    use std::arch::x86_64::*;
+    let zero = _mm512_setzero_pd();
+    let mut signs = [0u64; 8];
+    for (k, s) in signs.iter_mut().enumerate().take(planes) {
+        for j in 0..8 {
+            // SAFETY: 64k + 8j + 8 ≤ 512: eight f64 within the array.
+            let v = unsafe { _mm512_loadu_pd(values.as_ptr().add(64 * k + 8 * j)) };
+            *s |= (_mm512_cmp_pd_mask::<_CMP_LT_OQ>(v, zero) as u64) << (8 * j);
+        }
+    }
+    signs
+}
+
 /// Signs and owned crossed edges of an evaluated block; appends its vertices in rank order.
 fn block_vertices(
     lattice: &Lattice,
@@ -328,21 +366,11 @@ fn block_vertices(
     let last: [bool; 3] = std::array::from_fn(|a| b[a] + 1 == dims[a]);
     // Owned coordinates per axis: below the upper face, or all at the lattice's upper side.
     let own: [u32; 3] = std::array::from_fn(|a| if last[a] { n[a] } else { STEP });
-    // Points beyond the lattice hold 0.0 (outside); their bits are masked off below.
-    let mut signs = [0u64; 8];
-    for (k, s) in signs.iter_mut().enumerate().take(n[2] as usize) {
-        let mut w = 0u64;
-        for j in 0..8 {
-            let row: &[f64; 8] = values[64 * k + 8 * j..64 * k + 8 * j + 8]
-                .try_into()
-                .unwrap();
-            let mut byte = 0u64;
-            for (i, v) in row.iter().enumerate() {
-                byte |= ((*v < 0.0) as u64) << i;
-            }
-            w |= byte << (8 * j);
-        }
-        *s = w & plane_mask(n[0], n[1]);
+    // Points beyond the lattice hold 0.0 (outside); their bits are masked off.
+    let mut signs = inside_bits(values, n[2] as usize);
+    let points = plane_mask(n[0], n[1]);
+    for s in signs.iter_mut() {
+        *s &= points;
     }
     let mut edges = [0u64; 24];
     let x_mask = plane_mask(n[0] - 1, own[1]);
@@ -423,17 +451,18 @@ const EDGE_ENTRY: [usize; 12] = {
 /// Triangulates the crossed cells of block `a`; returns their number (None when a crossed edge
 /// lies in a block the field ruled out, which a correct [`BlockField`] never does). First fills a table of
 /// the vertex index of every crossed edge its cells use (its own, then those on its upper faces
-/// that neighbours own), then reads the triangles' corners from it.
+/// that neighbours own), then reads the triangles' corners from it. Entries of `ids` are read
+/// only for crossed edges, which are written first, so the table is never cleared.
 fn triangulate_block(
     table: &CaseTable,
     a: &Active,
     active: &[Active],
     map: &[u32],
     dims: [u32; 3],
+    ids: &mut [u32; 1536],
     out: &mut Vec<[u32; 3]>,
 ) -> Option<u64> {
     let [nx, ny, nz] = a.n.map(|v| v as u32);
-    let mut ids = [0u32; 1536];
     let mut next = a.base;
     for (w, &e) in a.edges.iter().enumerate() {
         let mut m = e;
