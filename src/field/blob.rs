@@ -344,19 +344,41 @@ impl BlobField {
         out: &mut [f64; 512],
         row_fn: impl Fn(&mut [f64], &[f64], &RowTerm),
     ) {
-        let BlockCoords { xs, ys, zs, n } = block;
+        let BlockCoords {
+            xs,
+            ys,
+            zs,
+            n,
+            inv_h,
+        } = block;
         let [nx, ny, nz] = n.map(|v| v as usize);
+        // Indices of the block's points within [c - r, c + r] along an axis, with a point of
+        // margin for rounding (the exact tests follow); empty when none.
+        let range = |c: f64, r: f64, first: f64, inv_h: f64, n: usize| -> std::ops::Range<usize> {
+            let lo = ((c - r - first) * inv_h).floor() - 1.0;
+            let hi = ((c + r - first) * inv_h).ceil() + 1.0;
+            if hi < 0.0 || lo > (n - 1) as f64 {
+                return 0..0;
+            }
+            lo.max(0.0) as usize..(hi as usize).min(n - 1) + 1
+        };
         out.fill(0.0);
         for &i in list {
             let i = i as usize;
-            let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
-            for k in 0..nz {
+            let (c, inv, a, r) = (
+                self.centers[i],
+                self.inv_r2[i],
+                self.strengths[i],
+                self.radii[i],
+            );
+            let rows = range(c.y, r, ys[0], inv_h[1], ny);
+            for k in range(c.z, r, zs[0], inv_h[2], nz) {
                 let dz = zs[k] - c.z;
                 let dz2 = dz * dz;
                 if 1.0 - dz2 * inv <= 0.0 {
                     continue;
                 }
-                for j in 0..ny {
+                for j in rows.clone() {
                     let Some(term) = RowTerm::new(c, inv, a, ys[j], dz2) else {
                         continue;
                     };
@@ -475,6 +497,9 @@ impl BlobField {
         Some((lo, hi))
     }
 }
+
+/// Block lists longer than this take the voxel lists for gradients.
+const LONG_BLOCK_LIST: usize = 64;
 
 /// Point batches smaller than this are evaluated on the calling thread (about 0.1 ms of work).
 const SERIAL_BELOW: usize = 2048;
@@ -695,6 +720,8 @@ struct BlockCoords {
     ys: [f64; BLOCK_POINTS],
     zs: [f64; BLOCK_POINTS],
     n: [u32; 3],
+    /// 1 / the lattice's cell side per axis.
+    inv_h: [f64; 3],
 }
 
 /// Box of the lattice points of a block: its lowest point and its highest.
@@ -826,6 +853,7 @@ impl BlockField for BlobField {
             ys: coord(1),
             zs: coord(2),
             n,
+            inv_h: (DVec3::ONE / lattice.cell).to_array(),
         };
         match Isa::detect() {
             // SAFETY: the variant is only chosen when the CPU has the feature.
@@ -847,6 +875,12 @@ impl BlockField for BlobField {
     ) {
         let list = blocks.list(b);
         let mut done = 0;
+        // A block much larger than the primitives (a coarse lattice) lists far more of them than
+        // reach any one point: the voxel lists are shorter then (the same terms, the same bits).
+        if list.len() > LONG_BLOCK_LIST {
+            map_points(points, out, |p| self.gradient_at(p));
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if let Isa::Avx512 = Isa::detect() {
             let full = points.len() / 8 * 8;

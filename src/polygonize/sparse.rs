@@ -108,6 +108,9 @@ struct Part {
     vertices: Vec<DVec3>,
     normals: Vec<DVec3>,
     evaluations: u64,
+    /// A normal of the part is zero (the gradient vanishes) or not finite.
+    zero_normal: bool,
+    bad_normal: bool,
 }
 
 /// Buffers kept between calls (an animation allocates nothing in steady state).
@@ -195,7 +198,9 @@ fn run<F: BlockField + ?Sized>(
     // Pass 1: values, signs, owned vertices (and normals) per block.
     let t = Instant::now();
     let num_blocks = dims.iter().map(|&d| d as usize).product::<usize>();
-    let tasks = num_blocks.div_ceil(BLOCKS_PER_TASK);
+    // Up to BLOCKS_PER_TASK blocks per task, fewer on small lattices (parallel work there too).
+    let per_task = (num_blocks / 64).clamp(1, BLOCKS_PER_TASK);
+    let tasks = num_blocks.div_ceil(per_task);
     ws.parts.resize_with(tasks, Part::default);
     let points = lattice.points_per_axis();
     let normals = settings.normals;
@@ -207,9 +212,11 @@ fn run<F: BlockField + ?Sized>(
             part.vertices.clear();
             part.normals.clear();
             part.evaluations = 0;
+            part.zero_normal = false;
+            part.bad_normal = false;
             let mut values = [0.0f64; 512];
-            let end = ((task + 1) * BLOCKS_PER_TASK).min(num_blocks);
-            for index in task * BLOCKS_PER_TASK..end {
+            let end = ((task + 1) * per_task).min(num_blocks);
+            for index in task * per_task..end {
                 let i = index as u32;
                 let b = [
                     i % dims[0],
@@ -238,6 +245,8 @@ fn run<F: BlockField + ?Sized>(
                         if l > 0.0 {
                             *g *= 1.0 / l;
                         }
+                        part.zero_normal |= l == 0.0;
+                        part.bad_normal |= !l.is_finite();
                     }
                 }
             }
@@ -301,7 +310,12 @@ fn run<F: BlockField + ?Sized>(
 
     if normals {
         let t = Instant::now();
-        if let Some(i) = mesh.normals.iter().position(|g| !g.is_finite()) {
+        if ws.parts.iter().any(|p| p.bad_normal) {
+            let i = mesh
+                .normals
+                .iter()
+                .position(|g| !g.is_finite())
+                .unwrap_or(0);
             let p = mesh.vertices[i];
             return Err(Error::FieldNotFinite {
                 x: p.x,
@@ -309,7 +323,9 @@ fn run<F: BlockField + ?Sized>(
                 z: p.z,
             });
         }
-        fill_vanishing_normals(&mut mesh);
+        if ws.parts.iter().any(|p| p.zero_normal) {
+            fill_vanishing_normals(&mut mesh);
+        }
         stats.normal_evaluations = mesh.vertices.len() as u64;
         stats.add_time("normals", t);
     }
