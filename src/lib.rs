@@ -39,6 +39,7 @@
 pub mod error;
 pub mod field;
 pub mod lattice;
+pub mod memory;
 pub mod mesh;
 pub mod polygonize;
 

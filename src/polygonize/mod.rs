@@ -163,7 +163,7 @@ pub fn compute_normals<F: Field + ?Sized>(
         return Ok(());
     }
     // Zeroed in parallel: the fresh pages are faulted in by all threads.
-    let mut g: Vec<DVec3> = Vec::new();
+    let mut g: Vec<DVec3> = crate::memory::with_capacity_huge(mesh.vertices.len());
     (0..mesh.vertices.len())
         .into_par_iter()
         .map(|_| DVec3::ZERO)
@@ -239,7 +239,7 @@ pub fn compute_normals<F: Field + ?Sized>(
 /// nothing is written twice.
 pub(crate) fn gather<T: Copy + Send + Sync, P: AsRef<[T]> + Sync>(parts: &[P]) -> Vec<T> {
     let total: usize = parts.iter().map(|p| p.as_ref().len()).sum();
-    let mut out: Vec<T> = Vec::with_capacity(total);
+    let mut out: Vec<T> = crate::memory::with_capacity_huge(total);
     let mut rest = &mut out.spare_capacity_mut()[..total];
     let mut slices = Vec::with_capacity(parts.len());
     for p in parts {

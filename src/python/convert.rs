@@ -155,14 +155,19 @@ pub fn flatten_points(p: Vec<DVec3>) -> Vec<f64> {
 /// Triangles as int64 indices, flat (run without the GIL: it is a pass over the whole mesh).
 pub fn flatten_triangles(t: &[[u32; 3]]) -> Vec<i64> {
     use rayon::prelude::*;
-    let mut out = vec![0i64; 3 * t.len()];
-    out.par_chunks_mut(3 * 4096)
+    let n = 3 * t.len();
+    let mut out: Vec<i64> = crate::memory::with_capacity_huge(n);
+    out.spare_capacity_mut()[..n]
+        .par_chunks_mut(3 * 4096)
         .zip(t.par_chunks(4096))
         .for_each(|(o, t)| {
             for (o, v) in o.iter_mut().zip(t.iter().flatten()) {
-                *o = *v as i64;
+                o.write(*v as i64);
             }
         });
+    // SAFETY: the chunks cover out[..n] exactly (4096 triangles of 3 indices each, the last
+    // chunk shorter alike), and every element was written above.
+    unsafe { out.set_len(n) };
     out
 }
 

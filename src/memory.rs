@@ -1,0 +1,31 @@
+//! Large output buffers backed by huge pages where the system allows it.
+//!
+//! A polygonizer's output (vertices, normals, triangles) is fresh memory on every call; at 256³
+//! it is tens of megabytes, and faulting it in one 4 KiB page at a time cost about a tenth of
+//! the run here. On Linux with transparent huge pages in `madvise` mode, asking for huge pages
+//! before the first write makes it one fault per 2 MiB. Elsewhere this does nothing.
+
+/// An empty vector with room for `n` elements, whose pages are advised to be huge pages when
+/// it is large (at least 4 MiB). The pages are not touched here.
+pub fn with_capacity_huge<T>(n: usize) -> Vec<T> {
+    let v: Vec<T> = Vec::with_capacity(n);
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let bytes = n.saturating_mul(std::mem::size_of::<T>());
+        if bytes >= 2 * HUGE {
+            let start = v.as_ptr() as usize;
+            let lo = start.next_multiple_of(HUGE);
+            let hi = (start + bytes) / HUGE * HUGE;
+            if hi > lo {
+                // SAFETY: [lo, hi) lies inside the vector's allocation (page-aligned, as madvise
+                // requires); MADV_HUGEPAGE only changes how the kernel backs those pages and
+                // never their contents. A failure (no THP support) is harmless and ignored.
+                unsafe {
+                    libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE);
+                }
+            }
+        }
+    }
+    v
+}
