@@ -335,14 +335,17 @@ impl BlobField {
     }
 
     /// Fills a block of values (see [`BlockField::block_values`]) by splatting the primitives of
-    /// `list` row by row: the dense splat's arithmetic and order, so the same bits.
+    /// `list` row by row: the dense splat's arithmetic and order, so the same bits. Rows are
+    /// always eight wide (lanes beyond the lattice repeat its last point and are never read);
+    /// `row_fn` adds one primitive's terms to a row from dx² per lane (computed once per
+    /// primitive), dy² + dz² as [`RowTerm`] has them.
     #[inline(always)]
     fn splat_block_with(
         &self,
         list: &[u32],
         block: &BlockCoords,
         out: &mut [f64; 512],
-        row_fn: impl Fn(&mut [f64], &[f64], &RowTerm),
+        row_fn: impl Fn(&mut [f64; 8], &[f64; 8], &RowTerm),
     ) {
         let BlockCoords {
             xs,
@@ -351,7 +354,7 @@ impl BlobField {
             n,
             inv_h,
         } = block;
-        let [nx, ny, nz] = n.map(|v| v as usize);
+        let [_, ny, nz] = n.map(|v| v as usize);
         // Indices of the block's points within [c - r, c + r] along an axis, with a point of
         // margin for rounding (the exact tests follow); empty when none.
         let range = |c: f64, r: f64, first: f64, inv_h: f64, n: usize| -> std::ops::Range<usize> {
@@ -371,6 +374,7 @@ impl BlobField {
                 self.strengths[i],
                 self.radii[i],
             );
+            let dx2: [f64; 8] = std::array::from_fn(|l| (xs[l] - c.x) * (xs[l] - c.x));
             let rows = range(c.y, r, ys[0], inv_h[1], ny);
             for k in range(c.z, r, zs[0], inv_h[2], nz) {
                 let dz = zs[k] - c.z;
@@ -382,26 +386,38 @@ impl BlobField {
                     let Some(term) = RowTerm::new(c, inv, a, ys[j], dz2) else {
                         continue;
                     };
-                    let row = &mut out[8 * j + 64 * k..8 * j + 64 * k + nx];
-                    row_fn(row, &xs[..nx], &term);
+                    let row: &mut [f64; 8] = (&mut out[8 * j + 64 * k..8 * j + 64 * k + 8])
+                        .try_into()
+                        .unwrap();
+                    row_fn(row, &dx2, &term);
                 }
             }
         }
-        for k in 0..nz {
-            for j in 0..ny {
-                for v in &mut out[8 * j + 64 * k..8 * j + 64 * k + nx] {
-                    *v = self.threshold - *v;
-                }
-            }
+        for v in out.iter_mut() {
+            *v = self.threshold - *v;
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     unsafe fn splat_block_avx512(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
-        // SAFETY: this function only runs where AVX-512F is available.
-        self.splat_block_with(list, block, out, |r, x, t| unsafe {
-            splat_row_avx512(r, x, t)
+        use std::arch::x86_64::*;
+        self.splat_block_with(list, block, out, |row, dx2, q| {
+            // SAFETY: both arrays hold eight f64; this runs where AVX-512F is available.
+            unsafe {
+                let d = _mm512_loadu_pd(dx2.as_ptr());
+                let s = _mm512_add_pd(
+                    _mm512_add_pd(d, _mm512_set1_pd(q.dy2)),
+                    _mm512_set1_pd(q.dz2),
+                );
+                let t = _mm512_max_pd(
+                    _mm512_sub_pd(_mm512_set1_pd(1.0), _mm512_mul_pd(s, _mm512_set1_pd(q.inv))),
+                    _mm512_setzero_pd(),
+                );
+                let v = _mm512_loadu_pd(row.as_ptr());
+                let add = _mm512_mul_pd(_mm512_mul_pd(_mm512_set1_pd(q.a), t), t);
+                _mm512_storeu_pd(row.as_mut_ptr(), _mm512_add_pd(v, add));
+            }
         })
     }
 
@@ -859,7 +875,12 @@ impl BlockField for BlobField {
             // SAFETY: the variant is only chosen when the CPU has the feature.
             #[cfg(target_arch = "x86_64")]
             Isa::Avx512 => unsafe { self.splat_block_avx512(list, &block, out) },
-            _ => self.splat_block_with(list, &block, out, splat_row),
+            _ => self.splat_block_with(list, &block, out, |row, dx2, q| {
+                for (v, d) in row.iter_mut().zip(dx2) {
+                    let t = (1.0 - ((d + q.dy2) + q.dz2) * q.inv).max(0.0);
+                    *v += q.a * t * t;
+                }
+            }),
         }
         BlockSign::Mixed
     }

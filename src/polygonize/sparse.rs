@@ -123,8 +123,10 @@ struct Workspace {
 }
 
 static WORKSPACES: std::sync::Mutex<Vec<Workspace>> = std::sync::Mutex::new(Vec::new());
-/// Workspaces above this are dropped after the call.
-const KEEP_BYTES: usize = 64 << 20;
+/// Workspaces above this are dropped after the call. Below it (256³ lattices of dense blob
+/// clusters fit), a repeated call reuses them instead of faulting in fresh pages; at most two
+/// are kept.
+const KEEP_BYTES: usize = 256 << 20;
 
 impl Workspace {
     fn bytes(&self) -> usize {
