@@ -520,9 +520,7 @@ fn triangulate_block(
                 }
                 let i = map[(b[0] + dims[0] * (b[1] + dims[1] * b[2])) as usize];
                 // A crossed edge in a skipped block: the field's bounds were wrong.
-                let Some(owner) = active.get(i as usize) else {
-                    return None;
-                };
+                let owner = active.get(i as usize)?;
                 ids[axis * 512 + k * 64 + bit as usize] = owner.vertex(axis, l);
             }
         }
