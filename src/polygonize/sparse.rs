@@ -233,6 +233,13 @@ fn run<F: BlockField + ?Sized>(
                 part.evaluations += (n[0] * n[1] * n[2]) as u64;
                 let first = part.vertices.len();
                 let active = block_vertices(lattice, b, lo, n, dims, &values, &mut part.vertices);
+                // One sign on every point after all (the bounds were not tight enough): no cell
+                // or edge of the block is crossed, and no neighbour needs it.
+                let all = plane_mask(n[0], n[1]);
+                let planes = &active.signs[..n[2] as usize];
+                if planes.iter().all(|&w| w == 0) || planes.iter().all(|&w| w == all) {
+                    continue;
+                }
                 part.active.push(Active {
                     base: first as u32,
                     ..active
