@@ -3,7 +3,8 @@
 //! A polygonizer's output (vertices, normals, triangles) is fresh memory on every call; at 256³
 //! it is tens of megabytes, and faulting it in one 4 KiB page at a time cost about a tenth of
 //! the run here. On Linux with transparent huge pages in `madvise` mode, asking for huge pages
-//! before the first write makes it one fault per 2 MiB. Elsewhere this does nothing.
+//! before the first write makes it one fault per 2 MiB. Elsewhere this does nothing, and the
+//! environment variable `IMPLICITMESH_NO_HUGEPAGES` (set at all) turns it off.
 
 /// An empty vector with room for `n` elements, whose pages are advised to be huge pages when
 /// it is large (at least 4 MiB). The pages are not touched here.
@@ -13,7 +14,9 @@ pub fn with_capacity_huge<T>(n: usize) -> Vec<T> {
     {
         const HUGE: usize = 2 << 20;
         let bytes = n.saturating_mul(std::mem::size_of::<T>());
-        if bytes >= 2 * HUGE {
+        static OFF: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        let off = *OFF.get_or_init(|| std::env::var_os("IMPLICITMESH_NO_HUGEPAGES").is_some());
+        if bytes >= 2 * HUGE && !off {
             let start = v.as_ptr() as usize;
             let lo = start.next_multiple_of(HUGE);
             let hi = (start + bytes) / HUGE * HUGE;
