@@ -740,6 +740,35 @@ struct BlockCoords {
     inv_h: [f64; 3],
 }
 
+impl BlobField {
+    /// The sign the field provably has on the box `[plo, phi]` (from each primitive of `list`,
+    /// which must hold every primitive reaching the box: its term lies between its values at
+    /// the nearest and the farthest point of the box), or [`BlockSign::Mixed`]. The margin,
+    /// 1e-9 of the strengths' sum, is far above rounding.
+    fn box_sign(&self, list: &[u32], plo: DVec3, phi: DVec3) -> BlockSign {
+        let (mut fmin, mut fmax, mut scale) = (0.0f64, 0.0f64, self.threshold.abs());
+        for &i in list {
+            let i = i as usize;
+            let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
+            let (near, far) = box_distances2(c, plo, phi);
+            let t_near = (1.0 - near * inv).max(0.0);
+            let t_far = (1.0 - far * inv).max(0.0);
+            let (big, small) = (a * t_near * t_near, a * t_far * t_far);
+            fmax += big.max(small);
+            fmin += big.min(small);
+            scale += a.abs();
+        }
+        let margin = 1e-9 * scale;
+        if fmax < self.threshold - margin {
+            BlockSign::Outside
+        } else if fmin > self.threshold + margin {
+            BlockSign::Inside
+        } else {
+            BlockSign::Mixed
+        }
+    }
+}
+
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
@@ -837,24 +866,37 @@ impl BlockField for BlobField {
     ) -> BlockSign {
         let list = blocks.list(b);
         let (plo, phi) = block_box(lattice, b);
-        let (mut fmin, mut fmax, mut scale) = (0.0f64, 0.0f64, self.threshold.abs());
-        for &i in list {
-            let i = i as usize;
-            let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
-            let (near, far) = box_distances2(c, plo, phi);
-            let t_near = (1.0 - near * inv).max(0.0);
-            let t_far = (1.0 - far * inv).max(0.0);
-            let (big, small) = (a * t_near * t_near, a * t_far * t_far);
-            fmax += big.max(small);
-            fmin += big.min(small);
-            scale += a.abs();
+        let sign = self.box_sign(list, plo, phi);
+        if sign != BlockSign::Mixed {
+            return sign;
         }
-        let margin = 1e-9 * scale;
-        if fmax < self.threshold - margin {
-            return BlockSign::Outside;
-        }
-        if fmin > self.threshold + margin {
-            return BlockSign::Inside;
+        // The bounds over the whole block are loose where many terms overlap: try its eight
+        // octants (points 0..=3 and 4..=7 per axis), and stop at the first that may be crossed.
+        if n.iter().all(|&v| v > 4) {
+            let half = |a: usize, s: u32| -> (u32, u32) {
+                if s == 0 {
+                    (lo[a], lo[a] + 3)
+                } else {
+                    (lo[a] + 4, lo[a] + n[a] - 1)
+                }
+            };
+            let mut first = None;
+            for o in 0..8u32 {
+                let (x, y, z) = (half(0, o & 1), half(1, (o >> 1) & 1), half(2, o >> 2));
+                let s = self.box_sign(
+                    list,
+                    lattice.point([x.0, y.0, z.0]),
+                    lattice.point([x.1, y.1, z.1]),
+                );
+                if s == BlockSign::Mixed || first.is_some_and(|f| f != s) {
+                    first = None;
+                    break;
+                }
+                first = Some(s);
+            }
+            if let Some(s) = first {
+                return s;
+            }
         }
         // Coordinates exactly as Lattice::point computes them (repeating the last point).
         let coord = |a: usize| -> [f64; BLOCK_POINTS] {
