@@ -16,6 +16,8 @@
 //! - [`polygonize::octree`]: hierarchical sampling with the pseudo-Euclidean rejection test
 //!   (Cuno et al.); [`polygonize::tracking`]: surface tracking from seeds with time-stamped
 //!   caches (Triquet et al.); both give the dense mesh's triangles where they find the surface.
+//! - [`polygonize::sparse`]: the dense mesh from only the blocks of the lattice that a
+//!   [`field::BlockField`] (a blob field) cannot rule out by bounds.
 //! - [`polygonize::subdivision`]: 1-to-4 subdivision of a control mesh with Newton projection,
 //!   the modified butterfly scheme and their blend (Jin et al.).
 //!

@@ -6,7 +6,7 @@
 //!
 //! The mesh is the dense polygonizer's, triangle for triangle and bit for bit: a crossed edge
 //! has ends of both signs, so every block holding it is evaluated, with the same values
-//! ([`BlockField`] requires the same bits as [`Field::values`]); vertices come from the edge's
+//! ([`BlockField`] requires the same bits as [`crate::field::Field::values`]); vertices come from the edge's
 //! lower end with [`edge_crossing`] and cells go through the shared case table. Only the order
 //! of vertices and triangles differs (block by block instead of layer by layer).
 //!
