@@ -6,7 +6,7 @@
 //! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`]).
 
 use super::voxels::VoxelGrid;
-use super::{BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
+use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
 use glam::DVec3;
@@ -859,11 +859,10 @@ impl BlockField for BlobField {
         &self,
         blocks: &BlockLists,
         lattice: &Lattice,
-        b: [u32; 3],
-        lo: [u32; 3],
-        n: [u32; 3],
+        block: &Block,
         out: &mut [f64; 512],
     ) -> BlockSign {
+        let Block { index: b, lo, n } = *block;
         let list = blocks.list(b);
         let (plo, phi) = block_box(lattice, b);
         let sign = self.box_sign(list, plo, phi);

@@ -104,6 +104,17 @@ pub enum BlockSign {
     Mixed,
 }
 
+/// One block of lattice points (see [`BlockField`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Block {
+    /// Block coordinates.
+    pub index: [u32; 3],
+    /// Its lowest lattice point.
+    pub lo: [u32; 3],
+    /// Points per axis, each at most [`BLOCK_POINTS`] (fewer at the lattice's upper sides).
+    pub n: [u32; 3],
+}
+
 /// A field that can bound its values over a box of lattice points cheaply, so that the sparse
 /// polygonizer ([`crate::polygonize::sparse`]) skips the blocks of the lattice that the surface
 /// cannot cross. The values it writes must have the same bits as [`Field::values`] (and the
@@ -116,17 +127,14 @@ pub trait BlockField: Field {
     /// `7·b .. 7·b + 8` along each axis (fewer at the lattice's upper sides), `blocks` per axis.
     fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks;
 
-    /// For block `b` with lowest lattice point `lo` and `n` points per axis (each at most
-    /// [`BLOCK_POINTS`]): [`BlockSign::Outside`] or [`BlockSign::Inside`] when every point
-    /// provably has that sign, otherwise the values at point `lo + (i, j, k)` written to
+    /// For `block`: [`BlockSign::Outside`] or [`BlockSign::Inside`] when every point provably
+    /// has that sign, otherwise the values at point `block.lo + (i, j, k)` written to
     /// `out[i + 8 j + 64 k]` and [`BlockSign::Mixed`].
     fn block_values(
         &self,
         blocks: &Self::Blocks,
         lattice: &Lattice,
-        b: [u32; 3],
-        lo: [u32; 3],
-        n: [u32; 3],
+        block: &Block,
         out: &mut [f64; 512],
     ) -> BlockSign;
 

@@ -49,7 +49,7 @@ use super::{
     BYTES_PER_TRIANGLE,
 };
 use crate::error::{Error, Result};
-use crate::field::{BlockField, BlockSign, BLOCK_POINTS};
+use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
@@ -227,7 +227,8 @@ fn run<F: BlockField + ?Sized>(
                 ];
                 let lo = b.map(|v| v * STEP);
                 let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
-                if field.block_values(&blocks, lattice, b, lo, n, &mut values) != BlockSign::Mixed {
+                let block = Block { index: b, lo, n };
+                if field.block_values(&blocks, lattice, &block, &mut values) != BlockSign::Mixed {
                     continue;
                 }
                 part.evaluations += (n[0] * n[1] * n[2]) as u64;
@@ -657,6 +658,55 @@ mod tests {
             "{} of {}",
             st.evaluations,
             st.lattice_points
+        );
+    }
+
+    /// A blob field whose bounds wrongly rule out every block with bx = 2.
+    struct Lying(BlobField);
+
+    impl crate::field::Field for Lying {
+        fn value(&self, p: DVec3) -> f64 {
+            self.0.value(p)
+        }
+    }
+
+    impl BlockField for Lying {
+        type Blocks = <BlobField as BlockField>::Blocks;
+        fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
+            self.0.blocks(lattice, blocks)
+        }
+        fn block_values(
+            &self,
+            blocks: &Self::Blocks,
+            lattice: &Lattice,
+            block: &Block,
+            out: &mut [f64; 512],
+        ) -> BlockSign {
+            if block.index[0] == 2 {
+                return BlockSign::Outside;
+            }
+            self.0.block_values(blocks, lattice, block, out)
+        }
+    }
+
+    #[test]
+    fn wrong_bounds_give_an_error_not_a_panic() {
+        use crate::field::blob::{PerPrimitive, Settings as BlobSettings};
+        let one = |r| PerPrimitive::All(r);
+        let blob = BlobField::new(
+            &[DVec3::ZERO],
+            one(0.9),
+            one(1.0),
+            0.5,
+            BlobSettings::default(),
+        );
+        let f = Lying(blob.unwrap());
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
+        let r = polygonize(&f, &l, &Settings::default());
+        let e = r.unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidArgument { name: "field", .. }),
+            "{e}"
         );
     }
 
