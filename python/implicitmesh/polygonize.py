@@ -68,8 +68,9 @@ def polygonize(
         ``"sparse"`` (:class:`BlobField` only): the same marching cubes over blocks of 7³ cells,
         skipping every block where bounds on the primitives' terms show that the field has one
         sign; the mesh is the dense mesh (the same triangles, vertices and normals, bit for bit,
-        in another order), every component is found, and the work follows the surface. The
-        fastest method for blobs at 128³ and above.
+        in another order; where the gradient vanishes, the fallback normal is equal to rounding),
+        every component is found, and the work follows the surface. The fastest method for
+        blobs at 128³ and above.
         ``"octree"``: hierarchical sampling (Cuno et al.): a block of cells is skipped when
         ``|f(centre)| > safety × circumradius``, so only blocks near the surface are refined; the
         leaves get the same marching cubes, so the mesh equals the dense one wherever no block is

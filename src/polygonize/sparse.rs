@@ -8,7 +8,10 @@
 //! has ends of both signs, so every block holding it is evaluated, with the same values
 //! ([`BlockField`] requires the same bits as [`crate::field::Field::values`]); vertices come from the edge's
 //! lower end with [`edge_crossing`] and cells go through the shared case table. Only the order
-//! of vertices and triangles differs (block by block instead of layer by layer).
+//! of vertices and triangles differs (block by block instead of layer by layer). Normals are
+//! the gradient at the same points with the same terms in the same order, so the same bits;
+//! where the gradient vanishes, both fall back to the mean normal of the vertex's triangles,
+//! summed in each mesh's own order (equal to rounding).
 //!
 //! Two parallel passes:
 //! 1. per block: values (or a sign), then the signs as eight 64-bit words (one per z-plane,
