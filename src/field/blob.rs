@@ -805,25 +805,27 @@ impl BlockField for BlobField {
                     (a.z, b.z)
                 };
                 for (i, (c, r)) in self.centers.iter().zip(&self.radii).enumerate() {
-                    if c.z + r < zlo || c.z - r > zhi {
+                    // The radius with the margin, in every test here.
+                    let rm = r * (1.0 + 1e-9);
+                    if c.z + rm < zlo || c.z - rm > zhi {
                         continue;
                     }
-                    // Candidate block ranges along x and y (a block more on each side for
-                    // rounding), then the exact sphere-box test.
-                    let range = |a: usize| -> (u32, u32) {
-                        let o = lattice.origin[a];
-                        let lo = (((c[a] - r - o) / (h[a] * step)).floor() - 1.0).max(0.0);
-                        let hi = ((c[a] + r - o) / (h[a] * step)).floor() + 1.0;
+                    // Candidate blocks along x and y (one more on each side for rounding), then
+                    // the exact sphere-box test.
+                    let range = |a: usize| -> std::ops::Range<u32> {
+                        let span = h[a] * step;
+                        let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
+                        let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
                         let hi = hi.min((dims[a] - 1) as f64);
-                        (lo as u32, hi.max(-1.0) as u32)
+                        if hi < 0.0 || lo > hi {
+                            return 0..0;
+                        }
+                        lo.max(0.0) as u32..hi as u32 + 1
                     };
-                    let ((x0, x1), (y0, y1)) = (range(0), range(1));
-                    if c.x + r < lattice.origin.x || c.y + r < lattice.origin.y {
-                        continue;
-                    }
-                    let r2 = r * r * (1.0 + 1e-9);
-                    for by in y0..=y1 {
-                        for bx in x0..=x1 {
+                    let (xs, ys) = (range(0), range(1));
+                    let r2 = rm * rm;
+                    for by in ys {
+                        for bx in xs.clone() {
                             let (lo, hi) = block_box(lattice, [bx, by, bz]);
                             if box_distances2(*c, lo, hi).0 <= r2 {
                                 pairs.push((bx + dims[0] * by, i as u32));
@@ -931,11 +933,11 @@ impl BlockField for BlobField {
     fn block_gradients(
         &self,
         blocks: &BlockLists,
-        b: [u32; 3],
+        block: &Block,
         points: &[DVec3],
         out: &mut [DVec3],
     ) {
-        let list = blocks.list(b);
+        let list = blocks.list(block.index);
         let mut done = 0;
         // A block much larger than the primitives (a coarse lattice) lists far more of them than
         // reach any one point: the voxel lists are shorter then (the same terms, the same bits).

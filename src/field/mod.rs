@@ -138,16 +138,16 @@ pub trait BlockField: Field {
         out: &mut [f64; 512],
     ) -> BlockSign;
 
-    /// Gradients at `points`, all inside block `b` (the vertices it owns), as [`Field::gradients`]
+    /// Gradients at `points`, all inside `block` (the vertices it owns), as [`Field::gradients`]
     /// computes them.
     fn block_gradients(
         &self,
         blocks: &Self::Blocks,
-        b: [u32; 3],
+        block: &Block,
         points: &[DVec3],
         out: &mut [DVec3],
     ) {
-        let _ = (blocks, b);
+        let _ = (blocks, block);
         for (p, o) in points.iter().zip(out) {
             *o = self.gradient(*p);
         }

@@ -252,7 +252,7 @@ fn run<F: BlockField + ?Sized>(
                     let new = &part.vertices[first..];
                     part.normals.resize(part.vertices.len(), DVec3::ZERO);
                     let out = &mut part.normals[first..];
-                    field.block_gradients(&blocks, b, new, out);
+                    field.block_gradients(&blocks, &block, new, out);
                     for g in out.iter_mut() {
                         let l = g.length();
                         if l > 0.0 {
