@@ -48,6 +48,8 @@ fn main() {
     let settings = Settings::default();
     let mut tess = tracking::Tessellator::new();
     let mut times = vec![];
+    // Fastest time of each phase over the runs.
+    let mut phases: Vec<(&'static str, f64)> = Vec::new();
     for _ in 0..reps {
         let t = Instant::now();
         let (tris, stats) = match method {
@@ -67,6 +69,12 @@ fn main() {
             }
         };
         times.push(t.elapsed().as_secs_f64());
+        for &(name, secs) in &stats.seconds {
+            match phases.iter_mut().find(|p| p.0 == name) {
+                Some(p) => p.1 = p.1.min(secs),
+                None => phases.push((name, secs)),
+            }
+        }
         if times.len() == reps {
             println!(
                 "{tris} triangles, {} evaluations, {:?}",
@@ -80,4 +88,9 @@ fn main() {
         times[reps / 2] * 1e3,
         times[0] * 1e3
     );
+    let fastest: Vec<String> = phases
+        .iter()
+        .map(|(name, s)| format!("{name} {:.2} ms", s * 1e3))
+        .collect();
+    println!("fastest phases: {}", fastest.join(", "));
 }

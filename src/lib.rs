@@ -44,6 +44,7 @@ pub mod lattice;
 pub mod memory;
 pub mod mesh;
 pub mod polygonize;
+pub(crate) mod simd;
 
 #[cfg(feature = "python")]
 mod python;

@@ -9,6 +9,7 @@ use super::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
+use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -611,40 +612,6 @@ unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
         let r = _mm512_add_pd(v, _mm512_mul_pd(_mm512_mul_pd(a, t), t));
         _mm512_mask_storeu_pd(row.as_mut_ptr().add(i), m, r);
         i += 8;
-    }
-}
-
-/// Instruction sets the splatting loop is compiled for.
-#[derive(Clone, Copy)]
-enum Isa {
-    Generic,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl Isa {
-    /// The instruction set, detected once per process (`IMPLICITMESH_NO_AVX512` set at start-up
-    /// turns AVX-512 off).
-    fn detect() -> Isa {
-        static ISA: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
-        *ISA.get_or_init(Isa::probe)
-    }
-
-    fn probe() -> Isa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::env::var_os("IMPLICITMESH_NO_AVX512").is_none()
-                && std::is_x86_feature_detected!("avx512f")
-            {
-                return Isa::Avx512;
-            }
-            if std::is_x86_feature_detected!("avx2") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Generic
     }
 }
 

@@ -48,8 +48,8 @@
 //! ```
 
 use super::{
-    check_memory, estimate_triangles, fill_vanishing_normals, gather, CaseTable, Settings, Stats,
-    BYTES_PER_TRIANGLE,
+    check_memory, estimate_triangles, fill_vanishing_normals, gather, normalize, CaseTable,
+    Settings, Stats, BYTES_PER_TRIANGLE,
 };
 use crate::error::{Error, Result};
 use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
@@ -253,14 +253,9 @@ fn run<F: BlockField + ?Sized>(
                     part.normals.resize(part.vertices.len(), DVec3::ZERO);
                     let out = &mut part.normals[first..];
                     field.block_gradients(&blocks, &block, new, out);
-                    for g in out.iter_mut() {
-                        let l = g.length();
-                        if l > 0.0 {
-                            *g *= 1.0 / l;
-                        }
-                        part.zero_normal |= l == 0.0;
-                        part.bad_normal |= !l.is_finite();
-                    }
+                    let (zero, bad) = normalize(out);
+                    part.zero_normal |= zero > 0;
+                    part.bad_normal |= bad.is_some();
                 }
             }
         });
@@ -304,11 +299,12 @@ fn run<F: BlockField + ?Sized>(
         .enumerate()
         .map(|(task, out)| {
             out.clear();
-            let mut ids = [0u32; 1536];
+            let mut ids = [0u32; IDS];
+            let cases = BlockCases::get(table);
             let end = ((task + 1) * ACTIVE_PER_TASK).min(active.len());
             active[task * ACTIVE_PER_TASK..end]
                 .iter()
-                .map(|a| triangulate_block(table, a, active, map, dims, &mut ids, out))
+                .map(|a| triangulate_block(cases, a, active, map, dims, &mut ids, out))
                 .sum::<Option<u64>>()
         })
         .sum::<Option<u64>>()
@@ -349,7 +345,7 @@ fn run<F: BlockField + ?Sized>(
 #[inline]
 fn inside_bits(values: &[f64; 512], planes: usize) -> [u64; 8] {
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx512f") {
+    if crate::simd::Isa::detect() == crate::simd::Isa::Avx512 {
         // SAFETY: the CPU has AVX-512F.
         return unsafe { inside_bits_avx512(values, planes) };
     }
@@ -477,18 +473,61 @@ const EDGE_ENTRY: [usize; 12] = {
     t
 };
 
+/// Entries of a block's vertex table: 3 axes × 512 (a power of two, so that indices masked
+/// with `IDS - 1` need no bounds check; the largest index used is 1535).
+const IDS: usize = 2048;
+
+/// A case table with each triangle corner's edge replaced by its [`EDGE_ENTRY`] offset: the
+/// triangles of a cell are read straight from the block's vertex table.
+struct BlockCases {
+    /// Triangles of case c are `entries[offsets[c]..offsets[c + 1]]`.
+    offsets: [u16; 257],
+    entries: Vec<[u16; 3]>,
+    /// Triangles of the case with the most.
+    max: usize,
+}
+
+impl BlockCases {
+    fn get(table: &CaseTable) -> &'static BlockCases {
+        static SEPARATE: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
+        static JOIN: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
+        let cell = match table.ambiguity() {
+            super::Ambiguity::Separate => &SEPARATE,
+            super::Ambiguity::Join => &JOIN,
+        };
+        cell.get_or_init(|| {
+            let mut offsets = [0u16; 257];
+            let mut entries = Vec::new();
+            for case in 0..256 {
+                entries.extend(
+                    table
+                        .triangles(case as u8)
+                        .iter()
+                        .map(|t| t.map(|e| EDGE_ENTRY[e as usize] as u16)),
+                );
+                offsets[case + 1] = entries.len() as u16;
+            }
+            BlockCases {
+                offsets,
+                entries,
+                max: table.max_triangles(),
+            }
+        })
+    }
+}
+
 /// Triangulates the crossed cells of block `a`; returns their number (None when a crossed edge
 /// lies in a block the field ruled out, which a correct [`BlockField`] never does). First fills a table of
 /// the vertex index of every crossed edge its cells use (its own, then those on its upper faces
 /// that neighbours own), then reads the triangles' corners from it. Entries of `ids` are read
 /// only for crossed edges, which are written first, so the table is never cleared.
 fn triangulate_block(
-    table: &CaseTable,
+    cases: &BlockCases,
     a: &Active,
     active: &[Active],
     map: &[u32],
     dims: [u32; 3],
-    ids: &mut [u32; 1536],
+    ids: &mut [u32; IDS],
     out: &mut Vec<[u32; 3]>,
 ) -> Option<u64> {
     let [nx, ny, nz] = a.n.map(|v| v as u32);
@@ -498,7 +537,7 @@ fn triangulate_block(
         while m != 0 {
             let bit = m.trailing_zeros() as usize;
             m &= m - 1;
-            ids[(w / 8) * 512 + (w % 8) * 64 + bit] = next;
+            ids[((w / 8) * 512 + (w % 8) * 64 + bit) & (IDS - 1)] = next;
             next += 1;
         }
     }
@@ -532,12 +571,14 @@ fn triangulate_block(
                 let i = map[(b[0] + dims[0] * (b[1] + dims[1] * b[2])) as usize];
                 // A crossed edge in a skipped block: the field's bounds were wrong.
                 let owner = active.get(i as usize)?;
-                ids[axis * 512 + k * 64 + bit as usize] = owner.vertex(axis, l);
+                ids[(axis * 512 + k * 64 + bit as usize) & (IDS - 1)] = owner.vertex(axis, l);
             }
         }
     }
     let cells = plane_mask(nx - 1, ny - 1);
     let mut crossed = 0;
+    // Room for the most triangles the block's cells can have: no reallocation below.
+    out.reserve(cases.max * (STEP * STEP * STEP) as usize);
     for k in 0..nz as usize - 1 {
         let (lo, hi) = (a.signs[k], a.signs[k + 1]);
         let (mut any, mut all) = (0u64, !0u64);
@@ -549,14 +590,15 @@ fn triangulate_block(
         while m != 0 {
             let c = m.trailing_zeros();
             m &= m - 1;
-            let case = ((lo >> c) & 3)
+            let case = (((lo >> c) & 3)
                 | ((lo >> (c + 8)) & 3) << 2
                 | ((hi >> c) & 3) << 4
-                | ((hi >> (c + 8)) & 3) << 6;
+                | ((hi >> (c + 8)) & 3) << 6) as usize;
             crossed += 1;
-            let cell = &ids[64 * k + c as usize..];
-            for t in table.triangles(case as u8) {
-                out.push(t.map(|e| cell[EDGE_ENTRY[e as usize]]));
+            let cell = 64 * k + c as usize;
+            let range = cases.offsets[case] as usize..cases.offsets[case + 1] as usize;
+            for t in &cases.entries[range] {
+                out.push(t.map(|o| ids[(cell + o as usize) & (IDS - 1)]));
             }
         }
     }
