@@ -303,8 +303,16 @@ fn normalize_avx512(g: &mut [DVec3]) -> usize {
 /// capacity: its fresh pages are first touched (and faulted in) by all threads at once, and
 /// nothing is written twice.
 pub(crate) fn gather<T: Copy + Send + Sync, P: AsRef<[T]> + Sync>(parts: &[P]) -> Vec<T> {
+    gather_map(parts, |t| *t)
+}
+
+/// [`gather`] with each element converted by `f` on the way.
+pub(crate) fn gather_map<T: Sync, U: Send, P: AsRef<[T]> + Sync>(
+    parts: &[P],
+    f: impl Fn(&T) -> U + Sync,
+) -> Vec<U> {
     let total: usize = parts.iter().map(|p| p.as_ref().len()).sum();
-    let mut out: Vec<T> = crate::memory::with_capacity_huge(total);
+    let mut out: Vec<U> = crate::memory::with_capacity_huge(total);
     let mut rest = &mut out.spare_capacity_mut()[..total];
     let mut slices = Vec::with_capacity(parts.len());
     for p in parts {
@@ -318,7 +326,7 @@ pub(crate) fn gather<T: Copy + Send + Sync, P: AsRef<[T]> + Sync>(parts: &[P]) -
         .with_min_len(4)
         .for_each(|(d, s)| {
             for (di, si) in d.iter_mut().zip(s.as_ref()) {
-                di.write(*si);
+                di.write(f(si));
             }
         });
     // SAFETY: the slices cover out[..total] exactly (their lengths sum to total) and every

@@ -162,6 +162,21 @@ pub fn polygonize<F: BlockField + ?Sized>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Stats)> {
+    let (mut mesh, triangles, stats) = polygonize_with(field, lattice, settings, gather)?;
+    mesh.triangles = triangles;
+    Ok((mesh, stats))
+}
+
+/// [`polygonize`] handing the triangles to `collect` as they lie after the second pass (runs of
+/// triangles that, concatenated in order, are the mesh's triangles) instead of concatenating
+/// them: a caller that wants them in another form (e.g. as 64-bit indices) builds it in one
+/// pass. The returned mesh has no triangles; `collect`'s result comes with it.
+pub fn polygonize_with<F: BlockField + ?Sized, T>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+    collect: impl FnOnce(&[Vec<[u32; 3]>]) -> T,
+) -> Result<(Mesh, T, Stats)> {
     let dims = block_dims(lattice);
     let num_blocks = dims.iter().map(|&d| d as u64).product::<u64>();
     check_memory(
@@ -173,7 +188,10 @@ pub fn polygonize<F: BlockField + ?Sized>(
         .ok()
         .and_then(|mut w| w.pop())
         .unwrap_or_default();
-    let r = run(field, lattice, settings, dims, &mut ws);
+    let r = run(field, lattice, settings, dims, &mut ws).map(|(mesh, tasks, stats)| {
+        let triangles = collect(&ws.triangles[..tasks]);
+        (mesh, triangles, stats)
+    });
     if ws.bytes() <= KEEP_BYTES {
         if let Ok(mut pool) = WORKSPACES.lock() {
             if pool.len() < 2 {
@@ -190,7 +208,7 @@ fn run<F: BlockField + ?Sized>(
     settings: &Settings,
     dims: [u32; 3],
     ws: &mut Workspace,
-) -> Result<(Mesh, Stats)> {
+) -> Result<(Mesh, usize, Stats)> {
     let table = CaseTable::get(settings.ambiguity);
     let mut stats = Stats {
         lattice_points: lattice.num_points(),
@@ -314,7 +332,6 @@ fn run<F: BlockField + ?Sized>(
                 "its block bounds ruled out a block that the surface crosses",
             )
         })?;
-    mesh.triangles = gather(&ws.triangles[..tasks]);
     stats.add_time("triangulate", t);
 
     if normals {
@@ -333,12 +350,16 @@ fn run<F: BlockField + ?Sized>(
             });
         }
         if ws.parts.iter().any(|p| p.zero_normal) {
+            // Rare (the gradient vanishes at a vertex): the face normals need the triangles
+            // in one piece, for this once.
+            mesh.triangles = gather(&ws.triangles[..tasks]);
             fill_vanishing_normals(&mut mesh);
+            mesh.triangles = Vec::new();
         }
         stats.normal_evaluations = mesh.vertices.len() as u64;
         stats.add_time("normals", t);
     }
-    Ok((mesh, stats))
+    Ok((mesh, tasks, stats))
 }
 
 /// Bit `i + 8j` of word `k` set when `values[i + 8j + 64k] < 0`, for the first `planes` planes.

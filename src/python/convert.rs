@@ -171,6 +171,15 @@ pub fn flatten_triangles(t: &[[u32; 3]]) -> Vec<i64> {
     out
 }
 
+/// Runs of triangles concatenated as int64 indices, flat, in one parallel pass.
+pub fn flatten_triangle_runs(runs: &[Vec<[u32; 3]>]) -> Vec<i64> {
+    let t = crate::polygonize::gather_map(runs, |t| t.map(i64::from));
+    match bytemuck::allocation::try_cast_vec::<[i64; 3], i64>(t) {
+        Ok(v) => v,
+        Err((_, t)) => bytemuck::cast_slice::<[i64; 3], i64>(&t).to_vec(),
+    }
+}
+
 /// A mesh as flat numpy-ready buffers: vertices, int64 faces, normals.
 pub struct MeshBuffers {
     pub vertices: Vec<f64>,
@@ -183,6 +192,15 @@ impl MeshBuffers {
     pub fn new(mesh: crate::mesh::Mesh) -> Self {
         MeshBuffers {
             faces: flatten_triangles(&mesh.triangles),
+            vertices: flatten_points(mesh.vertices),
+            normals: flatten_points(mesh.normals),
+        }
+    }
+
+    /// Takes a mesh's vertices and normals, with its faces already flat.
+    pub fn with_faces(mesh: crate::mesh::Mesh, faces: Vec<i64>) -> Self {
+        MeshBuffers {
+            faces,
             vertices: flatten_points(mesh.vertices),
             normals: flatten_points(mesh.normals),
         }

@@ -1,6 +1,6 @@
 //! `_core.polygonize`: argument checks, the GIL released around the polygonizer, numpy out.
 
-use super::convert::{points, MeshBuffers};
+use super::convert::{flatten_triangle_runs, points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
@@ -272,7 +272,10 @@ pub fn polygonize<'py>(
         "sparse" => match &field {
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
-                py.detach(|| sparse::polygonize(blobs, &lattice, &settings).map(buffers))
+                py.detach(|| {
+                    sparse::polygonize_with(blobs, &lattice, &settings, flatten_triangle_runs)
+                        .map(|(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, faces), stats))
+                })
             }
             _ => {
                 return Err(value_error(
