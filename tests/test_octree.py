@@ -21,14 +21,19 @@ BOX = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
 GRIDS = [("own", 64), ("own", 128), ("box", 64), ("box", 128)]
 
 #: Evaluations allowed, in % of the (n+1)³ lattice points that plain marching cubes evaluates.
-#: Measured (d = 0.015, defaults): 4.3–11.6 % at 128³ over the surface's bounds, 4.9–13.5 % over
-#: [-1, 1]³; 7.9–22.8 % and 9.1–26.3 % at 64³, the icosahedron always the largest.
+#: Measured (d = 0.015, defaults): 3.6–10.0 % at 128³ over the surface's bounds, 4.2–11.7 % over
+#: [-1, 1]³; 6.8–20.0 % and 7.9–22.7 % at 64³, the icosahedron always the largest (the paper's
+#: test alone, `corner_test=False`: 4.6–12.6 %, 5.3–14.6 %, 8.3–24.8 %, 9.5–28.1 %).
 #: At 64³ < 15 % is out of reach: the corners of the cells the surface crosses, which every
 #: polygonizer has to evaluate, are already 10.3 % (own bounds) and 12.0 % ([-1, 1]³) of the lattice
-#: for the icosahedron, and the octree keeps every cell within about r / (w/d) of the surface, which
-#: is about twice that. Over [-1, 1]³ the surface is a larger share of the lattice than over its own
-#: (8 % larger) bounds, and the icosahedron needs 26.3 %, so that grid gets 30 %.
-MAX_PERCENT = {("own", 64): 25.0, ("box", 64): 30.0, ("own", 128): 15.0, ("box", 128): 15.0}
+#: for the icosahedron, and the octree keeps cells near the surface that it cannot prove empty.
+#: Over [-1, 1]³ the surface is a larger share of the lattice than over its own (8 % larger)
+#: bounds, so that grid gets more room.
+MAX_PERCENT = {("own", 64): 22.0, ("box", 64): 25.0, ("own", 128): 12.0, ("box", 128): 13.0}
+
+#: Cuno et al.'s evaluation shares at 128³ over [-1, 1]³ for models of the same names (issue 3's
+#: target: ours below them). Measured with the defaults: knot 6.50 %, torus2 4.18 %.
+PAPER_PERCENT = {"knot": 12.56, "torus2": 4.22}
 
 
 class PointRecorder:
@@ -104,6 +109,19 @@ def test_octree_evaluates_a_small_share_of_the_lattice(polygonized):
     assert stats["lattice_points"] == (n + 1) ** 3 == dense.stats["evaluations"]
     assert math.isclose(stats["evaluation_percent"], 100.0 * stats["evaluations"] / stats["lattice_points"])
     assert stats["evaluation_percent"] < MAX_PERCENT[grid], (name, grid, stats["evaluation_percent"])
+
+
+@pytest.mark.parametrize("name", sorted(PAPER_PERCENT))
+def test_evaluations_below_the_papers_share(name, mesh_dir):
+    import trimesh
+
+    path = mesh_dir / f"{name}_800.ply"
+    if not path.is_file():
+        pytest.skip(f"shared test mesh {path} is absent")
+    m = trimesh.load(path, process=False)
+    surface = VariationalSurface.from_mesh(np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64), d=D)
+    octree = polygonize(surface, bounds=BOX, resolution=128, method="octree", normals=False)
+    assert octree.stats["evaluation_percent"] < PAPER_PERCENT[name], octree.stats["evaluation_percent"]
 
 
 @pytest.mark.parametrize("kind", ["own", "box"])

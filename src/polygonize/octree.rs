@@ -10,9 +10,14 @@
 //! shared case table and edge vertices — so wherever nothing was rejected wrongly, the mesh is
 //! exactly the dense mesh.
 //!
+//! Beyond the paper (on by default, see [`Settings::corner_test`]), values already known reject
+//! more: a block covered by the balls |f| around its known corners is dropped unevaluated, and
+//! leaf cells are tested first from their corner shared with the parent block, then by such
+//! covers, before all their corners are evaluated.
+//!
 //! All the centres of one level are evaluated in one batched field call, then the leaves' parent
-//! corners (the corner test) in one more, then all the leaf corners in one more; no point is
-//! evaluated twice (coarse centres are corners of leaf cells). The values live in a block-sparse
+//! corners (the corner test) in one more, the parent blocks' edge midpoints in one more, then
+//! all the leaf corners in one more; no point is evaluated twice (coarse centres are corners of leaf cells). The values live in a block-sparse
 //! store: a dense table of bricks of 8³ lattice points, each brick an array of indices into the
 //! values, so finding, claiming and reading a point is array indexing, and memory grows with the
 //! surface, not with the lattice. Leaves are triangulated in order, their cases found in parallel,
@@ -43,10 +48,20 @@ pub struct Settings {
     /// Multiplies the circumradius in the test |f(c)| > safety × r. Values above 1 keep more
     /// blocks (safer for fields that over-estimate distance, more evaluations).
     pub safety: f64,
-    /// Before evaluating all corners of the leaf cells, evaluate only each leaf's corner shared
-    /// with its parent block's corners (the one with even lattice coordinates) and reject the
-    /// leaf when |f| there exceeds safety × the cell's diagonal — the same pseudo-distance test,
-    /// from a corner instead of the centre. Not in the paper; `false` gives §4.3 exactly.
+    /// Tests beyond the paper that reject with values already known, each the same
+    /// pseudo-distance argument (no surface within |f(x)| / safety of x):
+    /// - a block whose known corners (kept centres of coarser levels) have balls of radius
+    ///   |f| / safety that together cover it is dropped without evaluating its centre;
+    /// - before evaluating all corners of the leaf cells, only each leaf's corner shared with
+    ///   its parent block is evaluated, and the leaf is rejected when |f| there exceeds
+    ///   safety × the cell's diagonal;
+    /// - leaves covered by the balls of their known corners are dropped; then the parent
+    ///   block's edge midpoints are evaluated for the leaves left, and the cover test runs
+    ///   again before their other corners.
+    ///
+    /// Covering is proven by splitting the box into octants, three levels deep. On the shared
+    /// meshes at 128³ this evaluates about a fifth fewer points (torus2 4.18 % of the lattice
+    /// instead of 5.33 %) for the same mesh. `false` gives §4.3 exactly.
     pub corner_test: bool,
 }
 
@@ -256,6 +271,40 @@ impl Store {
         idx
     }
 
+    /// The value at lattice point `p` when it has been evaluated (None beyond the lattice, or
+    /// when unknown or only queued).
+    #[inline]
+    fn known(&self, p: [u32; 3], cells: [u32; 3]) -> Option<f64> {
+        if p[0] > cells[0] || p[1] > cells[1] || p[2] > cells[2] {
+            return None;
+        }
+        let (t, l) = self.locate(p);
+        let b = self.table[t];
+        if b == NONE {
+            return None;
+        }
+        let i = self.slots[b as usize * BRICK_POINTS + l];
+        self.values.get(i as usize).copied()
+    }
+
+    /// [`Store::known`] for the 27 points of the block of 2 × 2 × 2 cells with lower corner `o`
+    /// (NaN where unknown).
+    #[inline]
+    fn block_known(&self, o: [u32; 3], cells: [u32; 3]) -> [f64; 27] {
+        let whole = (0..3).all(|a| o[a] & (BRICK - 1) <= BRICK - 3 && o[a] + 2 <= cells[a]);
+        let (t, l) = self.locate(o);
+        let b = self.table[t];
+        if whole && b != NONE {
+            // The whole block in the brick of `o` (as in claim_block).
+            let s = b as usize * BRICK_POINTS + l;
+            return std::array::from_fn(|p| {
+                let i = self.slots[s + BLOCK_SLOTS[p]];
+                self.values.get(i as usize).copied().unwrap_or(f64::NAN)
+            });
+        }
+        std::array::from_fn(|p| self.known(block_offset(o, p), cells).unwrap_or(f64::NAN))
+    }
+
     /// Evaluates `points` (queued by [`Store::claim`]) in batches and appends their values.
     fn evaluate<F: Field + ?Sized>(
         &mut self,
@@ -286,6 +335,13 @@ fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
     [o[0] + d[0], o[1] + d[1], o[2] + d[2]]
 }
 
+/// Lattice point of corner `k` of the block of `s` cells per side with lower corner `o`.
+#[inline]
+fn corner_scaled(o: [u32; 3], k: usize, s: u32) -> [u32; 3] {
+    let d = corner_offset(k);
+    [o[0] + d[0] * s, o[1] + d[1] * s, o[2] + d[2] * s]
+}
+
 /// The set bits of a child mask, in increasing order.
 #[inline]
 fn bits(m: u8) -> impl Iterator<Item = usize> {
@@ -300,6 +356,131 @@ fn block_offset(o: [u32; 3], p: usize) -> [u32; 3] {
         o[1] + ((p / 3) % 3) as u32,
         o[2] + (p / 9) as u32,
     ]
+}
+
+/// Levels of octant splitting with which [`covered`] tries to prove a box free of the surface
+/// (the finest pieces are 1/8 of the box per side).
+const COVER_DEPTH: u32 = 3;
+
+/// Whether the balls around the box's corners cover it: corner k (case-bit order) of the box
+/// `[0, size]` carries a ball of radius `radius[k]` (NaN: no ball). Under the same assumption as
+/// the rejection test (|f| under-estimates the distance to the surface, so no surface point lies
+/// within |f(x)|/safety of x), a covered box holds no surface. Proven by splitting the box into
+/// octants, down to [`COVER_DEPTH`] levels: a piece is covered when one ball holds all of it.
+fn covered(radius: &[f64; 8], size: DVec3) -> bool {
+    // The balls there are (NaN radius: none), as centres and squared radii.
+    let mut balls = [(DVec3::ZERO, 0.0); 8];
+    let mut n = 0;
+    for (k, &r) in radius.iter().enumerate() {
+        if r > 0.0 {
+            let d = corner_offset(k);
+            balls[n] = (
+                DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size,
+                r * r,
+            );
+            n += 1;
+        }
+    }
+    let balls = &balls[..n];
+    // Necessary: every corner of the box and its centre lie in a ball (most boxes near the
+    // surface fail here, before any splitting).
+    let inside = |p: DVec3| balls.iter().any(|&(c, r2)| (p - c).length_squared() < r2);
+    if !(0..8).all(|k| {
+        let d = corner_offset(k);
+        inside(DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size)
+    }) || !inside(0.5 * size)
+    {
+        return false;
+    }
+    covered_piece(balls, (1u32 << n) - 1, DVec3::ZERO, size, COVER_DEPTH)
+}
+
+/// Whether one of the balls in `mask` holds all of the piece `[lo, hi]`, or (splitting it,
+/// `depth` more times) each of its octants is covered; balls that miss the piece are dropped
+/// on the way down.
+fn covered_piece(balls: &[(DVec3, f64)], mask: u32, lo: DVec3, hi: DVec3, depth: u32) -> bool {
+    let mid = 0.5 * (lo + hi);
+    let (mut mid_covered, mut touching) = (false, 0u32);
+    let mut m = mask;
+    while m != 0 {
+        let i = m.trailing_zeros();
+        m &= m - 1;
+        let (c, r2) = balls[i as usize];
+        let far = (hi - c).abs().max((lo - c).abs());
+        if far.length_squared() < r2 {
+            return true;
+        }
+        // The piece's point nearest to the ball's centre.
+        if (c.clamp(lo, hi) - c).length_squared() < r2 {
+            touching |= 1 << i;
+            mid_covered |= (mid - c).length_squared() < r2;
+        }
+    }
+    // The piece's centre not covered: the piece is not.
+    if depth == 0 || !mid_covered {
+        return false;
+    }
+    (0..8).all(|k| {
+        let d = corner_offset(k);
+        let pick = |a: usize| {
+            if d[a] == 0 {
+                (lo[a], mid[a])
+            } else {
+                (mid[a], hi[a])
+            }
+        };
+        let (x, y, z) = (pick(0), pick(1), pick(2));
+        covered_piece(
+            balls,
+            touching,
+            DVec3::new(x.0, y.0, z.0),
+            DVec3::new(x.1, y.1, z.1),
+            depth - 1,
+        )
+    })
+}
+
+/// Block points (see [`block_point`]) with exactly one coordinate 1: the midpoints of the
+/// block's edges, which are the leaf corners with one odd lattice coordinate.
+const EDGE_MIDPOINTS: u32 = {
+    let mut m = 0;
+    let mut p = 0;
+    while p < 27 {
+        let ones = (p % 3 == 1) as u32 + ((p / 3) % 3 == 1) as u32 + (p / 9 == 1) as u32;
+        if ones == 1 {
+            m |= 1 << p;
+        }
+        p += 1;
+    }
+    m
+};
+
+/// Removes from the child masks the leaves whose known corners' balls cover them
+/// ([`covered`]); each leaf's corners are read from its block's 27 points.
+fn drop_covered_leaves(
+    store: &Store,
+    blocks: &[[u32; 3]],
+    masks: &mut [u8],
+    cells: [u32; 3],
+    cell: DVec3,
+    safety: f64,
+) {
+    blocks
+        .par_iter()
+        .zip(masks.par_iter_mut())
+        .with_min_len(256)
+        .for_each(|(&o, m)| {
+            if *m == 0 {
+                return;
+            }
+            let v = store.block_known(o, cells);
+            for d in bits(*m) {
+                let radius = LEAF_CORNERS[d].map(|p| v[p as usize].abs() / safety);
+                if covered(&radius, cell) {
+                    *m &= !(1 << d);
+                }
+            }
+        });
 }
 
 /// Polygonizes `field` over `lattice` with hierarchical rejection; leaves are single cells.
@@ -346,6 +527,29 @@ pub fn polygonize<F: Field + ?Sized>(
         let s = 1u32 << (levels - level);
         if level >= start_level {
             let t = Instant::now();
+            if octree.corner_test && level > start_level {
+                // Blocks that the balls of their known corners (kept centres of coarser
+                // levels) already cover need no centre of their own.
+                let size = lattice.cell * s as f64;
+                let store = &store;
+                let free: Vec<bool> = blocks
+                    .par_iter()
+                    .with_min_len(256)
+                    .map(|o| {
+                        let radius = std::array::from_fn(|k| {
+                            store
+                                .known(corner_scaled(*o, k, s), cells)
+                                .map_or(f64::NAN, |v| v.abs() / octree.safety)
+                        });
+                        covered(&radius, size)
+                    })
+                    .collect();
+                let mut i = 0;
+                blocks.retain(|_| {
+                    i += 1;
+                    !free[i - 1]
+                });
+            }
             // Centres are never shared: those of one level are distinct, and those of different
             // levels are odd multiples of different powers of two.
             points.clear();
@@ -428,6 +632,22 @@ pub fn polygonize<F: Field + ?Sized>(
             }
             *m = kept;
         }
+        // Leaves covered by the balls of the corners known so far (their parent corner, the
+        // block's centre, coarser centres) go; then the block's edge midpoints are evaluated
+        // for the leaves left, and the test runs again before the remaining corners.
+        let drop = |store: &Store, masks: &mut [u8]| {
+            drop_covered_leaves(store, &blocks, masks, cells, lattice.cell, octree.safety)
+        };
+        drop(&store, &mut masks);
+        points.clear();
+        for (&o, &m) in blocks.iter().zip(&masks) {
+            if m != 0 {
+                let wanted = LEAF_POINTS[m as usize] & EDGE_MIDPOINTS;
+                store.claim_block(o, wanted, lattice, &mut points);
+            }
+        }
+        store.evaluate(field, &points, settings, &mut stats)?;
+        drop(&store, &mut masks);
     }
     // The leaves, and all their corners not yet known evaluated in one batch; the leaves of a
     // block claim its points at once.
@@ -662,5 +882,63 @@ mod tests {
         };
         let (o, _) = polygonize(&f, &l, &s, &deep).unwrap();
         assert_eq!(d.compare(&o).missing, 0);
+    }
+
+    /// `covered` is sound: wherever it says a box is covered, every sample point of the box
+    /// lies in a ball; and it finds the covers that are easy to see.
+    #[test]
+    fn cover_test_is_sound() {
+        let mut state = 11u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let size = DVec3::new(1.0, 0.8, 1.3);
+        let corners: [DVec3; 8] = std::array::from_fn(|k| {
+            let d = corner_offset(k);
+            DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size
+        });
+        let mut yes = 0;
+        for _ in 0..3000 {
+            let radius: [f64; 8] = std::array::from_fn(|_| {
+                let r = next() * 1.8;
+                if next() < 0.3 {
+                    f64::NAN
+                } else {
+                    r
+                }
+            });
+            if !covered(&radius, size) {
+                continue;
+            }
+            yes += 1;
+            for _ in 0..200 {
+                let p = DVec3::new(next(), next(), next()) * size;
+                assert!(
+                    corners
+                        .iter()
+                        .zip(&radius)
+                        .any(|(c, r)| (p - *c).length() < *r),
+                    "{radius:?} {p}"
+                );
+            }
+        }
+        assert!(yes > 100, "{yes}");
+        // One ball reaching the far corner covers the box; two opposite balls that miss the
+        // box's centre do not; two that each reach past the centre and take in the corners
+        // nearest to them do.
+        let far = size.length();
+        let mut r = [f64::NAN; 8];
+        r[0] = far * 1.0001;
+        assert!(covered(&r, size));
+        r[0] = 0.45 * far;
+        r[7] = 0.45 * far;
+        assert!(!covered(&r, size));
+        r[0] = 0.95 * far;
+        r[7] = 0.95 * far;
+        assert!(covered(&r, size));
+        assert!(!covered(&[f64::NAN; 8], size));
     }
 }
