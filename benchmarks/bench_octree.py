@@ -15,6 +15,7 @@ import datetime as _dt
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -72,6 +73,16 @@ def bench(a: argparse.Namespace) -> str:
         t_trk = timeit_median(lambda: im.polygonize(s, bounds=bounds, resolution=res, method="tracking"), runs_fast, 1)
         t_den = timeit_median(lambda: im.polygonize(s, bounds=bounds, resolution=res), runs_med, 1)
         oct_, trk, den = t_oct.result, t_trk.result, t_den.result
+        # Paired rounds: octree then dense, in turn, a ratio per round; their median is immune
+        # to this machine changing speed between the blocks of runs above.
+        paired = []
+        for _ in range(runs_med + 2):
+            t0 = time.perf_counter()
+            im.polygonize(s, bounds=bounds, resolution=res, method="octree")
+            t1 = time.perf_counter()
+            im.polygonize(s, bounds=bounds, resolution=res)
+            paired.append((time.perf_counter() - t1) / (t1 - t0))
+        paired.sort()
         same = im.compare(den, oct_)
         same_t = im.compare(den, trk)
         P = np.ascontiguousarray(s.constraints["points"])
@@ -91,7 +102,9 @@ def bench(a: argparse.Namespace) -> str:
         t_sc = Timing.from_json(sc["grid"])
         rows.append([
             name, fmt_s(t_oct.median), fmt_s(t_trk.median), fmt_s(t_den.median), fmt_s(t_fer.median),
-            fmt_s(t_sc.median), fmt_ratio(t_den.median, t_oct.median), fmt_ratio(t_fer.median, t_oct.median),
+            fmt_s(t_sc.median), fmt_ratio(t_den.median, t_oct.median),
+            f"{paired[len(paired) // 2]:.2f}× ({paired[0]:.2f}–{paired[-1]:.2f}×)",
+            fmt_ratio(t_fer.median, t_oct.median),
             fmt_ratio(t_sc.median, t_oct.median),
         ])
         count_rows.append([
@@ -111,7 +124,9 @@ def bench(a: argparse.Namespace) -> str:
         "Each shared 800-vertex mesh fitted with `from_mesh(d=0.015)` (1,600 constraints, r³), polygonized "
         f"over [-1, 1]³ at {res}³ cells. Wall-clock medians in seconds after one warm-up "
         f"({runs_fast} runs for octree/tracking, {runs_med} for dense and ferreus-rbf, 1 for scipy + skimage, "
-        "which takes tens of seconds); ratio = peer / octree. ferreus-rbf: direct solve, `build_isosurface(extents, "
+        "which takes tens of seconds); ratio = peer / octree. Paired rounds: octree, then dense, in turn, "
+        f"{runs_med + 2} rounds; the median of the per-round ratios (with their range) does not move when the machine "
+        "changes speed between blocks of runs, as it does here by up to a third. ferreus-rbf: direct solve, `build_isosurface(extents, "
         f"{2.0 / res:.5f}, 0.0)` (its seeded marching tetrahedra at the same cell size). scipy: "
         f"`RBFInterpolator(kernel='cubic', degree=1)` on the {res + 1}³ grid with OPENBLAS_NUM_THREADS=1 (the faster "
         "setting in the RBF section), then `skimage.measure.marching_cubes`.",
@@ -124,7 +139,8 @@ def bench(a: argparse.Namespace) -> str:
         "",
         md_table(
             ["mesh", "ours octree", "ours tracking", "ours dense", "ferreus-rbf isosurface", "scipy + skimage",
-             "dense / octree", "ferreus / octree", "scipy+skimage / octree"],
+             "dense / octree", "dense / octree, paired rounds: median (range)", "ferreus / octree",
+             "scipy+skimage / octree"],
             rows,
         ),
         "",
