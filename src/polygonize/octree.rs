@@ -368,6 +368,14 @@ const COVER_DEPTH: u32 = 3;
 /// within |f(x)|/safety of x), a covered box holds no surface. Proven by splitting the box into
 /// octants, down to [`COVER_DEPTH`] levels: a piece is covered when one ball holds all of it.
 fn covered(radius: &[f64; 8], size: DVec3) -> bool {
+    // The box's centre is as far as half the diagonal from every corner: without a ball that
+    // reaches it, nothing is covered (the common case near the surface, decided here).
+    let reach = radius
+        .iter()
+        .fold(0.0f64, |m, &r| if r > m { r } else { m });
+    if reach * reach <= 0.25 * size.length_squared() {
+        return false;
+    }
     // The balls there are (NaN radius: none), as centres and squared radii.
     let mut balls = [(DVec3::ZERO, 0.0); 8];
     let mut n = 0;
