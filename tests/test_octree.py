@@ -22,7 +22,7 @@ GRIDS = [("own", 64), ("own", 128), ("box", 64), ("box", 128)]
 
 #: Evaluations allowed, in % of the (n+1)³ lattice points that plain marching cubes evaluates.
 #: Measured (d = 0.015, defaults): 3.6–10.0 % at 128³ over the surface's bounds, 4.2–11.7 % over
-#: [-1, 1]³; 6.8–20.0 % and 7.9–22.7 % at 64³, the icosahedron always the largest (the paper's
+#: [-1, 1]³; 6.8–19.9 % and 7.8–22.7 % at 64³, the icosahedron always the largest (the paper's
 #: test alone, `corner_test=False`: 4.6–12.6 %, 5.3–14.6 %, 8.3–24.8 %, 9.5–28.1 %).
 #: At 64³ < 15 % is out of reach: the corners of the cells the surface crosses, which every
 #: polygonizer has to evaluate, are already 10.3 % (own bounds) and 12.0 % ([-1, 1]³) of the lattice
@@ -32,7 +32,7 @@ GRIDS = [("own", 64), ("own", 128), ("box", 64), ("box", 128)]
 MAX_PERCENT = {("own", 64): 22.0, ("box", 64): 25.0, ("own", 128): 12.0, ("box", 128): 13.0}
 
 #: Cuno et al.'s evaluation shares at 128³ over [-1, 1]³ for models of the same names (issue 3's
-#: target: ours below them). Measured with the defaults: knot 6.50 %, torus2 4.18 %.
+#: target: ours below them). Measured with the defaults: knot 6.48 %, torus2 4.17 %.
 PAPER_PERCENT = {"knot": 12.56, "torus2": 4.22}
 
 

@@ -390,6 +390,14 @@ fn covered(radius: &[f64; 8], size: DVec3) -> bool {
         }
     }
     let balls = &balls[..n];
+    // Two balls at opposite corners (a leaf before its other corners are known: its parent
+    // corner and its block's centre): decided exactly.
+    if n == 2 {
+        let k = (0..8).find(|&k| radius[k] > 0.0).unwrap();
+        if radius[7 - k] > 0.0 {
+            return covered_by_opposite_balls(radius[k], radius[7 - k], size);
+        }
+    }
     // Necessary: every corner of the box and its centre lie in a ball (most boxes near the
     // surface fail here, before any splitting).
     let inside = |p: DVec3| balls.iter().any(|&(c, r2)| (p - c).length_squared() < r2);
@@ -401,6 +409,39 @@ fn covered(radius: &[f64; 8], size: DVec3) -> bool {
         return false;
     }
     covered_piece(balls, (1u32 << n) - 1, DVec3::ZERO, size, COVER_DEPTH)
+}
+
+/// Whether the open balls of radius `r0` around the corner 0 of the box `[0, size]` and `r1`
+/// around the opposite corner `size` cover the box, exactly. Outside the first ball, the point
+/// of the box farthest from `size` lies on the first ball's sphere (moving any coordinate
+/// towards 0 takes a point farther from `size`), and on the sphere's patch inside the box it
+/// has at most one coordinate strictly between its bounds (along an arc between two such
+/// coordinates the distance to `size` is largest at an end). So the candidates are the patch's
+/// points with two coordinates at 0 or at `size`, the third from the sphere.
+fn covered_by_opposite_balls(r0: f64, r1: f64, size: DVec3) -> bool {
+    let far = size.length_squared();
+    if far < r0 * r0 || far < r1 * r1 {
+        return true;
+    }
+    let c = size.to_array();
+    let mut worst = 0.0f64;
+    for free in 0..3 {
+        let (i, j) = ((free + 1) % 3, (free + 2) % 3);
+        for (xi, xj) in [(0.0, 0.0), (c[i], 0.0), (0.0, c[j]), (c[i], c[j])] {
+            let rest = r0 * r0 - xi * xi - xj * xj;
+            if rest < 0.0 {
+                continue;
+            }
+            let xf = rest.sqrt();
+            if xf > c[free] {
+                continue;
+            }
+            let d2 = (c[free] - xf).powi(2) + (c[i] - xi).powi(2) + (c[j] - xj).powi(2);
+            worst = worst.max(d2);
+        }
+    }
+    // A margin for the rounding above (the argument itself is exact).
+    worst * (1.0 + 1e-9) < r1 * r1
 }
 
 /// Whether one of the balls in `mask` holds all of the piece `[lo, hi]`, or (splitting it,
@@ -892,17 +933,57 @@ mod tests {
         assert_eq!(d.compare(&o).missing, 0);
     }
 
-    /// `covered` is sound: wherever it says a box is covered, every sample point of the box
-    /// lies in a ball; and it finds the covers that are easy to see.
-    #[test]
-    fn cover_test_is_sound() {
-        let mut state = 11u64;
-        let mut next = || {
+    /// Uniform numbers in [0, 1) from a seed (a linear congruential generator).
+    fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
             state = state
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        }
+    }
+
+    /// The exact test for two opposite balls is sound (sampled) and proves at least what the
+    /// octant splitting proves.
+    #[test]
+    fn opposite_balls_are_decided_exactly() {
+        let mut next = uniform(5);
+        let (mut exact, mut split) = (0, 0);
+        for _ in 0..4000 {
+            let size = DVec3::new(0.5 + next(), 0.5 + next(), 0.5 + next());
+            let far = size.length();
+            let (r0, r1) = (next() * 1.1 * far, next() * 1.1 * far);
+            let yes = covered_by_opposite_balls(r0, r1, size);
+            let balls = [(DVec3::ZERO, r0 * r0), (size, r1 * r1)];
+            let by_split = covered_piece(&balls, 3, DVec3::ZERO, size, 5);
+            assert!(yes || !by_split, "{r0} {r1} {size}");
+            exact += yes as u32;
+            split += by_split as u32;
+            if yes {
+                for _ in 0..100 {
+                    let p = DVec3::new(next(), next(), next()) * size;
+                    assert!(
+                        p.length() < r0 || (p - size).length() < r1,
+                        "{r0} {r1} {size} {p}"
+                    );
+                }
+                // The box's other corners, where the two balls are weakest.
+                for k in 1..7 {
+                    let d = corner_offset(k);
+                    let p = DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size;
+                    assert!(p.length() < r0 || (p - size).length() < r1);
+                }
+            }
+        }
+        assert!(exact > split && split > 100, "{exact} {split}");
+    }
+
+    /// `covered` is sound: wherever it says a box is covered, every sample point of the box
+    /// lies in a ball; and it finds the covers that are easy to see.
+    #[test]
+    fn cover_test_is_sound() {
+        let mut next = uniform(11);
         let size = DVec3::new(1.0, 0.8, 1.3);
         let corners: [DVec3; 8] = std::array::from_fn(|k| {
             let d = corner_offset(k);
