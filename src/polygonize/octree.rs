@@ -398,14 +398,12 @@ fn covered(radius: &[f64; 8], size: DVec3) -> bool {
             return covered_by_opposite_balls(radius[k], radius[7 - k], size);
         }
     }
-    // Necessary: every corner of the box and its centre lie in a ball (most boxes near the
-    // surface fail here, before any splitting).
+    // Necessary: every corner of the box lies in a ball (the centre does, by the test above).
     let inside = |p: DVec3| balls.iter().any(|&(c, r2)| (p - c).length_squared() < r2);
     if !(0..8).all(|k| {
         let d = corner_offset(k);
         inside(DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size)
-    }) || !inside(0.5 * size)
-    {
+    }) {
         return false;
     }
     covered_piece(balls, (1u32 << n) - 1, DVec3::ZERO, size, COVER_DEPTH)

@@ -154,25 +154,12 @@ pub fn flatten_points(p: Vec<DVec3>) -> Vec<f64> {
 
 /// Triangles as int64 indices, flat (run without the GIL: it is a pass over the whole mesh).
 pub fn flatten_triangles(t: &[[u32; 3]]) -> Vec<i64> {
-    use rayon::prelude::*;
-    let n = 3 * t.len();
-    let mut out: Vec<i64> = crate::memory::with_capacity_huge(n);
-    out.spare_capacity_mut()[..n]
-        .par_chunks_mut(3 * 4096)
-        .zip(t.par_chunks(4096))
-        .for_each(|(o, t)| {
-            for (o, v) in o.iter_mut().zip(t.iter().flatten()) {
-                o.write(*v as i64);
-            }
-        });
-    // SAFETY: the chunks cover out[..n] exactly (4096 triangles of 3 indices each, the last
-    // chunk shorter alike), and every element was written above.
-    unsafe { out.set_len(n) };
-    out
+    // Runs of 4096 triangles, converted in parallel.
+    flatten_triangle_runs(&t.chunks(4096).collect::<Vec<_>>())
 }
 
 /// Runs of triangles concatenated as int64 indices, flat, in one parallel pass.
-pub fn flatten_triangle_runs(runs: &[Vec<[u32; 3]>]) -> Vec<i64> {
+pub fn flatten_triangle_runs<R: AsRef<[[u32; 3]]> + Sync>(runs: &[R]) -> Vec<i64> {
     let t = crate::polygonize::gather_map(runs, |t| t.map(i64::from));
     match bytemuck::allocation::try_cast_vec::<[i64; 3], i64>(t) {
         Ok(v) => v,
