@@ -5,45 +5,9 @@ use implicitmesh::field::rbf::{Settings, VariationalSurface};
 use implicitmesh::field::Field;
 use std::time::Instant;
 
-fn read_ply(path: &str) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-    let text = std::fs::read_to_string(path).expect("read");
-    let mut lines = text.lines();
-    let (mut nv, mut nf) = (0usize, 0usize);
-    for l in lines.by_ref() {
-        if let Some(n) = l.strip_prefix("element vertex ") {
-            nv = n.trim().parse().unwrap();
-        }
-        if let Some(n) = l.strip_prefix("element face ") {
-            nf = n.trim().parse().unwrap();
-        }
-        if l == "end_header" {
-            break;
-        }
-    }
-    let v = (0..nv)
-        .map(|_| {
-            let x: Vec<f64> = lines
-                .next()
-                .unwrap()
-                .split_whitespace()
-                .map(|s| s.parse().unwrap())
-                .collect();
-            DVec3::new(x[0], x[1], x[2])
-        })
-        .collect();
-    let f = (0..nf)
-        .map(|_| {
-            let x: Vec<u32> = lines
-                .next()
-                .unwrap()
-                .split_whitespace()
-                .map(|s| s.parse().unwrap())
-                .collect();
-            [x[1], x[2], x[3]]
-        })
-        .collect();
-    (v, f)
-}
+#[path = "common/ply.rs"]
+mod ply;
+use ply::read_ply;
 
 fn main() {
     let path = std::env::args().nth(1).expect("mesh path");

@@ -105,13 +105,14 @@ def polygonize(
         :class:`BlobField`, a bound on ``|∇f|``, so that no block the surface crosses is
         rejected).
     corner_test : bool, optional
-        Octree only: also reject with values already known, by the same pseudo-distance
+        Octree only: also decide with values already known, by the same pseudo-distance
         argument (no surface within ``|f(x)| / safety`` of ``x``): a block covered by the balls
-        around its known corners is dropped without evaluating its centre, a leaf cell is
-        rejected by the value at its corner shared with the parent block (radius = the cell's
-        diagonal) and then by covers of its known corners, before its other corners are
-        evaluated. About a fifth fewer evaluations on the shared meshes, the same mesh.
-        Default True; False samples exactly as Cuno et al. §4.3.
+        around its known corners is dropped without evaluating its centre, and leaf cells are
+        settled by the signs of their corners (a corner inside the ball of a known value has its
+        sign; marching cubes needs values only at the ends of crossed edges), so a leaf whose
+        corners all get one sign needs no more evaluations. A third or more fewer evaluations
+        on the shared meshes, the same mesh. Default True; False samples exactly as Cuno et al.
+        §4.3.
     seeds : (K, 3) array_like, optional
         Tracking only: points inside or on each component of the surface to start from.
 

@@ -1,0 +1,65 @@
+//! Times the octree polygonizer against dense marching cubes on a variational surface fitted to
+//! a PLY mesh, in paired rounds (octree, then dense), for profiling:
+//! `cargo run --release --example octree_timing -- path/to/mesh.ply [resolution] [rounds] [octree]`
+//! (over [-1, 1]³, d = 0.015 as in the benchmark; prints the octree's phases of its fastest run;
+//! `octree` skips dense, for profiles of the octree alone).
+use glam::DVec3;
+use implicitmesh::field::constraints;
+use implicitmesh::field::rbf::{Settings, VariationalSurface};
+use implicitmesh::lattice::Lattice;
+use implicitmesh::polygonize::{dense, octree, Settings as PolySettings};
+use std::time::Instant;
+
+#[path = "common/ply.rs"]
+mod ply;
+use ply::read_ply;
+
+fn main() {
+    let a: Vec<String> = std::env::args().collect();
+    let path = a.get(1).expect("mesh path");
+    let res: u32 = a.get(2).map_or(128, |s| s.parse().unwrap());
+    let rounds: usize = a.get(3).map_or(7, |s| s.parse().unwrap());
+    let alone = a.get(4).is_some_and(|s| s == "octree");
+    let (v, f) = read_ply(path);
+    let placement = constraints::Settings {
+        d: Some(0.015),
+        ..Default::default()
+    };
+    let s = VariationalSurface::from_mesh(&v, &f, &placement, &Settings::default()).unwrap();
+    let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [res; 3]).unwrap();
+    let set = PolySettings::default();
+    let oct = octree::Settings::default();
+    let (mut ratios, mut best) = (Vec::new(), None::<(f64, _)>);
+    for _ in 0..rounds {
+        let t = Instant::now();
+        let (m, st) = octree::polygonize(&s, &lattice, &set, &oct).unwrap();
+        let to = t.elapsed().as_secs_f64();
+        if !alone {
+            let t = Instant::now();
+            let (d, _) = dense::polygonize(&s, &lattice, &set).unwrap();
+            let td = t.elapsed().as_secs_f64();
+            assert_eq!(m.triangles.len(), d.triangles.len());
+            ratios.push(td / to);
+        }
+        if best.as_ref().is_none_or(|b| to < b.0) {
+            best = Some((to, st));
+        }
+    }
+    ratios.sort_by(f64::total_cmp);
+    if ratios.is_empty() {
+        ratios.push(f64::NAN);
+    }
+    let (to, st) = best.unwrap();
+    println!(
+        "octree {:.4} s (fastest), {} evaluations ({:.2} %); dense / octree paired median {:.2} ({:.2}-{:.2})",
+        to,
+        st.evaluations,
+        st.evaluation_percent(),
+        ratios[ratios.len() / 2],
+        ratios[0],
+        ratios[ratios.len() - 1]
+    );
+    for (phase, secs) in &st.seconds {
+        println!("  {phase}: {secs:.4}");
+    }
+}
