@@ -346,9 +346,10 @@ mod avx512 {
         }
     }
 
-    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass.
+    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass. Without
+    /// `VALUES`, the values are left at 0 and not computed (the gradients are the same bits).
     #[target_feature(enable = "avx512f")]
-    pub unsafe fn values_gradients(
+    pub unsafe fn values_gradients<const VALUES: bool>(
         c: &Centres,
         blocks: &[Block],
         out: &mut [[[f64; LANES]; 4]],
@@ -381,7 +382,9 @@ mod avx512 {
                 let w = _mm512_set1_pd(c.w[j]);
                 for (a, p) in acc.iter_mut().zip([p0, p1]) {
                     let (phi, s, dx, dy, dz) = phi_grad_block(p.0, p.1, p.2, cx, cy, cz, cube);
-                    a[0] = _mm512_fmadd_pd(w, phi, a[0]);
+                    if VALUES {
+                        a[0] = _mm512_fmadd_pd(w, phi, a[0]);
+                    }
                     let ws = _mm512_mul_pd(w, s);
                     a[1] = _mm512_fmadd_pd(ws, dx, a[1]);
                     a[2] = _mm512_fmadd_pd(ws, dy, a[2]);
@@ -464,7 +467,7 @@ pub fn block_values_gradients<K: RadialFn>(
     if let Some(cube) = avx512_kernel::<K>() {
         if has_avx512() {
             // SAFETY: the CPU supports AVX-512F, checked just above.
-            unsafe { avx512::values_gradients(c, blocks, out, cube) };
+            unsafe { avx512::values_gradients::<true>(c, blocks, out, cube) };
             return;
         }
     }
@@ -477,6 +480,20 @@ pub fn block_values_gradients<K: RadialFn>(
     for (b, o) in blocks.iter().zip(out.iter_mut()) {
         *o = sum_values_gradients::<K>(c, b);
     }
+}
+
+/// [`block_values_gradients`] where only the gradients are wanted: `out[i][0]` (the value) is
+/// left unspecified, and the gradients are the same bits.
+pub fn block_gradients<K: RadialFn>(c: &Centres, blocks: &[Block], out: &mut [[[f64; LANES]; 4]]) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(cube) = avx512_kernel::<K>() {
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F, checked just above.
+            unsafe { avx512::values_gradients::<false>(c, blocks, out, cube) };
+            return;
+        }
+    }
+    block_values_gradients::<K>(c, blocks, out);
 }
 
 #[cfg(test)]

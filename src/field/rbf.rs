@@ -7,8 +7,8 @@
 
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::{
-    block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel, ThinPlate,
-    Triharmonic, LANES,
+    block_gradients, block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel,
+    ThinPlate, Triharmonic, LANES,
 };
 use super::saddle::SaddleSolver;
 use super::Field;
@@ -67,16 +67,21 @@ fn dispatch_values(kernel: Kernel, c: &Centres, blocks: &[Block], out: &mut [[f6
     }
 }
 
+/// Kernel sums and gradients of a run of blocks; with `values` false, only the gradients.
 fn dispatch_values_gradients(
     kernel: Kernel,
     c: &Centres,
     blocks: &[Block],
     out: &mut [[[f64; LANES]; 4]],
+    values: bool,
 ) {
-    match kernel {
-        Kernel::Triharmonic => block_values_gradients::<Triharmonic>(c, blocks, out),
-        Kernel::Biharmonic => block_values_gradients::<Biharmonic>(c, blocks, out),
-        Kernel::ThinPlate => block_values_gradients::<ThinPlate>(c, blocks, out),
+    match (kernel, values) {
+        (Kernel::Triharmonic, true) => block_values_gradients::<Triharmonic>(c, blocks, out),
+        (Kernel::Biharmonic, true) => block_values_gradients::<Biharmonic>(c, blocks, out),
+        (Kernel::ThinPlate, true) => block_values_gradients::<ThinPlate>(c, blocks, out),
+        (Kernel::Triharmonic, false) => block_gradients::<Triharmonic>(c, blocks, out),
+        (Kernel::Biharmonic, false) => block_gradients::<Biharmonic>(c, blocks, out),
+        (Kernel::ThinPlate, false) => block_gradients::<ThinPlate>(c, blocks, out),
     }
 }
 
@@ -304,34 +309,67 @@ impl VariationalSurface {
     /// Values and gradients at many points (gradients in the caller's coordinates).
     pub fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
         assert_eq!(points.len(), values.len());
+        self.sums_gradients(points, Some(values), gradients);
+    }
+
+    /// Gradients at many points, and the values too when `values` is given (the gradients are
+    /// the same bits either way).
+    fn sums_gradients(
+        &self,
+        points: &[DVec3],
+        values: Option<&mut [f64]>,
+        gradients: &mut [DVec3],
+    ) {
         assert_eq!(points.len(), gradients.len());
         let [a, bx, by, bz] = self.npoly;
         let (shift, scale) = (self.shift, self.scale);
-        points
-            .par_chunks(EVAL_CHUNK)
-            .zip(values.par_chunks_mut(EVAL_CHUNK))
-            .zip(gradients.par_chunks_mut(EVAL_CHUNK))
-            .for_each(|((p, v), g)| {
-                let nb = p.len().div_ceil(LANES);
-                let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
-                for (k, b) in blocks[..nb].iter_mut().enumerate() {
-                    for l in 0..LANES {
-                        let q = (p[(k * LANES + l).min(p.len() - 1)] - shift) * scale;
-                        b.x[l] = q.x;
-                        b.y[l] = q.y;
-                        b.z[l] = q.z;
-                    }
+        let with_values = values.is_some();
+        let chunk = |p: &[DVec3], v: Option<&mut [f64]>, g: &mut [DVec3]| {
+            let nb = p.len().div_ceil(LANES);
+            let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
+            for (k, b) in blocks[..nb].iter_mut().enumerate() {
+                for l in 0..LANES {
+                    let q = (p[(k * LANES + l).min(p.len() - 1)] - shift) * scale;
+                    b.x[l] = q.x;
+                    b.y[l] = q.y;
+                    b.z[l] = q.z;
                 }
-                let mut sums = [[[0.0; LANES]; 4]; EVAL_CHUNK / LANES];
-                dispatch_values_gradients(self.kernel, &self.soa, &blocks[..nb], &mut sums[..nb]);
-                for i in 0..p.len() {
+            }
+            let mut sums = [[[0.0; LANES]; 4]; EVAL_CHUNK / LANES];
+            dispatch_values_gradients(
+                self.kernel,
+                &self.soa,
+                &blocks[..nb],
+                &mut sums[..nb],
+                with_values,
+            );
+            for (i, g) in g.iter_mut().enumerate() {
+                let s = &sums[i / LANES];
+                *g = DVec3::new(
+                    s[1][i % LANES] + bx,
+                    s[2][i % LANES] + by,
+                    s[3][i % LANES] + bz,
+                ) * scale;
+            }
+            if let Some(v) = v {
+                for (i, v) in v.iter_mut().enumerate() {
                     let (k, l) = (i / LANES, i % LANES);
                     let b = &blocks[k];
-                    let s = &sums[k];
-                    v[i] = s[0][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
-                    g[i] = DVec3::new(s[1][l] + bx, s[2][l] + by, s[3][l] + bz) * scale;
+                    *v = sums[k][0][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
                 }
-            });
+            }
+        };
+        match values {
+            Some(values) => points
+                .par_chunks(EVAL_CHUNK)
+                .zip(values.par_chunks_mut(EVAL_CHUNK))
+                .zip(gradients.par_chunks_mut(EVAL_CHUNK))
+                .for_each(|((p, v), g)| chunk(p, Some(v), g)),
+            None => points
+                .par_chunks(EVAL_CHUNK)
+                .zip(gradients.par_chunks_mut(EVAL_CHUNK))
+                .for_each(|(p, g)| chunk(p, None, g)),
+        }
     }
 
     /// The kernel.
@@ -395,9 +433,8 @@ impl Field for VariationalSurface {
     }
 
     fn gradient(&self, p: DVec3) -> DVec3 {
-        let mut v = [0.0];
         let mut g = [DVec3::ZERO];
-        self.values_gradients(&[p], &mut v, &mut g);
+        self.sums_gradients(&[p], None, &mut g);
         g[0]
     }
 
@@ -407,8 +444,7 @@ impl Field for VariationalSurface {
     }
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
-        let mut v = vec![0.0; points.len()];
-        self.values_gradients(points, &mut v, out);
+        self.sums_gradients(points, None, out);
     }
 }
 
@@ -474,6 +510,24 @@ mod tests {
             assert!((direct - s.value(q)).abs() < 1e-9, "{kernel:?}");
             let pts = random_points(100, -1.0, 1.0, 3);
             assert!(gradient_error(&s, &pts, 1e-6) < 1e-5, "{kernel:?}");
+            // Gradients alone (normals) are the same bits as beside the values, one point at a
+            // time or in a batch (and its ragged last block).
+            let pts = random_points(203, -1.0, 1.0, 4);
+            let (mut v, mut g, mut h) = (
+                vec![0.0; 203],
+                vec![DVec3::ZERO; 203],
+                vec![DVec3::ZERO; 203],
+            );
+            s.values_gradients(&pts, &mut v, &mut g);
+            s.gradients(&pts, &mut h);
+            assert_eq!(g, h, "{kernel:?}");
+            assert_eq!(s.gradient(pts[7]), g[7], "{kernel:?}");
+            let mut w = vec![0.0; 203];
+            s.values(&pts, &mut w);
+            assert!(
+                v.iter().zip(&w).all(|(a, b)| (a - b).abs() < 1e-12),
+                "{kernel:?}"
+            );
         }
     }
 

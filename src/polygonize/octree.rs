@@ -280,15 +280,17 @@ impl Store {
         idx
     }
 
-    /// Stores a sign inferred for lattice point `p` (±∞) unless it has a value or a sign already.
+    /// Stores a sign inferred for lattice point `p` (±∞) unless it has a value or a sign already;
+    /// returns whether the point's sign is now `sign`.
     #[inline]
-    fn set_sign(&mut self, p: [u32; 3], sign: f64) {
+    fn set_sign(&mut self, p: [u32; 3], sign: f64) -> bool {
         let s = self.slot_mut(p);
         if self.slots[s] == NONE {
             self.slots[s] = self.values.len() as u32;
             self.values.push(sign);
             self.at[s] = sign;
         }
+        (self.at[s] < 0.0) == (sign < 0.0)
     }
 
     /// The value at lattice point `p` when it has been evaluated (None beyond the lattice, or
@@ -613,6 +615,15 @@ fn unknown_edge_ends(v: &[f64; 27], d: usize) -> u32 {
     need
 }
 
+/// The ends of crossed edges to evaluate, as (block, block points), and whether two blocks
+/// inferred different signs for a point (the premise failing; the first sign is kept, so the
+/// other block's leaves were decided with signs the store does not have).
+#[derive(Default)]
+struct Ends {
+    blocks: Vec<(u32, u32)>,
+    disagreed: bool,
+}
+
 /// One settling step of the leaves: signs are inferred ([`ball_masks`]) for the corners the
 /// undecided leaves in `masks` need (a point in balls of both signs, where the premise fails,
 /// gets none), then every leaf whose corners all have a sign leaves `masks`: into `crossed` when
@@ -626,7 +637,7 @@ fn settle_leaves(
     crossed: &mut [u8],
     reach: &[[Reach; 27]; 27],
     cells: [u32; 3],
-    ends: &mut Vec<(u32, u32)>,
+    ends: &mut Ends,
 ) {
     // Per block: the signs inferred (negative, positive) and the crossed edges' ends wanted.
     let found: Vec<(u32, u32, u32, u32)> = {
@@ -684,32 +695,33 @@ fn settle_leaves(
             while m != 0 {
                 let p = m.trailing_zeros() as usize;
                 m &= m - 1;
-                store.set_sign(block_offset(o, p), sign);
+                ends.disagreed |= !store.set_sign(block_offset(o, p), sign);
             }
         }
         if need != 0 {
-            ends.push((i, need));
+            ends.blocks.push((i, need));
         }
     }
 }
 
 /// Evaluates the ends of the crossed leaves' crossed edges that have only an inferred sign
 /// (edge vertices need both values): first those in `ends` (block, block points), which
-/// [`settle_leaves`] listed. Should a value contradict its inferred sign (the premise failing),
-/// the leaf's case changes, and the crossed leaves (`leaves`: the blocks and their masks of
-/// crossed children) are searched for crossed edges with an end still unknown, until none is
-/// left.
+/// [`settle_leaves`] listed. Should a value contradict its inferred sign, or two blocks have
+/// inferred different signs (the premise failing either way), cases change, and the crossed
+/// leaves (`leaves`: the blocks and their masks of crossed children) are searched for crossed
+/// edges with an end still unknown, until none is left.
 fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
     field: &F,
     lattice: &Lattice,
     store: &mut Store,
     leaves: (&[[u32; 3]], &[u8]),
-    mut ends: Vec<(u32, u32)>,
+    ends: Ends,
     settings: &super::Settings,
     stats: &mut Stats,
 ) -> Result<()> {
     let (cells, (blocks, crossed)) = (lattice.cells, leaves);
-    while !ends.is_empty() {
+    let (mut ends, mut disagreed) = (ends.blocks, ends.disagreed);
+    while !ends.is_empty() || disagreed {
         let mut at = Vec::new();
         let mut points = Vec::new();
         for (i, need) in ends {
@@ -738,7 +750,8 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             let i = store.slots[s] as usize;
             store.values[i] = v;
         }
-        if !contradicted {
+        // Without contradictions, the cases are those the ends were listed for.
+        if !contradicted && !std::mem::take(&mut disagreed) {
             break;
         }
         let store = &*store;
@@ -893,7 +906,7 @@ pub fn polygonize<F: Field + ?Sized>(
         let mut crossed = vec![0u8; blocks.len()];
         let reach = block_reach(lattice.cell, octree.safety);
         let reach = &*reach;
-        let mut ends = Vec::new();
+        let mut ends = Ends::default();
         let mut settle = |store: &mut Store, masks: &mut [u8], crossed: &mut [u8]| {
             settle_leaves(store, &blocks, masks, crossed, reach, cells, &mut ends)
         };
