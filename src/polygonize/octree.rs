@@ -293,23 +293,29 @@ impl Store {
         (self.at[s] < 0.0) == (sign < 0.0)
     }
 
-    /// The value at lattice point `p` when it has been evaluated (None beyond the lattice, or
-    /// when unknown or only queued).
+    /// What is known at lattice point `p`: its value, ±∞ for a sign without a value, NaN when
+    /// unknown, only queued, or beyond the lattice.
     #[inline]
-    fn known(&self, p: [u32; 3], cells: [u32; 3]) -> Option<f64> {
+    fn at_point(&self, p: [u32; 3], cells: [u32; 3]) -> f64 {
         if p[0] > cells[0] || p[1] > cells[1] || p[2] > cells[2] {
-            return None;
+            return f64::NAN;
         }
         let (t, l) = self.locate(p);
-        let b = self.table[t];
-        if b == NONE {
-            return None;
+        match self.table[t] {
+            NONE => f64::NAN,
+            b => self.at[b as usize * BRICK_POINTS + l],
         }
-        let v = self.at[b as usize * BRICK_POINTS + l];
-        (!v.is_nan()).then_some(v)
     }
 
-    /// [`Store::known`] for the 27 points of the block of 2 × 2 × 2 cells with lower corner `o`
+    /// The value at lattice point `p` when it has been evaluated (None beyond the lattice, or
+    /// when unknown, only queued, or only its sign is known).
+    #[inline]
+    fn known(&self, p: [u32; 3], cells: [u32; 3]) -> Option<f64> {
+        let v = self.at_point(p, cells);
+        v.is_finite().then_some(v)
+    }
+
+    /// [`Store::at_point`] for the 27 points of the block of 2 × 2 × 2 cells with lower corner `o`
     /// (NaN where unknown).
     #[inline]
     fn block_known(&self, o: [u32; 3], cells: [u32; 3]) -> [f64; 27] {
@@ -321,7 +327,7 @@ impl Store {
             let s = b as usize * BRICK_POINTS + l;
             return std::array::from_fn(|p| self.at[s + BLOCK_SLOTS[p]]);
         }
-        std::array::from_fn(|p| self.known(block_offset(o, p), cells).unwrap_or(f64::NAN))
+        std::array::from_fn(|p| self.at_point(block_offset(o, p), cells))
     }
 
     /// Evaluates `points` (queued by [`Store::claim`]) in batches and appends their values.
