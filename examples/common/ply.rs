@@ -17,26 +17,23 @@ pub fn read_ply(path: &str) -> (Vec<DVec3>, Vec<[u32; 3]>) {
             break;
         }
     }
+    let mut numbers = || -> Vec<f64> {
+        let line = lines.next().expect("fewer lines than the header says");
+        line.split_whitespace()
+            .map(|s| s.parse().unwrap())
+            .collect()
+    };
     let v = (0..nv)
         .map(|_| {
-            let x: Vec<f64> = lines
-                .next()
-                .unwrap()
-                .split_whitespace()
-                .map(|s| s.parse().unwrap())
-                .collect();
+            let x = numbers();
             DVec3::new(x[0], x[1], x[2])
         })
         .collect();
+    // A face line is its vertex count, then the indices.
     let f = (0..nf)
         .map(|_| {
-            let x: Vec<u32> = lines
-                .next()
-                .unwrap()
-                .split_whitespace()
-                .map(|s| s.parse().unwrap())
-                .collect();
-            [x[1], x[2], x[3]]
+            let x = numbers();
+            [x[1], x[2], x[3]].map(|i| i as u32)
         })
         .collect();
     (v, f)

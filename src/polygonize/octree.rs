@@ -728,7 +728,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
     let (cells, (blocks, crossed)) = (lattice.cells, leaves);
     let (mut ends, mut disagreed) = (ends.blocks, ends.disagreed);
     while !ends.is_empty() || disagreed {
-        let mut at = Vec::new();
+        let mut taken = Vec::new();
         let mut points = Vec::new();
         for (i, need) in ends {
             let o = blocks[i as usize];
@@ -741,7 +741,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
                 let v = store.at[s];
                 if v.is_infinite() {
                     store.at[s] = 0.0;
-                    at.push((s, v));
+                    taken.push((s, v));
                     points.push(lattice.point(p));
                 }
             }
@@ -750,7 +750,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
         evaluate(field, &points, &mut values, settings.batch)?;
         stats.evaluations += points.len() as u64;
         let mut contradicted = false;
-        for (&(s, sign), v) in at.iter().zip(values) {
+        for (&(s, sign), v) in taken.iter().zip(values) {
             contradicted |= (v < 0.0) != (sign < 0.0);
             store.at[s] = v;
             let i = store.slots[s] as usize;
