@@ -376,16 +376,29 @@ impl BlobField {
                 self.radii[i],
             );
             let dx2: [f64; 8] = std::array::from_fn(|l| (xs[l] - c.x) * (xs[l] - c.x));
-            let rows = range(c.y, r, ys[0], inv_h[1], ny);
+            let dy2: [f64; 8] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
+            // The lane nearest the centre has a row's largest term (the rounded sums and
+            // products are monotone), so where its term is zero the whole row gains exactly
+            // zero: only the rows where it is positive are splatted (the chords of the sphere
+            // that reach the block), found per plane as a bit mask without a branch per row.
+            let near = dx2.iter().fold(f64::INFINITY, |m, &d| m.min(d));
+            let near_y: [f64; 8] = std::array::from_fn(|j| near + dy2[j]);
+            let in_block = (1u32 << ny) - 1;
             for k in range(c.z, r, zs[0], inv_h[2], nz) {
                 let dz = zs[k] - c.z;
                 let dz2 = dz * dz;
-                if 1.0 - dz2 * inv <= 0.0 {
-                    continue;
-                }
-                for j in rows.clone() {
-                    let Some(term) = RowTerm::new(c, inv, a, ys[j], dz2) else {
-                        continue;
+                let mut rows = (0..8).fold(0u32, |m, j| {
+                    m | (((1.0 - (near_y[j] + dz2) * inv) > 0.0) as u32) << j
+                }) & in_block;
+                while rows != 0 {
+                    let j = rows.trailing_zeros() as usize;
+                    rows &= rows - 1;
+                    let term = RowTerm {
+                        cx: c.x,
+                        dy2: dy2[j],
+                        dz2,
+                        inv,
+                        a,
                     };
                     let row: &mut [f64; 8] = (&mut out[8 * j + 64 * k..8 * j + 64 * k + 8])
                         .try_into()
