@@ -293,6 +293,58 @@ impl Store {
         (self.at[s] < 0.0) == (sign < 0.0)
     }
 
+    /// [`Store::set_sign`] for the points in `neg` (sign −∞) and then those in `pos` (+∞) of the
+    /// block of 2 × 2 × 2 cells with lower corner `o` (bits as in [`block_point`]); returns
+    /// whether every point's sign is now the one given.
+    #[inline]
+    fn set_block_signs(&mut self, o: [u32; 3], neg: u32, pos: u32) -> bool {
+        let mut agreed = true;
+        if o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3) {
+            // The whole block in the brick of `o` (as in claim_block).
+            let s = self.slot_mut(o);
+            for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
+                let mut m = m;
+                while m != 0 {
+                    let slot = s + BLOCK_SLOTS[m.trailing_zeros() as usize];
+                    m &= m - 1;
+                    if self.slots[slot] == NONE {
+                        self.slots[slot] = self.values.len() as u32;
+                        self.values.push(sign);
+                        self.at[slot] = sign;
+                    }
+                    agreed &= (self.at[slot] < 0.0) == (sign < 0.0);
+                }
+            }
+        } else {
+            for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
+                let mut m = m;
+                while m != 0 {
+                    let p = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    agreed &= self.set_sign(block_offset(o, p), sign);
+                }
+            }
+        }
+        agreed
+    }
+
+    /// The indices in `values` of the points in `wanted` of the block of 2 × 2 × 2 cells with
+    /// lower corner `o`, all of which must have a value or an inferred sign (those of the other
+    /// points are `NONE`).
+    #[inline]
+    fn block_indices(&self, o: [u32; 3], wanted: u32) -> [u32; 27] {
+        let mut idx = [NONE; 27];
+        let mut m = wanted;
+        while m != 0 {
+            let p = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let (t, l) = self.locate(block_offset(o, p));
+            idx[p] = self.slots[self.table[t] as usize * BRICK_POINTS + l];
+            debug_assert_ne!(idx[p], NONE);
+        }
+        idx
+    }
+
     /// What is known at lattice point `p`: its value, ±∞ for a sign without a value, NaN when
     /// unknown, only queued, or beyond the lattice.
     #[inline]
@@ -695,15 +747,7 @@ fn settle_leaves(
     // Stored one block after another: a point that two blocks both infer keeps the first sign
     // (they differ only where the premise fails, and then the edge ends are served again).
     for (i, neg, pos, need) in found {
-        let o = blocks[i as usize];
-        for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
-            let mut m = m;
-            while m != 0 {
-                let p = m.trailing_zeros() as usize;
-                m &= m - 1;
-                ends.disagreed |= !store.set_sign(block_offset(o, p), sign);
-            }
-        }
+        ends.disagreed |= !store.set_block_signs(blocks[i as usize], neg, pos);
         if need != 0 {
             ends.blocks.push((i, need));
         }
@@ -943,26 +987,45 @@ pub fn polygonize<F: Field + ?Sized>(
         )?;
         masks = crossed;
     }
-    // The leaves, and all their corners not yet known evaluated in one batch; the leaves of a
-    // block claim its points at once.
-    let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
-    let mut leaves: Vec<[u32; 3]> = Vec::with_capacity(n);
-    let mut corners: Vec<[u32; 8]> = Vec::with_capacity(n);
-    points.clear();
-    points.reserve(2 * n);
-    for (&o, &m) in blocks.iter().zip(&masks) {
-        if m == 0 {
-            continue;
+    // The leaves, with the indices of their corners' values.
+    let (leaves, corners): (Vec<[u32; 3]>, Vec<[u32; 8]>) = if octree.corner_test && levels > 0 {
+        // Settled: every corner of a crossed leaf has a value or a sign, read in parallel.
+        let store = &store;
+        blocks
+            .par_iter()
+            .zip(masks.par_iter())
+            .with_min_len(256)
+            .flat_map_iter(|(&o, &m)| {
+                let idx = if m == 0 {
+                    [NONE; 27]
+                } else {
+                    store.block_indices(o, LEAF_POINTS[m as usize])
+                };
+                bits(m).map(move |d| (corner(o, d), LEAF_CORNERS[d].map(|p| idx[p as usize])))
+            })
+            .unzip()
+    } else {
+        // All their corners not yet known evaluated in one batch; the leaves of a block claim
+        // its points at once.
+        let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
+        let mut leaves = Vec::with_capacity(n);
+        let mut corners = Vec::with_capacity(n);
+        points.clear();
+        points.reserve(2 * n);
+        for (&o, &m) in blocks.iter().zip(&masks) {
+            if m == 0 {
+                continue;
+            }
+            let idx = store.claim_block(o, LEAF_POINTS[m as usize], lattice, &mut points);
+            for d in bits(m) {
+                leaves.push(corner(o, d));
+                corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
+            }
         }
-        let idx = store.claim_block(o, LEAF_POINTS[m as usize], lattice, &mut points);
-        for d in bits(m) {
-            leaves.push(corner(o, d));
-            corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
-        }
-    }
-    drop((blocks, masks));
-    store.evaluate(field, &points, settings, &mut stats)?;
-    drop(points);
+        store.evaluate(field, &points, settings, &mut stats)?;
+        (leaves, corners)
+    };
+    drop((blocks, masks, points));
     stats.cells_per_level.push(tested);
     stats.cells_visited = tested;
     stats.add_time("sample", t);
