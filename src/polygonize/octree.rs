@@ -335,13 +335,24 @@ impl Store {
     fn block_indices(&self, o: [u32; 3], wanted: u32) -> [u32; 27] {
         let mut idx = [NONE; 27];
         let mut m = wanted;
-        while m != 0 {
-            let p = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let (t, l) = self.locate(block_offset(o, p));
-            idx[p] = self.slots[self.table[t] as usize * BRICK_POINTS + l];
-            debug_assert_ne!(idx[p], NONE);
+        if o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3) {
+            // The whole block in the brick of `o` (as in claim_block).
+            let (t, l) = self.locate(o);
+            let s = self.table[t] as usize * BRICK_POINTS + l;
+            while m != 0 {
+                let p = m.trailing_zeros() as usize;
+                m &= m - 1;
+                idx[p] = self.slots[s + BLOCK_SLOTS[p]];
+            }
+        } else {
+            while m != 0 {
+                let p = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let (t, l) = self.locate(block_offset(o, p));
+                idx[p] = self.slots[self.table[t] as usize * BRICK_POINTS + l];
+            }
         }
+        debug_assert!((0..27).all(|p| wanted & 1 << p == 0 || idx[p] != NONE));
         idx
     }
 
@@ -991,19 +1002,21 @@ pub fn polygonize<F: Field + ?Sized>(
     let (leaves, corners): (Vec<[u32; 3]>, Vec<[u32; 8]>) = if octree.corner_test && levels > 0 {
         // Settled: every corner of a crossed leaf has a value or a sign, read in parallel.
         let store = &store;
-        blocks
+        let indices: Vec<[u32; 27]> = blocks
             .par_iter()
             .zip(masks.par_iter())
             .with_min_len(256)
-            .flat_map_iter(|(&o, &m)| {
-                let idx = if m == 0 {
-                    [NONE; 27]
-                } else {
-                    store.block_indices(o, LEAF_POINTS[m as usize])
-                };
-                bits(m).map(move |d| (corner(o, d), LEAF_CORNERS[d].map(|p| idx[p as usize])))
-            })
-            .unzip()
+            .map(|(&o, &m)| store.block_indices(o, LEAF_POINTS[m as usize]))
+            .collect();
+        let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
+        let (mut leaves, mut corners) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for ((&o, &m), idx) in blocks.iter().zip(&masks).zip(&indices) {
+            for d in bits(m) {
+                leaves.push(corner(o, d));
+                corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
+            }
+        }
+        (leaves, corners)
     } else {
         // All their corners not yet known evaluated in one batch; the leaves of a block claim
         // its points at once.
