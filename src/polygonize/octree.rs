@@ -335,6 +335,10 @@ impl Store {
     fn block_indices(&self, o: [u32; 3], wanted: u32) -> [u32; 27] {
         let mut idx = [NONE; 27];
         let mut m = wanted;
+        if m == 0 {
+            // (The brick of `o` may have no slots.)
+            return idx;
+        }
         if o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3) {
             // The whole block in the brick of `o` (as in claim_block).
             let (t, l) = self.locate(o);

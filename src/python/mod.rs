@@ -31,8 +31,14 @@ const PURGE_DELAY_MS: std::ffi::c_long = 1000;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    // SAFETY: sets a plain integer option; it is read at each purge.
-    unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, PURGE_DELAY_MS) };
+    // SAFETY: reads and sets a plain integer option (read at each purge). Only mimalloc's own
+    // default (10 ms) is replaced: a delay the user set (MIMALLOC_PURGE_DELAY) stays, and should
+    // the option's index ever name another option, its value is not 10 and nothing changes.
+    unsafe {
+        if libmimalloc_sys::mi_option_get(MI_OPTION_PURGE_DELAY) == 10 {
+            libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, PURGE_DELAY_MS);
+        }
+    }
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<variational::PyVariationalSurface>()?;
     m.add_class::<blob::PyBlobField>()?;
