@@ -280,11 +280,10 @@ impl Store {
         idx
     }
 
-    /// Stores a sign inferred for lattice point `p` (±∞) unless it has a value or a sign already;
-    /// returns whether the point's sign is now `sign`.
+    /// Stores a sign inferred (±∞) in slot `s` unless it has a value or a sign already; returns
+    /// whether the slot's sign is now `sign`.
     #[inline]
-    fn set_sign(&mut self, p: [u32; 3], sign: f64) -> bool {
-        let s = self.slot_mut(p);
+    fn set_sign(&mut self, s: usize, sign: f64) -> bool {
         if self.slots[s] == NONE {
             self.slots[s] = self.values.len() as u32;
             self.values.push(sign);
@@ -298,31 +297,22 @@ impl Store {
     /// whether every point's sign is now the one given.
     #[inline]
     fn set_block_signs(&mut self, o: [u32; 3], neg: u32, pos: u32) -> bool {
+        // The slots of the whole block, when it lies in the brick of `o` (as in claim_block).
+        let base = o
+            .iter()
+            .all(|&c| c & (BRICK - 1) <= BRICK - 3)
+            .then(|| self.slot_mut(o));
         let mut agreed = true;
-        if o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3) {
-            // The whole block in the brick of `o` (as in claim_block).
-            let s = self.slot_mut(o);
-            for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
-                let mut m = m;
-                while m != 0 {
-                    let slot = s + BLOCK_SLOTS[m.trailing_zeros() as usize];
-                    m &= m - 1;
-                    if self.slots[slot] == NONE {
-                        self.slots[slot] = self.values.len() as u32;
-                        self.values.push(sign);
-                        self.at[slot] = sign;
-                    }
-                    agreed &= (self.at[slot] < 0.0) == (sign < 0.0);
-                }
-            }
-        } else {
-            for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
-                let mut m = m;
-                while m != 0 {
-                    let p = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    agreed &= self.set_sign(block_offset(o, p), sign);
-                }
+        for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
+            let mut m = m;
+            while m != 0 {
+                let p = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let s = match base {
+                    Some(b) => b + BLOCK_SLOTS[p],
+                    None => self.slot_mut(block_offset(o, p)),
+                };
+                agreed &= self.set_sign(s, sign);
             }
         }
         agreed
@@ -334,27 +324,27 @@ impl Store {
     #[inline]
     fn block_indices(&self, o: [u32; 3], wanted: u32) -> [u32; 27] {
         let mut idx = [NONE; 27];
-        let mut m = wanted;
-        if m == 0 {
+        if wanted == 0 {
             // (The brick of `o` may have no slots.)
             return idx;
         }
-        if o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3) {
-            // The whole block in the brick of `o` (as in claim_block).
+        // The slots of the whole block, when it lies in the brick of `o` (as in claim_block).
+        let base = o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3).then(|| {
             let (t, l) = self.locate(o);
-            let s = self.table[t] as usize * BRICK_POINTS + l;
-            while m != 0 {
-                let p = m.trailing_zeros() as usize;
-                m &= m - 1;
-                idx[p] = self.slots[s + BLOCK_SLOTS[p]];
-            }
-        } else {
-            while m != 0 {
-                let p = m.trailing_zeros() as usize;
-                m &= m - 1;
-                let (t, l) = self.locate(block_offset(o, p));
-                idx[p] = self.slots[self.table[t] as usize * BRICK_POINTS + l];
-            }
+            self.table[t] as usize * BRICK_POINTS + l
+        });
+        let mut m = wanted;
+        while m != 0 {
+            let p = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let s = base.map_or_else(
+                || {
+                    let (t, l) = self.locate(block_offset(o, p));
+                    self.table[t] as usize * BRICK_POINTS + l
+                },
+                |b| b + BLOCK_SLOTS[p],
+            );
+            idx[p] = self.slots[s];
         }
         debug_assert!((0..27).all(|p| wanted & 1 << p == 0 || idx[p] != NONE));
         idx
