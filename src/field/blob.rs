@@ -213,8 +213,7 @@ impl BlobField {
     fn term(&self, i: usize, p: DVec3) -> f64 {
         // max(t, 0) instead of a branch: the same bits (a·0·0 = +0), no mispredictions.
         let q = &self.packed[i];
-        let t = (1.0 - (p - q.center).length_squared() * q.inv_r2).max(0.0);
-        q.strength * t * t
+        q.strength * unit_term(p - q.center, q.inv_r2)
     }
 
     /// ∇f(p) = −∇F(p) from the voxel lists.
@@ -289,8 +288,8 @@ impl BlobField {
             );
             let dz = z - c.z;
             let dz2 = dz * dz;
-            // (dx² + dy²) + dz² ≥ dz² in floating point too, so no point of the plane is
-            // reached when this is not positive.
+            // dy² + dz² ≥ dz² in floating point too, so no point of the plane is reached when
+            // this is not positive.
             if 1.0 - dz2 * inv <= 0.0 {
                 continue;
             }
@@ -301,7 +300,9 @@ impl BlobField {
                 let Some(term) = RowTerm::new(c, inv, a, ys[y], dz2) else {
                     continue;
                 };
-                let half = (r * r - term.dy2 - dz2).max(0.0).sqrt();
+                // Half the chord, from k = 1 − (dy² + dz²)/R² (the exact test is t > 0 in the
+                // row loop; `range` adds a point of margin).
+                let half = r * term.k.max(0.0).sqrt();
                 let Some((x0, x1)) = range(c.x, half, lattice.origin.x, inv_h.x, px) else {
                     continue;
                 };
@@ -338,15 +339,15 @@ impl BlobField {
     /// Fills a block of values (see [`BlockField::block_values`]) by splatting the primitives of
     /// `list` row by row: the dense splat's arithmetic and order, so the same bits. Rows are
     /// always eight wide (lanes beyond the lattice repeat its last point and are never read);
-    /// `row_fn` adds one primitive's terms to a row from dx² per lane (computed once per
-    /// primitive), dy² + dz² as [`RowTerm`] has them.
+    /// `row_fn` adds one primitive's terms to a row from dx²/R² per lane (computed once per
+    /// primitive), the row's k = 1 − (dy² + dz²)/R² and A (see [`unit_term`]).
     #[inline(always)]
     fn splat_block_with(
         &self,
         list: &[u32],
         block: &BlockCoords,
         out: &mut [f64; 512],
-        row_fn: impl Fn(&mut [f64; 8], &[f64; 8], &RowTerm),
+        row_fn: impl Fn(&mut [f64; 8], &[f64; 8], f64, f64),
     ) {
         let BlockCoords {
             xs,
@@ -375,35 +376,28 @@ impl BlobField {
                 self.strengths[i],
                 self.radii[i],
             );
-            let dx2: [f64; 8] = std::array::from_fn(|l| (xs[l] - c.x) * (xs[l] - c.x));
+            // dx²/R² per lane, once per primitive (see `unit_term`).
+            let qx: [f64; 8] = std::array::from_fn(|l| ((xs[l] - c.x) * (xs[l] - c.x)) * inv);
             let dy2: [f64; 8] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
-            // The lane nearest the centre has a row's largest term (the rounded sums and
-            // products are monotone), so where its term is zero the whole row gains exactly
-            // zero: only the rows where it is positive are splatted (the chords of the sphere
-            // that reach the block), found per plane as a bit mask without a branch per row.
-            let near = dx2.iter().fold(f64::INFINITY, |m, &d| m.min(d));
-            let near_y: [f64; 8] = std::array::from_fn(|j| near + dy2[j]);
+            // The lane nearest the centre has a row's largest term (the rounded steps are
+            // monotone), so where its term is zero the whole row gains exactly zero: only the
+            // rows where it is positive are splatted (the chords of the sphere that reach the
+            // block), found per plane as a bit mask without a branch per row.
+            let near = qx.iter().fold(f64::INFINITY, |m, &d| m.min(d));
             let in_block = (1u32 << ny) - 1;
             for k in range(c.z, r, zs[0], inv_h[2], nz) {
                 let dz = zs[k] - c.z;
                 let dz2 = dz * dz;
-                let mut rows = (0..8).fold(0u32, |m, j| {
-                    m | (((1.0 - (near_y[j] + dz2) * inv) > 0.0) as u32) << j
-                }) & in_block;
+                let ks: [f64; 8] = std::array::from_fn(|j| 1.0 - (dy2[j] + dz2) * inv);
+                let mut rows =
+                    (0..8).fold(0u32, |m, j| m | ((ks[j] - near > 0.0) as u32) << j) & in_block;
                 while rows != 0 {
                     let j = rows.trailing_zeros() as usize;
                     rows &= rows - 1;
-                    let term = RowTerm {
-                        cx: c.x,
-                        dy2: dy2[j],
-                        dz2,
-                        inv,
-                        a,
-                    };
                     let row: &mut [f64; 8] = (&mut out[8 * j + 64 * k..8 * j + 64 * k + 8])
                         .try_into()
                         .unwrap();
-                    row_fn(row, &dx2, &term);
+                    row_fn(row, &qx, ks[j], a);
                 }
             }
         }
@@ -412,27 +406,84 @@ impl BlobField {
         }
     }
 
+    /// [`BlobField::splat_block_with`] written for AVX-512: per primitive, dx²/R² is one vector
+    /// and per plane the rows' k = 1 − (dy² + dz²)/R² another, compared with the nearest lane's
+    /// dx²/R² at once for the mask of rows to splat. The same operations on each value as
+    /// [`unit_term`], in the same order, so the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     unsafe fn splat_block_avx512(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
         use std::arch::x86_64::*;
-        self.splat_block_with(list, block, out, |row, dx2, q| {
-            // SAFETY: both arrays hold eight f64; this runs where AVX-512F is available.
-            unsafe {
-                let d = _mm512_loadu_pd(dx2.as_ptr());
-                let s = _mm512_add_pd(
-                    _mm512_add_pd(d, _mm512_set1_pd(q.dy2)),
-                    _mm512_set1_pd(q.dz2),
-                );
-                let t = _mm512_max_pd(
-                    _mm512_sub_pd(_mm512_set1_pd(1.0), _mm512_mul_pd(s, _mm512_set1_pd(q.inv))),
-                    _mm512_setzero_pd(),
-                );
-                let v = _mm512_loadu_pd(row.as_ptr());
-                let add = _mm512_mul_pd(_mm512_mul_pd(_mm512_set1_pd(q.a), t), t);
-                _mm512_storeu_pd(row.as_mut_ptr(), _mm512_add_pd(v, add));
+        let BlockCoords {
+            xs,
+            ys,
+            zs,
+            n,
+            inv_h,
+        } = block;
+        let nz = n[2] as usize;
+        let in_block = ((1u32 << n[1]) - 1) as __mmask8;
+        out.fill(0.0);
+        // SAFETY: the coordinate arrays hold eight f64 each.
+        let (vx, vy) = unsafe { (_mm512_loadu_pd(xs.as_ptr()), _mm512_loadu_pd(ys.as_ptr())) };
+        let (one, zero) = (_mm512_set1_pd(1.0), _mm512_setzero_pd());
+        for &i in list {
+            let i = i as usize;
+            let (c, inv, a, r) = (
+                self.centers[i],
+                self.inv_r2[i],
+                self.strengths[i],
+                self.radii[i],
+            );
+            let vinv = _mm512_set1_pd(inv);
+            let dx = _mm512_sub_pd(vx, _mm512_set1_pd(c.x));
+            let qx = _mm512_mul_pd(_mm512_mul_pd(dx, dx), vinv);
+            let near = _mm512_set1_pd(_mm512_reduce_min_pd(qx));
+            let dy = _mm512_sub_pd(vy, _mm512_set1_pd(c.y));
+            let dy2 = _mm512_mul_pd(dy, dy);
+            let va = _mm512_set1_pd(a);
+            // Planes within [c - r, c + r], with a point of margin for rounding.
+            let lo = ((c.z - r - zs[0]) * inv_h[2]).floor() - 1.0;
+            let hi = ((c.z + r - zs[0]) * inv_h[2]).ceil() + 1.0;
+            if hi < 0.0 || lo > (nz - 1) as f64 {
+                continue;
             }
-        })
+            let planes = lo.max(0.0) as usize..(hi as usize).min(nz - 1) + 1;
+            for (k, &z) in zs.iter().enumerate().take(planes.end).skip(planes.start) {
+                let dz = z - c.z;
+                let ks = _mm512_sub_pd(
+                    one,
+                    _mm512_mul_pd(_mm512_add_pd(dy2, _mm512_set1_pd(dz * dz)), vinv),
+                );
+                // Rows whose nearest lane has a positive term (see `splat_block_with`).
+                let mut rows = _mm512_mask_cmp_pd_mask::<_CMP_GT_OQ>(in_block, ks, near) as u32;
+                if rows == 0 {
+                    continue;
+                }
+                let mut kv = [0.0f64; 8];
+                // SAFETY: eight f64.
+                unsafe { _mm512_storeu_pd(kv.as_mut_ptr(), ks) };
+                while rows != 0 {
+                    let j = rows.trailing_zeros() as usize;
+                    rows &= rows - 1;
+                    let t = _mm512_max_pd(_mm512_sub_pd(_mm512_set1_pd(kv[j]), qx), zero);
+                    let at = _mm512_mul_pd(va, _mm512_mul_pd(t, t));
+                    // SAFETY: 8j + 64k + 8 ≤ 512 (j, k < 8).
+                    unsafe {
+                        let p = out.as_mut_ptr().add(8 * j + 64 * k);
+                        _mm512_storeu_pd(p, _mm512_add_pd(_mm512_loadu_pd(p), at));
+                    }
+                }
+            }
+        }
+        let th = _mm512_set1_pd(self.threshold);
+        for row in out.chunks_exact_mut(8) {
+            // SAFETY: eight f64.
+            unsafe {
+                let p = row.as_mut_ptr();
+                _mm512_storeu_pd(p, _mm512_sub_pd(th, _mm512_loadu_pd(p)));
+            }
+        }
     }
 
     /// [`BlobField::gradient_over`] for eight points per step (`points.len()` a multiple of 8).
@@ -554,42 +605,46 @@ fn map_points<T: Send>(points: &[DVec3], out: &mut [T], f: impl Fn(DVec3) -> T +
         .for_each(|(p, o)| run(p, o));
 }
 
-/// One primitive's term along one lattice row: x-centre, dy², dz², 1/R², A.
+/// t·t of one primitive at offset `d` from its centre (1/R² `inv`), with
+/// t = max((1 − (dy² + dz²)/R²) − dx²/R², 0): the order every evaluation of the potential uses
+/// (point, plane and block), so that all give the same bits. Grouping dy² + dz² first lets a
+/// lattice row share 1 − (dy² + dz²)/R² and a block share dx²/R² per primitive; both rounded
+/// steps are monotone, so the term never grows with any |d_i|.
+#[inline(always)]
+fn unit_term(d: DVec3, inv: f64) -> f64 {
+    let t = ((1.0 - (d.y * d.y + d.z * d.z) * inv) - (d.x * d.x) * inv).max(0.0);
+    t * t
+}
+
+/// One primitive's term along one lattice row: x-centre, k = 1 − (dy² + dz²)/R², 1/R², A.
 struct RowTerm {
     cx: f64,
-    dy2: f64,
-    dz2: f64,
+    k: f64,
     inv: f64,
     a: f64,
 }
 
 impl RowTerm {
     /// The term of the primitive at `c` (1/R² `inv`, strength `a`) along the row at `y` in a
-    /// plane at squared z-distance `dz2`; None when it reaches no point of the row:
-    /// (dx² + dy²) + dz² ≥ dy² + dz² in floating point too.
+    /// plane at squared z-distance `dz2`; None when it reaches no point of the row
+    /// (k − dx²/R² ≤ k ≤ 0 in floating point too).
     #[inline(always)]
     fn new(c: DVec3, inv: f64, a: f64, y: f64, dz2: f64) -> Option<RowTerm> {
         let dy = y - c.y;
-        let dy2 = dy * dy;
-        (1.0 - (dy2 + dz2) * inv > 0.0).then_some(RowTerm {
-            cx: c.x,
-            dy2,
-            dz2,
-            inv,
-            a,
-        })
+        let k = 1.0 - (dy * dy + dz2) * inv;
+        (k > 0.0).then_some(RowTerm { cx: c.x, k, inv, a })
     }
 }
 
-/// Adds the term A·t², t = max(1 − ((dx² + dy²) + dz²)/R², 0), to each value of a row (`row[k]`
-/// at x = `xs[k]`). The order of operations is that of [`BlobField::potential`], without fused
-/// multiply-adds, so the values are bit-identical to point evaluation.
+/// Adds the term A·(t·t), t = max(k − dx²/R², 0) (see [`unit_term`]), to each value of a row
+/// (`row[i]` at x = `xs[i]`). The order of operations is that of [`BlobField::potential`],
+/// without fused multiply-adds, so the values are bit-identical to point evaluation.
 #[inline(always)]
 fn splat_row(row: &mut [f64], xs: &[f64], q: &RowTerm) {
     for (v, &x) in row.iter_mut().zip(xs) {
         let dx = x - q.cx;
-        let t = (1.0 - ((dx * dx + q.dy2) + q.dz2) * q.inv).max(0.0);
-        *v += q.a * t * t;
+        let t = (q.k - (dx * dx) * q.inv).max(0.0);
+        *v += q.a * (t * t);
     }
 }
 
@@ -601,13 +656,9 @@ fn splat_row(row: &mut [f64], xs: &[f64], q: &RowTerm) {
 unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
     use std::arch::x86_64::*;
     let n = row.len().min(xs.len());
-    let (cx, dy2, dz2) = (
-        _mm512_set1_pd(q.cx),
-        _mm512_set1_pd(q.dy2),
-        _mm512_set1_pd(q.dz2),
-    );
+    let (cx, k) = (_mm512_set1_pd(q.cx), _mm512_set1_pd(q.k));
     let (inv, a) = (_mm512_set1_pd(q.inv), _mm512_set1_pd(q.a));
-    let (one, zero) = (_mm512_set1_pd(1.0), _mm512_setzero_pd());
+    let zero = _mm512_setzero_pd();
     let mut i = 0;
     while i < n {
         let m: __mmask8 = if n - i >= 8 {
@@ -620,9 +671,11 @@ unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
         let x = _mm512_maskz_loadu_pd(m, xs.as_ptr().add(i));
         let v = _mm512_maskz_loadu_pd(m, row.as_ptr().add(i));
         let dx = _mm512_sub_pd(x, cx);
-        let s = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), dy2), dz2);
-        let t = _mm512_max_pd(_mm512_sub_pd(one, _mm512_mul_pd(s, inv)), zero);
-        let r = _mm512_add_pd(v, _mm512_mul_pd(_mm512_mul_pd(a, t), t));
+        let t = _mm512_max_pd(
+            _mm512_sub_pd(k, _mm512_mul_pd(_mm512_mul_pd(dx, dx), inv)),
+            zero,
+        );
+        let r = _mm512_add_pd(v, _mm512_mul_pd(a, _mm512_mul_pd(t, t)));
         _mm512_mask_storeu_pd(row.as_mut_ptr().add(i), m, r);
         i += 8;
     }
@@ -898,10 +951,10 @@ impl BlockField for BlobField {
             // SAFETY: the variant is only chosen when the CPU has the feature.
             #[cfg(target_arch = "x86_64")]
             Isa::Avx512 => unsafe { self.splat_block_avx512(list, &block, out) },
-            _ => self.splat_block_with(list, &block, out, |row, dx2, q| {
-                for (v, d) in row.iter_mut().zip(dx2) {
-                    let t = (1.0 - ((d + q.dy2) + q.dz2) * q.inv).max(0.0);
-                    *v += q.a * t * t;
+            _ => self.splat_block_with(list, &block, out, |row, qx, k, a| {
+                for (v, q) in row.iter_mut().zip(qx) {
+                    let t = (k - q).max(0.0);
+                    *v += a * (t * t);
                 }
             }),
         }
