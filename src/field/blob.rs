@@ -209,6 +209,18 @@ impl BlobField {
         (0..self.centers.len()).map(|i| self.term(i, p)).sum()
     }
 
+    /// Centre, 1/R², A and R of primitive `i`.
+    #[inline(always)]
+    fn primitive(&self, i: u32) -> (DVec3, f64, f64, f64) {
+        let i = i as usize;
+        (
+            self.centers[i],
+            self.inv_r2[i],
+            self.strengths[i],
+            self.radii[i],
+        )
+    }
+
     #[inline(always)]
     fn term(&self, i: usize, p: DVec3) -> f64 {
         // max(t, 0) instead of a branch: the same bits (a·0·0 = +0), no mispredictions.
@@ -349,33 +361,11 @@ impl BlobField {
         out: &mut [f64; 512],
         row_fn: impl Fn(&mut [f64; 8], &[f64; 8], f64, f64),
     ) {
-        let BlockCoords {
-            xs,
-            ys,
-            zs,
-            n,
-            inv_h,
-        } = block;
-        let [_, ny, nz] = n.map(|v| v as usize);
-        // Indices of the block's points within [c - r, c + r] along an axis, with a point of
-        // margin for rounding (the exact tests follow); empty when none.
-        let range = |c: f64, r: f64, first: f64, inv_h: f64, n: usize| -> std::ops::Range<usize> {
-            let lo = ((c - r - first) * inv_h).floor() - 1.0;
-            let hi = ((c + r - first) * inv_h).ceil() + 1.0;
-            if hi < 0.0 || lo > (n - 1) as f64 {
-                return 0..0;
-            }
-            lo.max(0.0) as usize..(hi as usize).min(n - 1) + 1
-        };
+        let BlockCoords { xs, ys, zs, n, .. } = block;
+        let ny = n[1] as usize;
         out.fill(0.0);
         for &i in list {
-            let i = i as usize;
-            let (c, inv, a, r) = (
-                self.centers[i],
-                self.inv_r2[i],
-                self.strengths[i],
-                self.radii[i],
-            );
+            let (c, inv, a, r) = self.primitive(i);
             // dx²/R² per lane, once per primitive (see `unit_term`).
             let qx: [f64; 8] = std::array::from_fn(|l| ((xs[l] - c.x) * (xs[l] - c.x)) * inv);
             let dy2: [f64; 8] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
@@ -385,8 +375,9 @@ impl BlobField {
             // block), found per plane as a bit mask without a branch per row.
             let near = qx.iter().fold(f64::INFINITY, |m, &d| m.min(d));
             let in_block = (1u32 << ny) - 1;
-            for k in range(c.z, r, zs[0], inv_h[2], nz) {
-                let dz = zs[k] - c.z;
+            let planes = block.planes(c.z, r);
+            for (k, &z) in zs.iter().enumerate().take(planes.end).skip(planes.start) {
+                let dz = z - c.z;
                 let dz2 = dz * dz;
                 let ks: [f64; 8] = std::array::from_fn(|j| 1.0 - (dy2[j] + dz2) * inv);
                 let mut rows =
@@ -414,27 +405,14 @@ impl BlobField {
     #[target_feature(enable = "avx512f")]
     unsafe fn splat_block_avx512(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
         use std::arch::x86_64::*;
-        let BlockCoords {
-            xs,
-            ys,
-            zs,
-            n,
-            inv_h,
-        } = block;
-        let nz = n[2] as usize;
+        let BlockCoords { xs, ys, zs, n, .. } = block;
         let in_block = ((1u32 << n[1]) - 1) as __mmask8;
         out.fill(0.0);
         // SAFETY: the coordinate arrays hold eight f64 each.
         let (vx, vy) = unsafe { (_mm512_loadu_pd(xs.as_ptr()), _mm512_loadu_pd(ys.as_ptr())) };
         let (one, zero) = (_mm512_set1_pd(1.0), _mm512_setzero_pd());
         for &i in list {
-            let i = i as usize;
-            let (c, inv, a, r) = (
-                self.centers[i],
-                self.inv_r2[i],
-                self.strengths[i],
-                self.radii[i],
-            );
+            let (c, inv, a, r) = self.primitive(i);
             let vinv = _mm512_set1_pd(inv);
             let dx = _mm512_sub_pd(vx, _mm512_set1_pd(c.x));
             let qx = _mm512_mul_pd(_mm512_mul_pd(dx, dx), vinv);
@@ -442,13 +420,7 @@ impl BlobField {
             let dy = _mm512_sub_pd(vy, _mm512_set1_pd(c.y));
             let dy2 = _mm512_mul_pd(dy, dy);
             let va = _mm512_set1_pd(a);
-            // Planes within [c - r, c + r], with a point of margin for rounding.
-            let lo = ((c.z - r - zs[0]) * inv_h[2]).floor() - 1.0;
-            let hi = ((c.z + r - zs[0]) * inv_h[2]).ceil() + 1.0;
-            if hi < 0.0 || lo > (nz - 1) as f64 {
-                continue;
-            }
-            let planes = lo.max(0.0) as usize..(hi as usize).min(nz - 1) + 1;
+            let planes = block.planes(c.z, r);
             for (k, &z) in zs.iter().enumerate().take(planes.end).skip(planes.start) {
                 let dz = z - c.z;
                 let ks = _mm512_sub_pd(
@@ -771,6 +743,21 @@ struct BlockCoords {
     n: [u32; 3],
     /// 1 / the lattice's cell side per axis.
     inv_h: [f64; 3],
+}
+
+impl BlockCoords {
+    /// The block's planes within [cz − r, cz + r], with a point of margin for rounding (the
+    /// exact test is per row); empty when none.
+    #[inline(always)]
+    fn planes(&self, cz: f64, r: f64) -> std::ops::Range<usize> {
+        let (first, inv_h, n) = (self.zs[0], self.inv_h[2], self.n[2] as usize);
+        let lo = ((cz - r - first) * inv_h).floor() - 1.0;
+        let hi = ((cz + r - first) * inv_h).ceil() + 1.0;
+        if hi < 0.0 || lo > (n - 1) as f64 {
+            return 0..0;
+        }
+        lo.max(0.0) as usize..(hi as usize).min(n - 1) + 1
+    }
 }
 
 impl BlobField {
