@@ -84,6 +84,8 @@ struct Active {
     before: [u16; 24],
     /// Index of the block's first vertex (global after the first pass's prefix sum).
     base: u32,
+    /// Triangles of the block's crossed cells.
+    triangles: u32,
 }
 
 impl Active {
@@ -122,7 +124,6 @@ struct Workspace {
     parts: Vec<Part>,
     active: Vec<Active>,
     map: Vec<u32>,
-    triangles: Vec<Vec<[u32; 3]>>,
 }
 
 static WORKSPACES: std::sync::Mutex<Vec<Workspace>> = std::sync::Mutex::new(Vec::new());
@@ -142,11 +143,6 @@ impl Workspace {
             .sum::<usize>()
             + self.active.capacity() * std::mem::size_of::<Active>()
             + self.map.capacity() * 4
-            + self
-                .triangles
-                .iter()
-                .map(|t| t.capacity() * 12)
-                .sum::<usize>()
     }
 }
 
@@ -162,21 +158,49 @@ pub fn polygonize<F: BlockField + ?Sized>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Stats)> {
-    let (mut mesh, triangles, stats) = polygonize_with(field, lattice, settings, gather)?;
+    let (mut mesh, triangles, stats) = polygonize_as::<F, u32>(field, lattice, settings)?;
     mesh.triangles = triangles;
     Ok((mesh, stats))
 }
 
-/// [`polygonize`] handing the triangles to `collect` as they lie after the second pass (runs of
-/// triangles that, concatenated in order, are the mesh's triangles) instead of concatenating
-/// them: a caller that wants them in another form (e.g. as 64-bit indices) builds it in one
-/// pass. The returned mesh has no triangles; `collect`'s result comes with it.
-pub fn polygonize_with<F: BlockField + ?Sized, T>(
+/// The integer type of the vertex indices [`polygonize_as`] writes: `u32` (as [`Mesh`] holds
+/// them) or `i64` (as numpy and trimesh want faces).
+pub trait TriangleIndex: Copy + Send + Sync + 'static {
+    fn from_u32(v: u32) -> Self;
+    fn to_u32(self) -> u32;
+}
+
+impl TriangleIndex for u32 {
+    #[inline(always)]
+    fn from_u32(v: u32) -> Self {
+        v
+    }
+    #[inline(always)]
+    fn to_u32(self) -> u32 {
+        self
+    }
+}
+
+impl TriangleIndex for i64 {
+    #[inline(always)]
+    fn from_u32(v: u32) -> Self {
+        v as i64
+    }
+    #[inline(always)]
+    fn to_u32(self) -> u32 {
+        self as u32
+    }
+}
+
+/// [`polygonize`] with the triangles' vertex indices as `I`, written straight into their final
+/// buffer (each block knows its number of triangles after the first pass): a caller that wants
+/// 64-bit indices gets them without a second copy. The returned mesh has no triangles; they
+/// come beside it.
+pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
-    collect: impl FnOnce(&[Vec<[u32; 3]>]) -> T,
-) -> Result<(Mesh, T, Stats)> {
+) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
     let dims = block_dims(lattice);
     let num_blocks = dims.iter().map(|&d| d as u64).product::<u64>();
     check_memory(
@@ -188,10 +212,7 @@ pub fn polygonize_with<F: BlockField + ?Sized, T>(
         .ok()
         .and_then(|mut w| w.pop())
         .unwrap_or_default();
-    let r = run(field, lattice, settings, dims, &mut ws).map(|(mesh, tasks, stats)| {
-        let triangles = collect(&ws.triangles[..tasks]);
-        (mesh, triangles, stats)
-    });
+    let r = run(field, lattice, settings, dims, &mut ws);
     if ws.bytes() <= KEEP_BYTES {
         if let Ok(mut pool) = WORKSPACES.lock() {
             if pool.len() < 2 {
@@ -202,14 +223,15 @@ pub fn polygonize_with<F: BlockField + ?Sized, T>(
     r
 }
 
-fn run<F: BlockField + ?Sized>(
+fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
     dims: [u32; 3],
     ws: &mut Workspace,
-) -> Result<(Mesh, usize, Stats)> {
+) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
     let table = CaseTable::get(settings.ambiguity);
+    let cases = BlockCases::get(table);
     let mut stats = Stats {
         lattice_points: lattice.num_points(),
         ..Default::default()
@@ -264,6 +286,7 @@ fn run<F: BlockField + ?Sized>(
                 }
                 part.active.push(Active {
                     base: first as u32,
+                    triangles: cases.count(&active),
                     ..active
                 });
                 if normals {
@@ -307,23 +330,33 @@ fn run<F: BlockField + ?Sized>(
     }
     stats.add_time("evaluate", t);
 
-    // Pass 2: triangles per evaluated block.
+    // Pass 2: triangles per evaluated block, each task into its own range of the final buffer.
     let t = Instant::now();
-    let tasks = ws.active.len().div_ceil(ACTIVE_PER_TASK);
-    ws.triangles.resize_with(tasks, Vec::new);
     let (active, map) = (&ws.active[..], &ws.map[..]);
-    stats.cells_crossed = ws.triangles[..tasks]
-        .par_iter_mut()
-        .enumerate()
-        .map(|(task, out)| {
-            out.clear();
+    let chunks: Vec<&[Active]> = active.chunks(ACTIVE_PER_TASK).collect();
+    let total: usize = active.iter().map(|a| a.triangles as usize).sum();
+    let mut triangles: Vec<[I; 3]> = crate::memory::with_capacity_huge(total);
+    let mut rest = &mut triangles.spare_capacity_mut()[..total];
+    let mut outs = Vec::with_capacity(chunks.len());
+    for c in &chunks {
+        let (a, b) = rest.split_at_mut(c.iter().map(|a| a.triangles as usize).sum());
+        outs.push(a);
+        rest = b;
+    }
+    stats.cells_crossed = outs
+        .into_par_iter()
+        .zip(chunks.par_iter())
+        .map(|(out, chunk)| {
             let mut ids = [0u32; IDS];
-            let cases = BlockCases::get(table);
-            let end = ((task + 1) * ACTIVE_PER_TASK).min(active.len());
-            active[task * ACTIVE_PER_TASK..end]
-                .iter()
-                .map(|a| triangulate_block(cases, a, active, map, dims, &mut ids, out))
-                .sum::<Option<u64>>()
+            let mut at = 0;
+            let mut crossed = 0;
+            for a in chunk.iter() {
+                let end = at + a.triangles as usize;
+                crossed +=
+                    triangulate_block(cases, a, active, map, dims, &mut ids, &mut out[at..end])?;
+                at = end;
+            }
+            Some(crossed)
         })
         .sum::<Option<u64>>()
         .ok_or_else(|| {
@@ -332,6 +365,9 @@ fn run<F: BlockField + ?Sized>(
                 "its block bounds ruled out a block that the surface crosses",
             )
         })?;
+    // SAFETY: the tasks' ranges cover triangles[..total] exactly, and each block wrote all the
+    // triangles it counted (`triangulate_block` checks that, and the error above returns early).
+    unsafe { triangles.set_len(total) };
     stats.add_time("triangulate", t);
 
     if normals {
@@ -350,16 +386,16 @@ fn run<F: BlockField + ?Sized>(
             });
         }
         if ws.parts.iter().any(|p| p.zero_normal) {
-            // Rare (the gradient vanishes at a vertex): the face normals need the triangles
-            // in one piece, for this once.
-            mesh.triangles = gather(&ws.triangles[..tasks]);
+            // Rare (the gradient vanishes at a vertex): the face normals need the triangles as
+            // u32, for this once.
+            mesh.triangles = triangles.iter().map(|t| t.map(I::to_u32)).collect();
             fill_vanishing_normals(&mut mesh);
             mesh.triangles = Vec::new();
         }
         stats.normal_evaluations = mesh.vertices.len() as u64;
         stats.add_time("normals", t);
     }
-    Ok((mesh, tasks, stats))
+    Ok((mesh, triangles, stats))
 }
 
 /// Bit `i + 8j` of word `k` set when `values[i + 8j + 64k] < 0`, for the first `planes` planes.
@@ -475,6 +511,7 @@ fn block_vertices(
         edges,
         before,
         base: 0,
+        triangles: 0,
     }
 }
 
@@ -504,11 +541,18 @@ struct BlockCases {
     /// Triangles of case c are `entries[offsets[c]..offsets[c + 1]]`.
     offsets: [u16; 257],
     entries: Vec<[u16; 3]>,
-    /// Triangles of the case with the most.
-    max: usize,
 }
 
 impl BlockCases {
+    /// Triangles of a block's crossed cells.
+    fn count(&self, a: &Active) -> u32 {
+        let mut n = 0;
+        crossed_cells(&a.signs, a.n, |_, case| {
+            n += (self.offsets[case + 1] - self.offsets[case]) as u32
+        });
+        n
+    }
+
     fn get(table: &CaseTable) -> &'static BlockCases {
         static SEPARATE: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
         static JOIN: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
@@ -528,28 +572,49 @@ impl BlockCases {
                 );
                 offsets[case + 1] = entries.len() as u16;
             }
-            BlockCases {
-                offsets,
-                entries,
-                max: table.max_triangles(),
-            }
+            BlockCases { offsets, entries }
         })
     }
 }
 
-/// Triangulates the crossed cells of block `a`; returns their number (None when a crossed edge
-/// lies in a block the field ruled out, which a correct [`BlockField`] never does). First fills a table of
-/// the vertex index of every crossed edge its cells use (its own, then those on its upper faces
+/// Calls `f(cell, case)` for each crossed cell of a block with `signs` and `n` points per axis
+/// (`cell` = x + 8y + 64z of its lower corner), eight cells of a row at a time.
+#[inline(always)]
+fn crossed_cells(signs: &[u64; 8], n: [u8; 3], mut f: impl FnMut(usize, usize)) {
+    let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
+    for k in 0..n[2] as usize - 1 {
+        let (lo, hi) = (signs[k], signs[k + 1]);
+        let (mut any, mut all) = (0u64, !0u64);
+        for s in [0, 1, 8, 9] {
+            any |= (lo >> s) | (hi >> s);
+            all &= (lo >> s) & (hi >> s);
+        }
+        let mut m = any & !all & cells;
+        while m != 0 {
+            let c = m.trailing_zeros();
+            m &= m - 1;
+            let case = (((lo >> c) & 3)
+                | ((lo >> (c + 8)) & 3) << 2
+                | ((hi >> c) & 3) << 4
+                | ((hi >> (c + 8)) & 3) << 6) as usize;
+            f(64 * k + c as usize, case);
+        }
+    }
+}
+
+/// Triangulates the crossed cells of block `a` into `out` (room for exactly its triangles);
+/// returns the number of cells (None when a crossed edge lies in a block the field ruled out,
+/// which a correct [`BlockField`] never does). First fills a table of the vertex index of every crossed edge its cells use (its own, then those on its upper faces
 /// that neighbours own), then reads the triangles' corners from it. Entries of `ids` are read
 /// only for crossed edges, which are written first, so the table is never cleared.
-fn triangulate_block(
+fn triangulate_block<I: TriangleIndex>(
     cases: &BlockCases,
     a: &Active,
     active: &[Active],
     map: &[u32],
     dims: [u32; 3],
     ids: &mut [u32; IDS],
-    out: &mut Vec<[u32; 3]>,
+    out: &mut [std::mem::MaybeUninit<[I; 3]>],
 ) -> Option<u64> {
     let [nx, ny, nz] = a.n.map(|v| v as u32);
     let mut next = a.base;
@@ -596,33 +661,17 @@ fn triangulate_block(
             }
         }
     }
-    let cells = plane_mask(nx - 1, ny - 1);
-    let mut crossed = 0;
-    // Room for the most triangles the block's cells can have: no reallocation below.
-    out.reserve(cases.max * (STEP * STEP * STEP) as usize);
-    for k in 0..nz as usize - 1 {
-        let (lo, hi) = (a.signs[k], a.signs[k + 1]);
-        let (mut any, mut all) = (0u64, !0u64);
-        for s in [0, 1, 8, 9] {
-            any |= (lo >> s) | (hi >> s);
-            all &= (lo >> s) & (hi >> s);
+    let (mut crossed, mut w) = (0, 0);
+    crossed_cells(&a.signs, a.n, |cell, case| {
+        crossed += 1;
+        let range = cases.offsets[case] as usize..cases.offsets[case + 1] as usize;
+        for t in &cases.entries[range] {
+            out[w].write(t.map(|o| I::from_u32(ids[(cell + o as usize) & (IDS - 1)])));
+            w += 1;
         }
-        let mut m = any & !all & cells;
-        while m != 0 {
-            let c = m.trailing_zeros();
-            m &= m - 1;
-            let case = (((lo >> c) & 3)
-                | ((lo >> (c + 8)) & 3) << 2
-                | ((hi >> c) & 3) << 4
-                | ((hi >> (c + 8)) & 3) << 6) as usize;
-            crossed += 1;
-            let cell = 64 * k + c as usize;
-            let range = cases.offsets[case] as usize..cases.offsets[case + 1] as usize;
-            for t in &cases.entries[range] {
-                out.push(t.map(|o| ids[(cell + o as usize) & (IDS - 1)]));
-            }
-        }
-    }
+    });
+    // The block's count came from the same cells and table: every slot is written.
+    (w == out.len()).then_some(())?;
     Some(crossed)
 }
 

@@ -155,12 +155,12 @@ pub fn flatten_points(p: Vec<DVec3>) -> Vec<f64> {
 /// Triangles as int64 indices, flat (run without the GIL: it is a pass over the whole mesh).
 pub fn flatten_triangles(t: &[[u32; 3]]) -> Vec<i64> {
     // Runs of 4096 triangles, converted in parallel.
-    flatten_triangle_runs(&t.chunks(4096).collect::<Vec<_>>())
+    let runs = t.chunks(4096).collect::<Vec<_>>();
+    flat_faces(crate::polygonize::gather_map(&runs, |t| t.map(i64::from)))
 }
 
-/// Runs of triangles concatenated as int64 indices, flat, in one parallel pass.
-pub fn flatten_triangle_runs<R: AsRef<[[u32; 3]]> + Sync>(runs: &[R]) -> Vec<i64> {
-    let t = crate::polygonize::gather_map(runs, |t| t.map(i64::from));
+/// int64 triangles, flat (the same allocation).
+pub fn flat_faces(t: Vec<[i64; 3]>) -> Vec<i64> {
     match bytemuck::allocation::try_cast_vec::<[i64; 3], i64>(t) {
         Ok(v) => v,
         Err((_, t)) => bytemuck::cast_slice::<[i64; 3], i64>(&t).to_vec(),

@@ -1,6 +1,6 @@
 //! `_core.polygonize`: argument checks, the GIL released around the polygonizer, numpy out.
 
-use super::convert::{flatten_triangle_runs, points, MeshBuffers};
+use super::convert::{flat_faces, points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
@@ -273,8 +273,9 @@ pub fn polygonize<'py>(
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
                 py.detach(|| {
-                    sparse::polygonize_with(blobs, &lattice, &settings, flatten_triangle_runs)
-                        .map(|(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, faces), stats))
+                    sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
+                        |(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats),
+                    )
                 })
             }
             _ => {
