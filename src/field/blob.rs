@@ -376,8 +376,9 @@ impl BlobField {
             let near = qx.iter().fold(f64::INFINITY, |m, &d| m.min(d));
             let in_block = (1u32 << ny) - 1;
             let planes = block.planes(c.z, r);
-            for (k, &z) in zs.iter().enumerate().take(planes.end).skip(planes.start) {
-                let dz = z - c.z;
+            #[allow(clippy::needless_range_loop)] // k also indexes `out`
+            for k in planes {
+                let dz = zs[k] - c.z;
                 let dz2 = dz * dz;
                 let ks: [f64; 8] = std::array::from_fn(|j| 1.0 - (dy2[j] + dz2) * inv);
                 let mut rows =
@@ -421,8 +422,9 @@ impl BlobField {
             let dy2 = _mm512_mul_pd(dy, dy);
             let va = _mm512_set1_pd(a);
             let planes = block.planes(c.z, r);
-            for (k, &z) in zs.iter().enumerate().take(planes.end).skip(planes.start) {
-                let dz = z - c.z;
+            #[allow(clippy::needless_range_loop)] // k also indexes `out`
+            for k in planes {
+                let dz = zs[k] - c.z;
                 let ks = _mm512_sub_pd(
                     one,
                     _mm512_mul_pd(_mm512_add_pd(dy2, _mm512_set1_pd(dz * dz)), vinv),
