@@ -152,6 +152,9 @@ const BLOCK_SLOTS: [usize; 27] = {
 const BYTES_PER_TRIANGLE_STORE: u64 = 192;
 /// An empty brick-table entry, slot or edge.
 const NONE: u32 = u32::MAX;
+/// Bricks whose slots [`Store::new`] reserves address space for (32³: a 256³ lattice's, 200 MB
+/// of address space, of which only the bricks used are touched).
+const RESERVED_BRICKS: usize = 1 << 15;
 
 /// The values of one call, in evaluation order, and where each lattice point's value is: the
 /// lattice points are split into bricks of 8³, a dense table (one entry per brick) gives each
@@ -195,12 +198,20 @@ impl Store {
 
     fn new(lattice: &Lattice) -> Self {
         let dims = Self::dims(lattice);
+        let table = vec![NONE; dims.iter().product()];
+        // Room for the slots of every brick (up to RESERVED_BRICKS): they never move as bricks
+        // are handed out, and only the pages of bricks handed out are touched. Growing them
+        // instead (copies, and each copy's pages faulted in afresh) took a tenth of the
+        // icosahedron's octree at 128³.
+        let room = table.len().min(RESERVED_BRICKS) * BRICK_POINTS;
         Store {
             dims,
-            table: vec![NONE; dims.iter().product()],
-            slots: Vec::new(),
-            at: Vec::new(),
-            values: Vec::new(),
+            table,
+            slots: crate::memory::with_capacity_huge(room),
+            at: crate::memory::with_capacity_huge(room),
+            // A slot gets at most one index into `values`; besides those, only rejected
+            // centres have values.
+            values: crate::memory::with_capacity_huge(room),
             queued: Vec::new(),
         }
     }
