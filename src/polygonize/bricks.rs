@@ -1,40 +1,62 @@
 //! Block-sparse, time-stamped storage for the tracking polygonizer's caches (Triquet et al.
 //! §4.1 and §4.7): the lattice is split into bricks of 8 × 8 × 8 lattice points; a small dense
 //! table maps each brick position to a brick of the pool, handed out on first touch in a call.
-//! Every entry carries the stamp of the call that wrote it, so entries from earlier calls are
-//! simply stale: nothing is cleared between calls, bricks are recycled from call to call, and
-//! memory grows with the number of bricks the surface touches, not with the lattice.
+//! Each table entry carries the stamp of the call that handed its brick out, so bricks from
+//! earlier calls are simply stale: nothing is cleared between calls (only a brick's marks, 320
+//! bytes, when it is handed out again), bricks are recycled from call to call, and memory grows
+//! with the number of bricks the surface touches, not with the lattice.
+//!
+//! Within a brick, the marks (value claimed, cell queued, edge vertex made) are bit sets, one
+//! 64-bit word per z-plane of the brick (bit `x + 8y`), kept apart from the values and vertex
+//! indices: the marks of a brick fill five cache lines, which stay hot while its cells are
+//! visited, and the eight corners of a cell are claimed with two word operations.
 
 /// Lattice points per brick side.
 pub const SIDE: u32 = 8;
 const LOCAL: usize = (SIDE * SIDE * SIDE) as usize;
 const NONE: u32 = u32::MAX;
 
-/// Everything cached about one lattice point, in one record so that a lookup touches one
-/// cache line: its value, the vertices on the three edges that start at it, and the "queued"
-/// mark of the cell whose lower corner it is, each with its stamp.
-#[derive(Clone, Copy, Default)]
-#[repr(C)]
-struct Point {
-    value: f64,
-    value_stamp: u32,
-    queued_stamp: u32,
-    edge: [u32; 3],
-    edge_stamp: [u32; 3],
-}
-
 /// One brick of 8³ lattice points.
 #[derive(Clone)]
 struct Brick {
-    points: [Point; LOCAL],
+    /// Per point (bit `x + 8y` of word `z`): its value is claimed (and, once evaluated,
+    /// written) in this call.
+    claimed: [u64; 8],
+    /// Per cell, by its lower corner: the cell is queued in this call.
+    queued: [u64; 8],
+    /// Per point and axis: the vertex on the edge from the point along the axis is made.
+    made: [[u64; 8]; 3],
+    values: [f64; LOCAL],
+    /// Per axis and point: the vertex index on the edge from the point along the axis.
+    edges: [[u32; LOCAL]; 3],
 }
 
 impl Brick {
     fn new() -> Box<Self> {
         Box::new(Brick {
-            points: [Point::default(); LOCAL],
+            claimed: [0; 8],
+            queued: [0; 8],
+            made: [[0; 8]; 3],
+            values: [0.0; LOCAL],
+            edges: [[NONE; LOCAL]; 3],
         })
     }
+
+    /// Forgets the marks of an earlier call.
+    fn clear_marks(&mut self) {
+        self.claimed = [0; 8];
+        self.queued = [0; 8];
+        self.made = [[0; 8]; 3];
+    }
+}
+
+/// Sets bit `l` of a brick's bit set; returns whether it was clear.
+#[inline(always)]
+fn mark(bits: &mut [u64; 8], l: usize) -> bool {
+    let (w, b) = (l >> 6, 1u64 << (l & 63));
+    let new = bits[w] & b == 0;
+    bits[w] |= b;
+    new
 }
 
 /// Offsets within a brick of the eight corners of a cell, in case-bit order (x fastest).
@@ -58,10 +80,7 @@ impl Bricks {
     pub fn begin(&mut self, points: [u32; 3]) {
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
-            // After 2³² calls, wipe the stamps once so that none can match by accident.
-            for b in &mut self.pool {
-                b.points.fill(Point::default());
-            }
+            // After 2³² calls, wipe the table's stamps once so that none can match by accident.
             self.table.iter_mut().for_each(|e| e.0 = 0);
             self.stamp = 1;
         }
@@ -87,6 +106,8 @@ impl Bricks {
             + self.pool.len() * std::mem::size_of::<Brick>()
     }
 
+    /// Pool index of the brick holding `p` (handed out, with its marks cleared, on first touch
+    /// in this call) and `p`'s index within it.
     #[inline]
     fn brick(&mut self, p: [u32; 3]) -> (usize, usize) {
         let b = [p[0] / SIDE, p[1] / SIDE, p[2] / SIDE];
@@ -98,6 +119,8 @@ impl Bricks {
         if e.0 != self.stamp {
             if self.used == self.pool.len() {
                 self.pool.push(Brick::new());
+            } else {
+                self.pool[self.used].clear_marks();
             }
             *e = (self.stamp, self.used as u32);
             self.used += 1;
@@ -105,53 +128,32 @@ impl Bricks {
         (e.1 as usize, l)
     }
 
-    /// The value at lattice point `p` if written in this call.
-    #[inline]
-    pub fn value(&mut self, p: [u32; 3]) -> Option<f64> {
-        let (b, l) = self.brick(p);
-        let q = &self.pool[b].points[l];
-        (q.value_stamp == self.stamp).then_some(q.value)
-    }
-
-    /// Marks `p` as pending (returns false when it was already known or pending).
-    #[inline]
-    pub fn claim_value(&mut self, p: [u32; 3]) -> bool {
-        let (b, l) = self.brick(p);
-        let s = self.stamp;
-        let q = &mut self.pool[b].points[l];
-        if q.value_stamp == s {
-            false
-        } else {
-            q.value_stamp = s;
-            q.value = f64::NAN;
-            true
-        }
-    }
-
-    /// Claims the corners of the cell with lower corner `o` (as [`Bricks::claim_value`]),
-    /// calling `claimed` with each corner claimed now and its [`Slot`] for
-    /// [`Bricks::set_slot`].
+    /// Claims the corners of the cell with lower corner `o` whose values are neither known nor
+    /// claimed in this call, calling `claimed` with each corner claimed now and its [`Slot`]
+    /// for [`Bricks::set_slot`].
     #[inline]
     pub fn claim_cell(&mut self, o: [u32; 3], mut claimed: impl FnMut([u32; 3], Slot)) {
-        let s = self.stamp;
         if let Some((b, l)) = self.cell_in_brick(o) {
-            let pts = &mut self.pool[b].points;
-            for (k, off) in CORNER_OFFSETS.iter().enumerate() {
-                let q = &mut pts[l + off];
-                if q.value_stamp != s {
-                    q.value_stamp = s;
-                    q.value = f64::NAN;
-                    claimed(corner(o, k), Slot::new(b, l + off));
+            // The four corners of each of the cell's two z-planes, as bits of that plane's word.
+            let bits = &mut self.pool[b].claimed;
+            let (w, shift) = (l >> 6, l & 63);
+            for (dz, word) in [(0, w), (1, w + 1)] {
+                let cell = 0x303u64 << shift;
+                let mut new = cell & !bits[word];
+                bits[word] |= cell;
+                while new != 0 {
+                    let bit = new.trailing_zeros() as usize;
+                    new &= new - 1;
+                    let (dx, dy) = ((bit - shift) & 1, (bit - shift) >> 3);
+                    let k = dx | dy << 1 | dz << 2;
+                    claimed(corner(o, k), Slot::new(b, l + CORNER_OFFSETS[k]));
                 }
             }
         } else {
             for k in 0..8 {
                 let c = corner(o, k);
                 let (b, l) = self.brick(c);
-                let q = &mut self.pool[b].points[l];
-                if q.value_stamp != s {
-                    q.value_stamp = s;
-                    q.value = f64::NAN;
+                if mark(&mut self.pool[b].claimed, l) {
                     claimed(c, Slot::new(b, l));
                 }
             }
@@ -162,24 +164,16 @@ impl Bricks {
     #[inline]
     pub fn set_slot(&mut self, slot: Slot, v: f64) {
         let (b, l) = slot.get();
-        self.pool[b].points[l].value = v;
-    }
-
-    #[inline]
-    pub fn set_value(&mut self, p: [u32; 3], v: f64) {
-        let (b, l) = self.brick(p);
-        let s = self.stamp;
-        let q = &mut self.pool[b].points[l];
-        q.value_stamp = s;
-        q.value = v;
+        self.pool[b].values[l] = v;
     }
 
     /// The value at `p`, which must have been written in this call.
     #[inline]
-    pub fn known(&mut self, p: [u32; 3]) -> f64 {
+    fn known(&mut self, p: [u32; 3]) -> f64 {
         let (b, l) = self.brick(p);
-        debug_assert_eq!(self.pool[b].points[l].value_stamp, self.stamp);
-        self.pool[b].points[l].value
+        let brick = &self.pool[b];
+        debug_assert!(brick.claimed[l >> 6] & 1 << (l & 63) != 0);
+        brick.values[l]
     }
 
     /// The values at the eight corners of the cell with lower corner `o` (all written in this
@@ -187,8 +181,8 @@ impl Bricks {
     #[inline]
     pub fn cell_values(&mut self, o: [u32; 3]) -> [f64; 8] {
         if let Some((b, l)) = self.cell_in_brick(o) {
-            let pts = &self.pool[b].points;
-            CORNER_OFFSETS.map(|off| pts[l + off].value)
+            let values = &self.pool[b].values;
+            CORNER_OFFSETS.map(|off| values[l + off])
         } else {
             [0, 1, 2, 3, 4, 5, 6, 7].map(|k| self.known(corner(o, k)))
         }
@@ -209,15 +203,11 @@ impl Bricks {
     pub fn edge(&mut self, p: [u32; 3], axis: u8, make: impl FnOnce(&mut Self) -> u32) -> u32 {
         let (b, l) = self.brick(p);
         let a = axis as usize;
-        let q = &self.pool[b].points[l];
-        if q.edge_stamp[a] == self.stamp {
-            return q.edge[a];
+        if !mark(&mut self.pool[b].made[a], l) {
+            return self.pool[b].edges[a][l];
         }
         let v = make(self);
-        let s = self.stamp;
-        let q = &mut self.pool[b].points[l];
-        q.edge_stamp[a] = s;
-        q.edge[a] = v;
+        self.pool[b].edges[a][l] = v;
         v
     }
 
@@ -225,14 +215,7 @@ impl Bricks {
     #[inline]
     pub fn queue(&mut self, c: [u32; 3]) -> bool {
         let (b, l) = self.brick(c);
-        let s = self.stamp;
-        let q = &mut self.pool[b].points[l];
-        if q.queued_stamp == s {
-            false
-        } else {
-            q.queued_stamp = s;
-            true
-        }
+        mark(&mut self.pool[b].queued, l)
     }
 }
 
@@ -260,4 +243,64 @@ fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
         o[1] + ((k >> 1) & 1) as u32,
         o[2] + ((k >> 2) & 1) as u32,
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Claiming cells claims each corner once per call, in both the in-brick and the
+    /// across-bricks paths, and a new call starts with nothing claimed, queued or made.
+    #[test]
+    fn claims_once_per_call_and_forgets_between_calls() {
+        // Cells inside one brick, on brick faces, edges and corners (the first twice).
+        const CELLS: [[u32; 3]; 7] = [
+            [0, 0, 0],
+            [1, 0, 0],
+            [6, 6, 6],
+            [7, 7, 7],
+            [7, 0, 3],
+            [8, 8, 8],
+            [0, 0, 0],
+        ];
+        let mut b = Bricks::default();
+        for call in 0..3u32 {
+            b.begin([20, 20, 20]);
+            let mut seen = std::collections::HashSet::new();
+            for o in CELLS {
+                b.claim_cell(o, |c, _| {
+                    // A corner of the cell, not claimed before in this call.
+                    assert!(
+                        (0..3).all(|a| c[a] == o[a] || c[a] == o[a] + 1),
+                        "{c:?} of {o:?}"
+                    );
+                    b_set(&mut seen, c);
+                });
+            }
+            // Every corner of every cell, exactly once.
+            let want: std::collections::HashSet<[u32; 3]> = CELLS
+                .iter()
+                .flat_map(|&o| (0..8).map(move |k| corner(o, k)))
+                .collect();
+            assert_eq!(seen, want, "call {call}");
+            assert!(b.queue([7, 7, 7]) && !b.queue([7, 7, 7]));
+            let mut made = 0;
+            let v1 = b.edge([7, 3, 3], 0, |_| {
+                made += 1;
+                40 + call
+            });
+            let v2 = b.edge([7, 3, 3], 0, |_| {
+                made += 1;
+                99
+            });
+            assert_eq!((v1, v2, made), (40 + call, 40 + call, 1));
+        }
+        // Later calls reuse the bricks of the first.
+        assert_eq!(b.counts().0, b.counts().1);
+    }
+
+    /// Records `c`, which must not have been claimed before in this call.
+    fn b_set(seen: &mut std::collections::HashSet<[u32; 3]>, c: [u32; 3]) {
+        assert!(seen.insert(c), "{c:?} claimed twice");
+    }
 }

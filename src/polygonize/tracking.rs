@@ -1,9 +1,9 @@
 //! Surface tracking (Triquet et al. §4.4): starting from seed cells, visit only cells the surface
 //! crosses, entering a neighbour only through a face whose corners change sign (known from the
 //! case table, §4.6). Each cell is processed once. Corner values, edge vertices and visited marks
-//! live in hash maps keyed by lattice coordinates and tagged with a time stamp (§4.1): an entry
-//! from an earlier call is simply stale, so nothing is cleared between frames, and storage grows
-//! with the surface, not with the lattice (§4.7).
+//! live in bricks of 8³ lattice points handed out on first touch and tagged with a time stamp
+//! (§4.1, [`super::bricks`]): a brick from an earlier call is simply stale, so nothing is
+//! cleared between frames, and storage grows with the surface, not with the lattice (§4.7).
 //!
 //! The walk goes wave by wave: all unknown corners of the current wave of cells are evaluated in
 //! one batched field call, so the field may be parallel (or a Python callable called in batches).
