@@ -333,7 +333,7 @@ impl PyTessellator {
         let tess = &mut self.inner;
         let result = py.detach(|| {
             tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
-                .map(|(m, s)| (MeshBuffers::new(m.clone()), s))
+                .map(|(m, s)| (MeshBuffers::copied(m), s))
         });
         if let Some(e) = field.take_error() {
             return Err(e);
