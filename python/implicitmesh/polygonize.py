@@ -195,7 +195,8 @@ class Tessellator:
     Tracking evaluates the fewest points, which pays for costly fields (a Python callable, a
     large variational fit). For a :class:`BlobField`, ``polygonize(field, method="sparse")``
     is faster per frame (it keeps its work buffers between calls too): 200 blobs at 64³ ran at
-    263 frames per second with it and 46 with the ``Tessellator`` (BENCHMARKS.md).
+    271-505 frames per second with it and 47-71 with the ``Tessellator`` in two benchmark runs
+    (BENCHMARKS.md).
 
     Examples
     --------
