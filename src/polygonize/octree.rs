@@ -152,8 +152,9 @@ const BLOCK_SLOTS: [usize; 27] = {
 const BYTES_PER_TRIANGLE_STORE: u64 = 192;
 /// An empty brick-table entry, slot or edge.
 const NONE: u32 = u32::MAX;
-/// Bricks whose slots [`Store::new`] reserves address space for (32³: a 256³ lattice's, 200 MB
-/// of address space, of which only the bricks used are touched).
+/// Bricks whose slots and values [`Store::new`] reserves address space for (32³, a 256³
+/// lattice's: 20 bytes per point, 335 MB of address space, of which only the pages of the
+/// bricks used are touched).
 const RESERVED_BRICKS: usize = 1 << 15;
 
 /// The values of one call, in evaluation order, and where each lattice point's value is: the
@@ -201,8 +202,8 @@ impl Store {
         let table = vec![NONE; dims.iter().product()];
         // Room for the slots of every brick (up to RESERVED_BRICKS): they never move as bricks
         // are handed out, and only the pages of bricks handed out are touched. Growing them
-        // instead (copies, and each copy's pages faulted in afresh) took a tenth of the
-        // icosahedron's octree at 128³.
+        // instead (copies, and each copy's pages faulted in afresh) took 7-9 % of the
+        // icosahedron's octree at 128³ run alone.
         let room = table.len().min(RESERVED_BRICKS) * BRICK_POINTS;
         Store {
             dims,

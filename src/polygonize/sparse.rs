@@ -666,11 +666,14 @@ fn triangulate_block<I: TriangleIndex>(
         crossed += 1;
         let range = cases.offsets[case] as usize..cases.offsets[case + 1] as usize;
         for t in &cases.entries[range] {
-            out[w].write(t.map(|o| I::from_u32(ids[(cell + o as usize) & (IDS - 1)])));
+            if let Some(slot) = out.get_mut(w) {
+                slot.write(t.map(|o| I::from_u32(ids[(cell + o as usize) & (IDS - 1)])));
+            }
             w += 1;
         }
     });
-    // The block's count came from the same cells and table: every slot is written.
+    // The block's count came from the same cells and table, so every slot is written exactly;
+    // were it otherwise, this is an error, not a panic nor uninitialised output.
     (w == out.len()).then_some(())?;
     Some(crossed)
 }
