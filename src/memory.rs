@@ -9,11 +9,26 @@
 /// An empty vector with room for `n` elements, whose pages are advised to be huge pages when
 /// it is large (at least 4 MiB). The pages are not touched here.
 pub fn with_capacity_huge<T>(n: usize) -> Vec<T> {
-    let v: Vec<T> = Vec::with_capacity(n);
+    advise_huge(Vec::with_capacity(n))
+}
+
+/// [`with_capacity_huge`] for room that is only an optimisation (address space reserved so
+/// that a vector never grows by copying): where the system refuses the reservation (strict
+/// overcommit), an empty vector that grows as usual.
+pub fn reserve_huge<T>(n: usize) -> Vec<T> {
+    let mut v: Vec<T> = Vec::new();
+    if v.try_reserve_exact(n).is_err() {
+        return Vec::new();
+    }
+    advise_huge(v)
+}
+
+/// Advises huge pages for the spare capacity of `v` when it is large (at least 4 MiB).
+fn advise_huge<T>(v: Vec<T>) -> Vec<T> {
     #[cfg(target_os = "linux")]
     {
         const HUGE: usize = 2 << 20;
-        let bytes = n.saturating_mul(std::mem::size_of::<T>());
+        let bytes = v.capacity().saturating_mul(std::mem::size_of::<T>());
         static OFF: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
         let off = *OFF.get_or_init(|| std::env::var_os("IMPLICITMESH_NO_HUGEPAGES").is_some());
         if bytes >= 2 * HUGE && !off {
@@ -31,4 +46,20 @@ pub fn with_capacity_huge<T>(n: usize) -> Vec<T> {
         }
     }
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refused_reservation_gives_an_empty_vector() {
+        // Far beyond any address space: refused, not an abort; the vector still grows.
+        let mut v: Vec<u64> = reserve_huge(usize::MAX / 16);
+        assert_eq!(v.capacity(), 0);
+        v.push(7);
+        assert_eq!(v, [7]);
+        let w: Vec<u64> = reserve_huge(1 << 20);
+        assert!(w.capacity() >= 1 << 20 && w.is_empty());
+    }
 }

@@ -208,11 +208,11 @@ impl Store {
         Store {
             dims,
             table,
-            slots: crate::memory::with_capacity_huge(room),
-            at: crate::memory::with_capacity_huge(room),
+            slots: crate::memory::reserve_huge(room),
+            at: crate::memory::reserve_huge(room),
             // A slot gets at most one index into `values`; besides those, only rejected
             // centres have values.
-            values: crate::memory::with_capacity_huge(room),
+            values: crate::memory::reserve_huge(room),
             queued: Vec::new(),
         }
     }
