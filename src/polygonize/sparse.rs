@@ -766,6 +766,26 @@ mod tests {
     }
 
     #[test]
+    fn int64_triangles_are_the_u32_triangles() {
+        // Many blocks and tasks, the lattice's upper sides cut through blocks.
+        let f = blobs(60, 0.2, 12);
+        let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [61, 47, 90]).unwrap();
+        let s = Settings::default();
+        let (m, st) = polygonize(&f, &l, &s).unwrap();
+        let (m64, t64, st64) = polygonize_as::<_, i64>(&f, &l, &s).unwrap();
+        assert!(m64.triangles.is_empty() && !m.triangles.is_empty());
+        let t: Vec<[u32; 3]> = t64
+            .iter()
+            .map(|t| t.map(|v| u32::try_from(v).unwrap()))
+            .collect();
+        assert_eq!(t, m.triangles);
+        assert_eq!(
+            (m64.vertices, st64.cells_crossed),
+            (m.vertices, st.cells_crossed)
+        );
+    }
+
+    #[test]
     fn skips_most_blocks_and_is_closed() {
         let f = blobs(20, 0.3, 11);
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 96).unwrap();
