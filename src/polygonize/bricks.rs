@@ -200,13 +200,13 @@ impl Bricks {
 
     /// The vertex on the edge from `p` along `axis`, creating it with `make` on first use.
     #[inline]
-    pub fn edge(&mut self, p: [u32; 3], axis: u8, make: impl FnOnce(&mut Self) -> u32) -> u32 {
+    pub fn edge(&mut self, p: [u32; 3], axis: u8, make: impl FnOnce() -> u32) -> u32 {
         let (b, l) = self.brick(p);
         let a = axis as usize;
         if !mark(&mut self.pool[b].made[a], l) {
             return self.pool[b].edges[a][l];
         }
-        let v = make(self);
+        let v = make();
         self.pool[b].edges[a][l] = v;
         v
     }
@@ -285,11 +285,11 @@ mod tests {
             assert_eq!(seen, want, "call {call}");
             assert!(b.queue([7, 7, 7]) && !b.queue([7, 7, 7]));
             let mut made = 0;
-            let v1 = b.edge([7, 3, 3], 0, |_| {
+            let v1 = b.edge([7, 3, 3], 0, || {
                 made += 1;
                 40 + call
             });
-            let v2 = b.edge([7, 3, 3], 0, |_| {
+            let v2 = b.edge([7, 3, 3], 0, || {
                 made += 1;
                 99
             });

@@ -243,7 +243,7 @@ impl Tessellator {
                     }
                     let (d, axis) = edge_origin(e);
                     let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
-                    idx[e] = self.cache.edge(a, axis, |_| {
+                    idx[e] = self.cache.edge(a, axis, || {
                         let mut b = a;
                         b[axis as usize] += 1;
                         vertices.push(edge_crossing(lattice.point(a), lattice.point(b), fa, fb));
