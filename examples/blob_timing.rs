@@ -1,6 +1,6 @@
 //! Times the polygonizers on random blob fields (the benchmark cases), for profiling:
 //! `cargo run --release --example blob_timing -- 200 0.25 128 dense [repeats] [voxel_size]`
-//! (method `dense`, `sparse` or `tracking`; prints the phases of the last run and the median).
+//! (method `dense`, `sparse`, `tracking` or `blocks` (the `Tessellator`'s walk block by block); prints the phases of the last run and the median).
 use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
 use implicitmesh::lattice::Lattice;
@@ -58,6 +58,12 @@ fn main() {
                     .polygonize(&field, &lattice, &centers, res, &[], &settings)
                     .unwrap();
                 (m.triangles.len(), s)
+            }
+            "blocks" => {
+                let (_, t, s) = tess
+                    .polygonize_blocks::<_, u32>(&field, &lattice, &centers, res, &[], &settings)
+                    .unwrap();
+                (t.len(), s)
             }
             "sparse" => {
                 let (m, s) = sparse::polygonize(&field, &lattice, &settings).unwrap();

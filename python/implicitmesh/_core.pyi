@@ -110,6 +110,7 @@ class Tessellator:
         normals: bool = True,
         batch_size: int = 262144,
         memory_limit: int | None = None,
+        blocks: bool = True,
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...
     @property
     def capacity_bytes(self) -> int: ...

@@ -188,15 +188,20 @@ def _check_common(field, bounds, ambiguity, batch_size, memory_limit):
 class Tessellator:
     """Surface tracking that keeps its caches and buffers between calls, for animation.
 
-    Move the field (e.g. :meth:`BlobField.update`) and call :meth:`polygonize` again: corner
-    values, edge vertices and visited marks are time-stamped, so nothing is cleared and, in
-    steady state, nothing is reallocated.
+    Move the field (e.g. :meth:`BlobField.update`) and call :meth:`polygonize` again. The walk
+    starts from the same seeds as ``polygonize(field, method="tracking")`` and finds the same
+    mesh: every component that holds a seed, triangle for triangle and bit for bit (only the
+    order of vertices and triangles may differ).
 
-    Tracking evaluates the fewest points, which pays for costly fields (a Python callable, a
-    large variational fit). For a :class:`BlobField`, ``polygonize(field, method="sparse")``
-    is faster per frame (it keeps its work buffers between calls too): 200 blobs at 64³ ran at
-    271-505 frames per second with it and 47-71 with the ``Tessellator`` in two benchmark runs
-    (BENCHMARKS.md).
+    For a :class:`BlobField` the walk goes block by block (``blocks=True``, the default): a
+    block of 7 × 7 × 7 cells is evaluated at once (all 8³ points, vectorised) when the walk first
+    enters one of its cells, and within the block the walk is a flood over bit sets, one 64-bit
+    word per plane of cells. It evaluates more points than the walk cell by cell but is several
+    times faster. With ``blocks=False``, and for other fields, the walk goes cell by cell with
+    time-stamped caches of corner values and edge vertices (Triquet et al. §4.1, §4.4): nothing
+    is cleared between calls, and that walk evaluates the fewest points, which pays for costly
+    fields (a Python callable, a large variational fit). In steady state neither walk
+    reallocates its buffers; each call returns new arrays.
 
     Examples
     --------
@@ -221,10 +226,27 @@ class Tessellator:
         normals: bool = True,
         batch_size: int = 262144,
         memory_limit: int | None = None,
+        blocks: bool = True,
     ) -> Mesh:
         """Tracks the surface of ``field``; arguments as for :func:`polygonize` with
-        ``method="tracking"``. Returns a new :class:`Mesh` (its arrays are copies)."""
+        ``method="tracking"``.
+
+        Parameters
+        ----------
+        blocks : bool
+            For a :class:`BlobField`, walk block by block (faster; more evaluations, the same
+            mesh). Ignored for other fields, which are walked cell by cell.
+
+        Returns
+        -------
+        Mesh
+            A new mesh (its arrays are not shared with the caches). ``stats["evaluations"]``
+            counts the seed walks' points and, block by block, every point of each block
+            evaluated.
+        """
         bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
+        if not isinstance(blocks, (bool, np.bool_)):
+            raise ValueError(f"blocks: must be True or False, got {blocks!r}")
         v, f, n, stats = self._core.polygonize(
             field,
             bounds,
@@ -234,6 +256,7 @@ class Tessellator:
             normals=normals,
             batch_size=batch_size,
             memory_limit=memory_limit,
+            blocks=bool(blocks),
         )
         stats["triangles"] = len(f)
         stats["vertices"] = len(v)

@@ -60,32 +60,32 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// Cells per block side.
-const STEP: u32 = BLOCK_POINTS as u32 - 1;
+pub(super) const STEP: u32 = BLOCK_POINTS as u32 - 1;
 /// Blocks per task of the first pass (most blocks are skipped after a few bounds).
 const BLOCKS_PER_TASK: usize = 64;
 /// Evaluated blocks per task of the second pass.
 const ACTIVE_PER_TASK: usize = 16;
 /// No evaluated block here.
-const NONE: u32 = u32::MAX;
+pub(super) const NONE: u32 = u32::MAX;
 
 /// An evaluated block: what the second pass needs of it.
 #[derive(Clone, Copy)]
-struct Active {
-    block: [u32; 3],
+pub(super) struct Active {
+    pub(super) block: [u32; 3],
     /// Points per axis (2..=8).
-    n: [u8; 3],
+    pub(super) n: [u8; 3],
     /// Whether the block is the last along each axis (it then owns its upper faces).
-    last: [bool; 3],
+    pub(super) last: [bool; 3],
     /// Signs per z-plane: bit `i + 8j` of word `k` set when point (i, j, k) is inside.
-    signs: [u64; 8],
+    pub(super) signs: [u64; 8],
     /// Crossed edges the block owns, per axis and z-plane of their lower end (word `8a + k`).
-    edges: [u64; 24],
+    pub(super) edges: [u64; 24],
     /// Vertices of the block before word `w` of `edges`.
-    before: [u16; 24],
+    pub(super) before: [u16; 24],
     /// Index of the block's first vertex (global after the first pass's prefix sum).
-    base: u32,
+    pub(super) base: u32,
     /// Triangles of the block's crossed cells.
-    triangles: u32,
+    pub(super) triangles: u32,
 }
 
 impl Active {
@@ -101,21 +101,88 @@ impl Active {
 
 /// Bits `i + 8j` for `i < x` and `j < y` (a block's 8 × 8 plane).
 #[inline]
-fn plane_mask(x: u32, y: u32) -> u64 {
+pub(super) fn plane_mask(x: u32, y: u32) -> u64 {
     let row = if x >= 8 { 0xff } else { (1u64 << x) - 1 };
     (0..y.min(8)).fold(0, |m, j| m | row << (8 * j))
+}
+
+/// The vertices (and normals) of evaluated blocks, as one task makes them.
+#[derive(Default)]
+pub(super) struct BlockOutput {
+    pub(super) vertices: Vec<DVec3>,
+    pub(super) normals: Vec<DVec3>,
+    pub(super) evaluations: u64,
+    /// A normal is zero (the gradient vanishes) or not finite.
+    pub(super) zero_normal: bool,
+    pub(super) bad_normal: bool,
+}
+
+impl BlockOutput {
+    pub(super) fn clear(&mut self) {
+        self.vertices.clear();
+        self.normals.clear();
+        self.evaluations = 0;
+        self.zero_normal = false;
+        self.bad_normal = false;
+    }
+
+    pub(super) fn capacity_bytes(&self) -> usize {
+        (self.vertices.capacity() + self.normals.capacity()) * 24
+    }
+}
+
+/// Evaluates block `b` of a lattice with `dims` blocks per axis. When its points have both
+/// signs, appends the vertices of the crossed edges it owns (and their normals) to `out` and
+/// returns the block with `base` its first vertex in `out`; otherwise None.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub(super) fn evaluate_block<F: BlockField + ?Sized>(
+    field: &F,
+    blocks: &F::Blocks,
+    lattice: &Lattice,
+    dims: [u32; 3],
+    b: [u32; 3],
+    normals: bool,
+    values: &mut [f64; 512],
+    out: &mut BlockOutput,
+) -> Option<Active> {
+    let points = lattice.points_per_axis();
+    let lo = b.map(|v| v * STEP);
+    let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
+    let block = Block { index: b, lo, n };
+    if field.block_values(blocks, lattice, &block, values) != BlockSign::Mixed {
+        return None;
+    }
+    out.evaluations += (n[0] * n[1] * n[2]) as u64;
+    let first = out.vertices.len();
+    let active = block_vertices(lattice, b, lo, n, dims, values, &mut out.vertices);
+    // One sign on every point after all (the bounds were not tight enough): no cell or edge of
+    // the block is crossed, and no neighbour needs it.
+    let all = plane_mask(n[0], n[1]);
+    let planes = &active.signs[..n[2] as usize];
+    if planes.iter().all(|&w| w == 0) || planes.iter().all(|&w| w == all) {
+        return None;
+    }
+    if normals {
+        let new = &out.vertices[first..];
+        out.normals.resize(out.vertices.len(), DVec3::ZERO);
+        let g = &mut out.normals[first..];
+        field.block_gradients(blocks, &block, new, g);
+        let (zero, bad) = normalize(g);
+        out.zero_normal |= zero > 0;
+        out.bad_normal |= bad.is_some();
+    }
+    Some(Active {
+        base: first as u32,
+        ..active
+    })
 }
 
 /// What one task of the first pass produces.
 #[derive(Default)]
 struct Part {
     active: Vec<Active>,
-    vertices: Vec<DVec3>,
-    normals: Vec<DVec3>,
-    evaluations: u64,
-    /// A normal of the part is zero (the gradient vanishes) or not finite.
-    zero_normal: bool,
-    bad_normal: bool,
+    out: BlockOutput,
 }
 
 /// Buffers kept between calls (an animation allocates nothing in steady state).
@@ -136,10 +203,7 @@ impl Workspace {
     fn bytes(&self) -> usize {
         self.parts
             .iter()
-            .map(|p| {
-                p.active.capacity() * std::mem::size_of::<Active>()
-                    + (p.vertices.capacity() + p.normals.capacity()) * 24
-            })
+            .map(|p| p.active.capacity() * std::mem::size_of::<Active>() + p.out.capacity_bytes())
             .sum::<usize>()
             + self.active.capacity() * std::mem::size_of::<Active>()
             + self.map.capacity() * 4
@@ -247,18 +311,13 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     let per_task = (num_blocks / 64).clamp(1, BLOCKS_PER_TASK);
     let tasks = num_blocks.div_ceil(per_task);
     ws.parts.resize_with(tasks, Part::default);
-    let points = lattice.points_per_axis();
     let normals = settings.normals;
     ws.parts
         .par_iter_mut()
         .enumerate()
         .for_each(|(task, part)| {
             part.active.clear();
-            part.vertices.clear();
-            part.normals.clear();
-            part.evaluations = 0;
-            part.zero_normal = false;
-            part.bad_normal = false;
+            part.out.clear();
             let mut values = [0.0f64; 512];
             let end = ((task + 1) * per_task).min(num_blocks);
             for index in task * per_task..end {
@@ -268,35 +327,14 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
                     (i / dims[0]) % dims[1],
                     i / (dims[0] * dims[1]),
                 ];
-                let lo = b.map(|v| v * STEP);
-                let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
-                let block = Block { index: b, lo, n };
-                if field.block_values(&blocks, lattice, &block, &mut values) != BlockSign::Mixed {
-                    continue;
-                }
-                part.evaluations += (n[0] * n[1] * n[2]) as u64;
-                let first = part.vertices.len();
-                let active = block_vertices(lattice, b, lo, n, dims, &values, &mut part.vertices);
-                // One sign on every point after all (the bounds were not tight enough): no cell
-                // or edge of the block is crossed, and no neighbour needs it.
-                let all = plane_mask(n[0], n[1]);
-                let planes = &active.signs[..n[2] as usize];
-                if planes.iter().all(|&w| w == 0) || planes.iter().all(|&w| w == all) {
-                    continue;
-                }
-                part.active.push(Active {
-                    base: first as u32,
-                    triangles: cases.count(&active),
-                    ..active
-                });
-                if normals {
-                    let new = &part.vertices[first..];
-                    part.normals.resize(part.vertices.len(), DVec3::ZERO);
-                    let out = &mut part.normals[first..];
-                    field.block_gradients(&blocks, &block, new, out);
-                    let (zero, bad) = normalize(out);
-                    part.zero_normal |= zero > 0;
-                    part.bad_normal |= bad.is_some();
+                let out = &mut part.out;
+                if let Some(a) =
+                    evaluate_block(field, &blocks, lattice, dims, b, normals, &mut values, out)
+                {
+                    part.active.push(Active {
+                        triangles: cases.count(&a, &ALL_CELLS),
+                        ..a
+                    });
                 }
             }
         });
@@ -313,89 +351,137 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
                 .map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
             ws.active.push(Active { base, ..*a });
         }
-        vertices += part.vertices.len();
-        stats.evaluations += part.evaluations;
+        vertices += part.out.vertices.len();
+        stats.evaluations += part.out.evaluations;
     }
     stats.cells_visited = ws
         .active
         .iter()
         .map(|a| a.n.iter().map(|&v| v as u64 - 1).product::<u64>())
         .sum();
-    let mut mesh = Mesh {
-        vertices: gather(&ws.parts.iter().map(|p| &p.vertices[..]).collect::<Vec<_>>()),
-        ..Default::default()
-    };
-    if normals {
-        mesh.normals = gather(&ws.parts.iter().map(|p| &p.normals[..]).collect::<Vec<_>>());
-    }
+    let outputs: Vec<&BlockOutput> = ws.parts.iter().map(|p| &p.out).collect();
+    let mut mesh = gather_outputs(&outputs, normals);
     stats.add_time("evaluate", t);
 
     // Pass 2: triangles per evaluated block, each task into its own range of the final buffer.
     let t = Instant::now();
-    let (active, map) = (&ws.active[..], &ws.map[..]);
-    let chunks: Vec<&[Active]> = active.chunks(ACTIVE_PER_TASK).collect();
+    let (triangles, crossed) =
+        triangulate_blocks::<I, false>(cases, &ws.active, None, &ws.map, dims)?;
+    stats.cells_crossed = crossed;
+    stats.add_time("triangulate", t);
+    if normals {
+        let t = Instant::now();
+        finish_normals(&mut mesh, &triangles, &outputs)?;
+        stats.normal_evaluations = mesh.vertices.len() as u64;
+        stats.add_time("normals", t);
+    }
+    Ok((mesh, triangles, stats))
+}
+
+/// The vertices (and normals) of `outputs`, in order, as one mesh without triangles.
+pub(super) fn gather_outputs(outputs: &[&BlockOutput], normals: bool) -> Mesh {
+    let mut mesh = Mesh {
+        vertices: gather(&outputs.iter().map(|p| &p.vertices[..]).collect::<Vec<_>>()),
+        ..Default::default()
+    };
+    if normals {
+        mesh.normals = gather(&outputs.iter().map(|p| &p.normals[..]).collect::<Vec<_>>());
+    }
+    mesh
+}
+
+/// Triangles of the evaluated blocks `active` (with their cells in `reach`, or all crossed
+/// cells), in block order, in parallel, straight into one buffer; and the number of cells.
+/// `map` gives each block's position in `active` (see [`triangulate_block`] for `TRACKED`).
+pub(super) fn triangulate_blocks<I: TriangleIndex, const TRACKED: bool>(
+    cases: &BlockCases,
+    active: &[Active],
+    reach: Option<&[[u64; 8]]>,
+    map: &[u32],
+    dims: [u32; 3],
+) -> Result<(Vec<[I; 3]>, u64)> {
+    let chunks: Vec<(usize, &[Active])> = active
+        .chunks(ACTIVE_PER_TASK)
+        .enumerate()
+        .map(|(c, a)| (c * ACTIVE_PER_TASK, a))
+        .collect();
     let total: usize = active.iter().map(|a| a.triangles as usize).sum();
     let mut triangles: Vec<[I; 3]> = crate::memory::with_capacity_huge(total);
     let mut rest = &mut triangles.spare_capacity_mut()[..total];
     let mut outs = Vec::with_capacity(chunks.len());
-    for c in &chunks {
+    for (_, c) in &chunks {
         let (a, b) = rest.split_at_mut(c.iter().map(|a| a.triangles as usize).sum());
         outs.push(a);
         rest = b;
     }
-    stats.cells_crossed = outs
+    let crossed = outs
         .into_par_iter()
         .zip(chunks.par_iter())
-        .map(|(out, chunk)| {
+        .map(|(out, &(first, chunk))| {
             let mut ids = [0u32; IDS];
             let mut at = 0;
             let mut crossed = 0;
-            for a in chunk.iter() {
+            for (k, a) in chunk.iter().enumerate() {
                 let end = at + a.triangles as usize;
-                crossed +=
-                    triangulate_block(cases, a, active, map, dims, &mut ids, &mut out[at..end])?;
+                let cells = reach.map_or(&ALL_CELLS, |r| &r[first + k]);
+                crossed += triangulate_block::<I, TRACKED>(
+                    cases,
+                    a,
+                    cells,
+                    active,
+                    map,
+                    dims,
+                    &mut ids,
+                    &mut out[at..end],
+                )?;
                 at = end;
             }
             Some(crossed)
         })
         .sum::<Option<u64>>()
-        .ok_or_else(|| {
-            Error::invalid(
-                "field",
-                "its block bounds ruled out a block that the surface crosses",
-            )
-        })?;
+        .ok_or_else(bounds_error)?;
     // SAFETY: the tasks' ranges cover triangles[..total] exactly, and each block wrote all the
     // triangles it counted (`triangulate_block` checks that, and the error above returns early).
     unsafe { triangles.set_len(total) };
-    stats.add_time("triangulate", t);
+    Ok((triangles, crossed))
+}
 
-    if normals {
-        let t = Instant::now();
-        if ws.parts.iter().any(|p| p.bad_normal) {
-            let i = mesh
-                .normals
-                .iter()
-                .position(|g| !g.is_finite())
-                .unwrap_or(0);
-            let p = mesh.vertices[i];
-            return Err(Error::FieldNotFinite {
-                x: p.x,
-                y: p.y,
-                z: p.z,
-            });
-        }
-        if ws.parts.iter().any(|p| p.zero_normal) {
-            // Rare (the gradient vanishes at a vertex): the face normals need the triangles as
-            // u32, for this once.
-            mesh.triangles = triangles.iter().map(|t| t.map(I::to_u32)).collect();
-            fill_vanishing_normals(&mut mesh);
-            mesh.triangles = Vec::new();
-        }
-        stats.normal_evaluations = mesh.vertices.len() as u64;
-        stats.add_time("normals", t);
+/// The error of a [`BlockField`] whose bounds ruled out a block that the surface crosses.
+pub(super) fn bounds_error() -> Error {
+    Error::invalid(
+        "field",
+        "its block bounds ruled out a block that the surface crosses",
+    )
+}
+
+/// Checks the normals the blocks made (an error at the first non-finite one) and fills those
+/// where the gradient vanished with the mean normal of the vertex's triangles.
+pub(super) fn finish_normals<I: TriangleIndex>(
+    mesh: &mut Mesh,
+    triangles: &[[I; 3]],
+    outputs: &[&BlockOutput],
+) -> Result<()> {
+    if outputs.iter().any(|p| p.bad_normal) {
+        let i = mesh
+            .normals
+            .iter()
+            .position(|g| !g.is_finite())
+            .unwrap_or(0);
+        let p = mesh.vertices[i];
+        return Err(Error::FieldNotFinite {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        });
     }
-    Ok((mesh, triangles, stats))
+    if outputs.iter().any(|p| p.zero_normal) {
+        // Rare (the gradient vanishes at a vertex): the face normals need the triangles as u32,
+        // for this once.
+        mesh.triangles = triangles.iter().map(|t| t.map(I::to_u32)).collect();
+        fill_vanishing_normals(mesh);
+        mesh.triangles = Vec::new();
+    }
+    Ok(())
 }
 
 /// Bit `i + 8j` of word `k` set when `values[i + 8j + 64k] < 0`, for the first `planes` planes.
@@ -436,7 +522,7 @@ fn inside_bits_avx512(values: &[f64; 512], planes: usize) -> [u64; 8] {
 }
 
 /// Signs and owned crossed edges of an evaluated block; appends its vertices in rank order.
-fn block_vertices(
+pub(super) fn block_vertices(
     lattice: &Lattice,
     b: [u32; 3],
     lo: [u32; 3],
@@ -533,27 +619,28 @@ const EDGE_ENTRY: [usize; 12] = {
 
 /// Entries of a block's vertex table: 3 axes × 512 (a power of two, so that indices masked
 /// with `IDS - 1` need no bounds check; the largest index used is 1535).
-const IDS: usize = 2048;
+pub(super) const IDS: usize = 2048;
 
 /// A case table with each triangle corner's edge replaced by its [`EDGE_ENTRY`] offset: the
 /// triangles of a cell are read straight from the block's vertex table.
-struct BlockCases {
+pub(super) struct BlockCases {
     /// Triangles of case c are `entries[offsets[c]..offsets[c + 1]]`.
     offsets: [u16; 257],
     entries: Vec<[u16; 3]>,
 }
 
 impl BlockCases {
-    /// Triangles of a block's crossed cells.
-    fn count(&self, a: &Active) -> u32 {
+    /// Triangles of a block's crossed cells in `reach` (bit `i + 8j` of word `k` for cell
+    /// (i, j, k); [`ALL_CELLS`] for all).
+    pub(super) fn count(&self, a: &Active, reach: &[u64; 8]) -> u32 {
         let mut n = 0;
-        crossed_cells(&a.signs, a.n, |_, case| {
+        crossed_cells(&a.signs, a.n, reach, |_, case| {
             n += (self.offsets[case + 1] - self.offsets[case]) as u32
         });
         n
     }
 
-    fn get(table: &CaseTable) -> &'static BlockCases {
+    pub(super) fn get(table: &CaseTable) -> &'static BlockCases {
         static SEPARATE: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
         static JOIN: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
         let cell = match table.ambiguity() {
@@ -577,10 +664,19 @@ impl BlockCases {
     }
 }
 
-/// Calls `f(cell, case)` for each crossed cell of a block with `signs` and `n` points per axis
-/// (`cell` = x + 8y + 64z of its lower corner), eight cells of a row at a time.
+/// Every cell of a block, as a `reach` mask of [`crossed_cells`].
+pub(super) const ALL_CELLS: [u64; 8] = [!0; 8];
+
+/// Calls `f(cell, case)` for each crossed cell in `reach` (bit `i + 8j` of word `k` for cell
+/// (i, j, k)) of a block with `signs` and `n` points per axis (`cell` = x + 8y + 64z of its
+/// lower corner), eight cells of a row at a time.
 #[inline(always)]
-fn crossed_cells(signs: &[u64; 8], n: [u8; 3], mut f: impl FnMut(usize, usize)) {
+pub(super) fn crossed_cells(
+    signs: &[u64; 8],
+    n: [u8; 3],
+    reach: &[u64; 8],
+    mut f: impl FnMut(usize, usize),
+) {
     let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
     for k in 0..n[2] as usize - 1 {
         let (lo, hi) = (signs[k], signs[k + 1]);
@@ -589,7 +685,7 @@ fn crossed_cells(signs: &[u64; 8], n: [u8; 3], mut f: impl FnMut(usize, usize)) 
             any |= (lo >> s) | (hi >> s);
             all &= (lo >> s) & (hi >> s);
         }
-        let mut m = any & !all & cells;
+        let mut m = any & !all & cells & reach[k];
         while m != 0 {
             let c = m.trailing_zeros();
             m &= m - 1;
@@ -602,14 +698,18 @@ fn crossed_cells(signs: &[u64; 8], n: [u8; 3], mut f: impl FnMut(usize, usize)) 
     }
 }
 
-/// Triangulates the crossed cells of block `a` into `out` (room for exactly its triangles);
-/// returns the number of cells (None when a crossed edge lies in a block the field ruled out,
-/// which a correct [`BlockField`] never does). First fills a table of the vertex index of every crossed edge its cells use (its own, then those on its upper faces
+/// Triangulates the crossed cells of block `a` in `reach` (see [`crossed_cells`]) into `out`
+/// (room for exactly their triangles); returns the number of cells. None when a crossed edge
+/// lies in a block the field ruled out, which a correct [`BlockField`] never does; with
+/// `TRACKED`, blocks not in `active` are those the tracking did not reach, which only cells
+/// outside `reach` may touch (None when a cell in `reach` does). First fills a table of the vertex index of every crossed edge its cells use (its own, then those on its upper faces
 /// that neighbours own), then reads the triangles' corners from it. Entries of `ids` are read
 /// only for crossed edges, which are written first, so the table is never cleared.
-fn triangulate_block<I: TriangleIndex>(
+#[allow(clippy::too_many_arguments)]
+pub(super) fn triangulate_block<I: TriangleIndex, const TRACKED: bool>(
     cases: &BlockCases,
     a: &Active,
+    reach: &[u64; 8],
     active: &[Active],
     map: &[u32],
     dims: [u32; 3],
@@ -655,23 +755,36 @@ fn triangulate_block<I: TriangleIndex>(
                     }
                 }
                 let i = map[(b[0] + dims[0] * (b[1] + dims[1] * b[2])) as usize];
-                // A crossed edge in a skipped block: the field's bounds were wrong.
-                let owner = active.get(i as usize)?;
-                ids[(axis * 512 + k * 64 + bit as usize) & (IDS - 1)] = owner.vertex(axis, l);
+                let id = &mut ids[(axis * 512 + k * 64 + bit as usize) & (IDS - 1)];
+                match active.get(i as usize) {
+                    Some(owner) => *id = owner.vertex(axis, l),
+                    // Checked below, should a cell in `reach` use it.
+                    None if TRACKED => *id = NONE,
+                    // A crossed edge in a skipped block: the field's bounds were wrong.
+                    None => return None,
+                }
             }
         }
     }
     let (mut crossed, mut w) = (0, 0);
-    crossed_cells(&a.signs, a.n, |cell, case| {
+    let mut unreached = false;
+    crossed_cells(&a.signs, a.n, reach, |cell, case| {
         crossed += 1;
         let range = cases.offsets[case] as usize..cases.offsets[case + 1] as usize;
         for t in &cases.entries[range] {
+            let v = t.map(|o| ids[(cell + o as usize) & (IDS - 1)]);
+            if TRACKED {
+                unreached |= v.contains(&NONE);
+            }
             if let Some(slot) = out.get_mut(w) {
-                slot.write(t.map(|o| I::from_u32(ids[(cell + o as usize) & (IDS - 1)])));
+                slot.write(v.map(I::from_u32));
             }
             w += 1;
         }
     });
+    if unreached {
+        return None;
+    }
     // The block's count came from the same cells and table, so every slot is written exactly;
     // were it otherwise, this is an error, not a panic nor uninitialised output.
     (w == out.len()).then_some(())?;

@@ -10,12 +10,14 @@
 //! Because the lattice, the table and the edge arithmetic are those of the dense polygonizer, the
 //! mesh equals the dense mesh on every component that holds a seed.
 
+use super::block_tracking;
 use super::bricks::{Bricks, Slot};
 use super::cell::{case_index, edge_origin, emit_triangles};
+use super::sparse::TriangleIndex;
 use super::table::EDGES;
 use super::{compute_normals, evaluate, CaseTable, Settings, Stats};
 use crate::error::Result;
-use crate::field::Field;
+use crate::field::{BlockField, Field};
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
@@ -51,6 +53,8 @@ pub struct Tessellator {
     slots: Vec<Slot>,
     vals: Vec<f64>,
     mesh: Mesh,
+    /// Buffers of the walk block by block ([`Tessellator::polygonize_blocks`]).
+    blocks: block_tracking::Workspace,
 }
 
 impl Tessellator {
@@ -73,6 +77,7 @@ impl Tessellator {
             + self.mesh.vertices.capacity() * 24
             + self.mesh.normals.capacity() * 24
             + self.mesh.triangles.capacity() * 12
+            + self.blocks.capacity_bytes()
     }
 
     fn begin(&mut self, lattice: &Lattice) {
@@ -300,13 +305,66 @@ impl Tessellator {
             lattice_points: lattice.num_points(),
             ..Default::default()
         };
-        self.start(lattice);
-        let t = Instant::now();
-        let mut seeds = self.walk_seeds(field, lattice, starts, max_walk, settings, &mut stats)?;
-        seeds.extend_from_slice(seed_cells);
-        stats.add_time("seeds", t);
+        let seeds = self.seeds(
+            field,
+            lattice,
+            (starts, max_walk),
+            seed_cells,
+            settings,
+            &mut stats,
+        )?;
         self.track(field, lattice, &seeds, settings, &mut stats)?;
         Ok((&self.mesh, stats))
+    }
+
+    /// Starts a call and finds its seed cells: walked from `starts` (at most `max_walk` cells
+    /// each), and `seed_cells`.
+    fn seeds<F: Field + ?Sized>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        (starts, max_walk): (&[DVec3], u32),
+        seed_cells: &[[u32; 3]],
+        settings: &Settings,
+        stats: &mut Stats,
+    ) -> Result<Vec<[u32; 3]>> {
+        self.start(lattice);
+        let t = Instant::now();
+        let mut seeds = self.walk_seeds(field, lattice, starts, max_walk, settings, stats)?;
+        seeds.extend_from_slice(seed_cells);
+        stats.add_time("seeds", t);
+        Ok(seeds)
+    }
+
+    /// [`Tessellator::polygonize`] for fields that evaluate whole blocks of the lattice (blob
+    /// fields): the same seeds, then the walk block by block ([`super::block_tracking`]). The
+    /// mesh is the same (up to the order of vertices and triangles); more points are evaluated
+    /// (whole blocks of 8³, vectorised), in much less time. The triangles come beside the mesh,
+    /// as `I`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn polygonize_blocks<F: BlockField + ?Sized, I: TriangleIndex>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        starts: &[DVec3],
+        max_walk: u32,
+        seed_cells: &[[u32; 3]],
+        settings: &Settings,
+    ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
+        let mut walk = Stats::default();
+        let seeds = self.seeds(
+            field,
+            lattice,
+            (starts, max_walk),
+            seed_cells,
+            settings,
+            &mut walk,
+        )?;
+        let (mesh, triangles, mut stats) =
+            block_tracking::polygonize_as(field, lattice, &seeds, settings, &mut self.blocks)?;
+        stats.evaluations += walk.evaluations;
+        stats.seconds.splice(0..0, walk.seconds);
+        Ok((mesh, triangles, stats))
     }
 }
 

@@ -311,7 +311,7 @@ impl PyTessellator {
     }
 
     /// Tracks the surface; see :meth:`implicitmesh.Tessellator.polygonize`.
-    #[pyo3(signature = (field, bounds, resolution, *, seeds=None, ambiguity="separate", normals=true, batch_size=262144, memory_limit=None))]
+    #[pyo3(signature = (field, bounds, resolution, *, seeds=None, ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, blocks=true))]
     #[allow(clippy::too_many_arguments)]
     fn polygonize<'py>(
         &mut self,
@@ -324,17 +324,32 @@ impl PyTessellator {
         normals: bool,
         batch_size: usize,
         memory_limit: Option<u64>,
+        blocks: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
         let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
         let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
-        let f = field.as_field();
         let tess = &mut self.inner;
-        let result = py.detach(|| {
-            tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
-                .map(|(m, s)| (MeshBuffers::copied(m), s))
-        });
+        let result = match &field {
+            // Blob fields evaluate whole blocks: the walk goes block by block.
+            FieldArg::Blob(b) if blocks => {
+                let blobs = &b.inner;
+                py.detach(|| {
+                    tess.polygonize_blocks::<_, i64>(blobs, &lattice, &starts, walk, &[], &settings)
+                        .map(|(mesh, faces, stats)| {
+                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
+                        })
+                })
+            }
+            _ => {
+                let f = field.as_field();
+                py.detach(|| {
+                    tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
+                        .map(|(m, s)| (MeshBuffers::copied(m), s))
+                })
+            }
+        };
         if let Some(e) = field.take_error() {
             return Err(e);
         }
