@@ -452,12 +452,12 @@ def bench(a: argparse.Namespace) -> str:
         fl = foreign_load(s0, cpu_snapshot())
         return times, tris, evals, fl, cpu / sum(times) if times else None
 
-    def ours_tracking(normals):
+    def ours_tracking(normals, blocks=True):
         def make(fld):
             tess = im.Tessellator()
 
             def step():
-                m = tess.polygonize(fld, bounds=bounds, resolution=ANIM_RES, normals=normals)
+                m = tess.polygonize(fld, bounds=bounds, resolution=ANIM_RES, normals=normals, blocks=blocks)
                 return len(m.faces), m.stats["evaluations"]
             return step
         return make
@@ -495,12 +495,17 @@ def bench(a: argparse.Namespace) -> str:
     set_vtk_backend(anim_vtk)
 
     anim_rows, anim_tris = [], {}
+    tess_label = "ours `Tessellator().polygonize` (tracking block by block, buffers kept)"
+    dense_label = "ours `polygonize(method=\"dense\")`"
+    sparse_label = "ours `polygonize(method=\"sparse\")`"
     for label, make in (
-        ("ours `Tessellator().polygonize` (tracking, caches kept)", ours_tracking(True)),
+        (tess_label, ours_tracking(True)),
         ("ours `Tessellator().polygonize`, normals=False", ours_tracking(False)),
-        ("ours `polygonize(method=\"dense\")`", ours_method("dense", True)),
+        ("ours `Tessellator().polygonize(blocks=False)` (tracking cell by cell, caches kept)",
+         ours_tracking(True, blocks=False)),
+        (dense_label, ours_method("dense", True)),
         ("ours `polygonize(method=\"dense\")`, normals=False", ours_method("dense", False)),
-        ("ours `polygonize(method=\"sparse\")`", ours_method("sparse", True)),
+        (sparse_label, ours_method("sparse", True)),
         ("ours `polygonize(method=\"sparse\")`, normals=False", ours_method("sparse", False)),
         (f"peer: numpy grid ({anim_splat}) + VTK flying edges ({anim_vtk}), no normals", peer_vtk(False)),
         (f"peer: numpy grid + VTK flying edges ({anim_vtk}) + normals", peer_vtk(True)),
@@ -517,14 +522,14 @@ def bench(a: argparse.Namespace) -> str:
             ("yes" if fps > ANIM_FPS else "no") if label.startswith("ours") else "",
         ])
     set_vtk_backend("Sequential")
-    labels = list(anim_tris)
-    differ = sum(a != b for a, b in zip(anim_tris[labels[0]], anim_tris[labels[2]]))
-    sp_differ = sum(a != b for a, b in zip(anim_tris[labels[4]], anim_tris[labels[2]]))
+    t_tris, d_tris = anim_tris[tess_label], anim_tris[dense_label]
+    differ = sum(a != b for a, b in zip(t_tris, d_tris))
+    sp_differ = sum(a != b for a, b in zip(anim_tris[sparse_label], d_tris))
     if sp_differ:
         notes.append(f"animation: SPARSE AND DENSE TRIANGLE COUNTS DIFFER in {sp_differ} of {frames} frames")
     if differ:
         notes.append(f"animation: tracking and dense triangle counts differ in {differ} of {frames} frames "
-                     f"(at most {max(b - a for a, b in zip(anim_tris[labels[0]], anim_tris[labels[2]])):,} "
+                     f"(at most {max(b - a for a, b in zip(t_tris, d_tris)):,} "
                      "triangles fewer for tracking; the frames' meshes are not analysed further)")
 
     # ---------------------------------------------------------------- markdown

@@ -17,7 +17,9 @@
 //!   (Cuno et al.); [`polygonize::tracking`]: surface tracking from seeds with time-stamped
 //!   caches (Triquet et al.); both give the dense mesh's triangles where they find the surface.
 //! - [`polygonize::sparse`]: the dense mesh from only the blocks of the lattice that a
-//!   [`field::BlockField`] (a blob field) cannot rule out by bounds.
+//!   [`field::BlockField`] (a blob field) cannot rule out by bounds;
+//!   [`polygonize::block_tracking`]: tracking's walk over those blocks, for animation (the cells
+//!   cell-by-cell tracking reaches, a block of 7³ cells evaluated and flooded at once).
 //! - [`polygonize::subdivision`]: 1-to-4 subdivision of a control mesh with Newton projection,
 //!   the modified butterfly scheme and their blend (Jin et al.).
 //!

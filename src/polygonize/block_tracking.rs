@@ -36,7 +36,7 @@
 //! let seed = [[13, 20, 20]];
 //! let mut ws = block_tracking::Workspace::default();
 //! let (mesh, triangles, _) =
-//!     block_tracking::polygonize_as::<_, u32>(&blobs, &lattice, &seed, &Settings::default(), &mut ws)
+//!     block_tracking::polygonize_as::<_, u32>(&blobs, &lattice, (&[], 0), &seed, &Settings::default(), &mut ws)
 //!         .unwrap();
 //! let (both, _) = dense::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
 //! let first = both.triangles.iter().filter(|t| both.vertices[t[0] as usize].x < 0.0);
@@ -49,11 +49,13 @@ use super::sparse::{
     plane_mask, triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, ALL_CELLS,
     NONE, STEP,
 };
+use super::tracking::start_walkers;
 use super::{check_memory, estimate_triangles, CaseTable, Settings, Stats, BYTES_PER_TRIANGLE};
 use crate::error::{Error, Result};
 use crate::field::BlockField;
 use crate::lattice::Lattice;
 use crate::mesh::Mesh;
+use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -157,6 +159,8 @@ pub struct Workspace {
     /// Blocks of each state (block index).
     index: Vec<u32>,
     parts: Vec<Part>,
+    /// Parts holding this call's blocks.
+    used_parts: usize,
     wave: Vec<u32>,
     work: Vec<u32>,
     /// The evaluated blocks with crossed cells, their reached cells, block index → position.
@@ -184,6 +188,70 @@ impl Workspace {
             + self.states.capacity() * std::mem::size_of::<State>()
             + self.active.capacity() * std::mem::size_of::<Active>()
             + self.reach.capacity() * 64
+    }
+
+    /// Evaluates the blocks entered since the last wave, in parallel; those with both signs
+    /// and cells entered go on the flood's work list. Returns the points evaluated.
+    fn evaluate_wave<F: BlockField + ?Sized>(
+        &mut self,
+        field: &F,
+        blocks: &F::Blocks,
+        lattice: &Lattice,
+        normals: bool,
+    ) -> u64 {
+        let dims = block_dims(lattice);
+        let used = self.used_parts;
+        let tasks = self.wave.len().div_ceil(BLOCKS_PER_TASK);
+        if self.parts.len() < used + tasks {
+            self.parts.resize_with(used + tasks, Part::default);
+        }
+        let (wave, index) = (&self.wave, &self.index);
+        self.parts[used..used + tasks]
+            .par_iter_mut()
+            .zip(wave.par_chunks(BLOCKS_PER_TASK))
+            .for_each(|(part, chunk)| {
+                part.done.clear();
+                part.out.clear();
+                let mut values = [0.0f64; 512];
+                for &s in chunk {
+                    let i = index[s as usize];
+                    let b = [
+                        i % dims[0],
+                        (i / dims[0]) % dims[1],
+                        i / (dims[0] * dims[1]),
+                    ];
+                    let out = &mut part.out;
+                    let got =
+                        evaluate_block(field, blocks, lattice, dims, b, normals, &mut values, out)
+                            .map(|a| (a, Faces::new(&a.signs, a.n), crossed_mask(&a.signs, a.n)));
+                    part.done.push((s, got));
+                }
+            });
+        self.wave.clear();
+        let mut evaluations = 0;
+        for p in used..used + tasks {
+            let part = &self.parts[p];
+            evaluations += part.out.evaluations;
+            for &(s, ref got) in &part.done {
+                let st = &mut self.states[s as usize];
+                match got {
+                    None => st.kind = Kind::Empty,
+                    Some((active, faces, crossed)) => {
+                        st.kind = Kind::Mixed;
+                        st.part = p as u32;
+                        st.active = *active;
+                        st.faces = *faces;
+                        st.crossed = *crossed;
+                        if st.pending.iter().any(|&w| w != 0) {
+                            st.listed = true;
+                            self.work.push(s);
+                        }
+                    }
+                }
+            }
+        }
+        self.used_parts += tasks;
+        evaluations
     }
 
     /// Adds `cells` (bits as in [`State::reach`]) to the block with index `i`, entering it
@@ -283,14 +351,17 @@ fn flood(st: &State) -> [u64; 8] {
     }
 }
 
-/// Polygonizes the components of `field`'s surface that hold one of the `seeds` (cells; those
-/// outside the lattice and those the surface does not cross are ignored), block by block. The
-/// mesh (vertices, normals) comes with its triangles as `I` beside it; `ws` keeps the buffers
-/// for the next call.
+/// Polygonizes the components of `field`'s surface that hold a seed, block by block: seed
+/// cells walked from `starts` as [`super::tracking::Tessellator::walk_seeds`] walks them (at most
+/// `max_walk` cells each; here read from the signs of the blocks the walks enter), and
+/// `seed_cells` (those outside the lattice and those the surface does not cross are ignored).
+/// The mesh (vertices, normals) comes with its triangles as `I` beside it; `ws` keeps the
+/// buffers for the next call.
 pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
     lattice: &Lattice,
-    seeds: &[[u32; 3]],
+    (starts, max_walk): (&[DVec3], u32),
+    seed_cells: &[[u32; 3]],
     settings: &Settings,
     ws: &mut Workspace,
 ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
@@ -318,69 +389,70 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     ws.index.clear();
     ws.wave.clear();
     ws.work.clear();
-    let block_index = |b: [u32; 3]| b[0] + dims[0] * (b[1] + dims[1] * b[2]);
+    ws.used_parts = 0;
     let cells = lattice.cells;
-    for c in seeds {
+    let locate = |c: [u32; 3]| {
+        let b = c.map(|v| v / STEP);
+        (
+            b[0] + dims[0] * (b[1] + dims[1] * b[2]),
+            c.map(|v| v % STEP),
+        )
+    };
+    let normals = settings.normals;
+    let eval = |ws: &mut Workspace| ws.evaluate_wave(field, &blocks, lattice, normals);
+    // Seeds: each walk reads the signs of the blocks it enters, evaluated in waves.
+    let mut walkers = start_walkers(starts, lattice);
+    let mut seeds = Vec::new();
+    while !walkers.is_empty() {
+        for w in &walkers {
+            ws.enter(locate(w.cell).0, &[0; 8]);
+        }
+        stats.evaluations += eval(ws);
+        let mut keep = 0;
+        for i in 0..walkers.len() {
+            let mut w = walkers[i];
+            let alive = loop {
+                let (b, l) = locate(w.cell);
+                let st = match ws.map[b as usize] {
+                    NONE => break true,
+                    s => &ws.states[s as usize],
+                };
+                if st.kind == Kind::Queued {
+                    break true;
+                }
+                if st.crossed[l[2] as usize] >> (l[0] + 8 * l[1]) & 1 != 0 {
+                    seeds.push(w.cell);
+                    break false;
+                }
+                if !w.advance(cells, max_walk) {
+                    break false;
+                }
+            };
+            if alive {
+                walkers[keep] = w;
+                keep += 1;
+            }
+        }
+        walkers.truncate(keep);
+        walkers.sort_unstable();
+        walkers.dedup();
+    }
+    seeds.extend_from_slice(seed_cells);
+    for c in &seeds {
         if (0..3).any(|a| c[a] >= cells[a]) {
             continue;
         }
-        let (b, l) = (c.map(|v| v / STEP), c.map(|v| v % STEP));
+        let (i, l) = locate(*c);
         let mut bits = [0u64; 8];
         bits[l[2] as usize] = 1 << (l[0] + 8 * l[1]);
-        ws.enter(block_index(b), &bits);
+        ws.enter(i, &bits);
     }
-    let normals = settings.normals;
-    let mut used_parts = 0;
+    stats.add_time("seeds", t);
+
+    let t = Instant::now();
+    let block_index = |b: [u32; 3]| b[0] + dims[0] * (b[1] + dims[1] * b[2]);
     let mut unreached = false;
-    while !ws.wave.is_empty() {
-        // Evaluate the blocks entered, in parallel.
-        let tasks = ws.wave.len().div_ceil(BLOCKS_PER_TASK);
-        if ws.parts.len() < used_parts + tasks {
-            ws.parts.resize_with(used_parts + tasks, Part::default);
-        }
-        let (wave, index) = (&ws.wave, &ws.index);
-        ws.parts[used_parts..used_parts + tasks]
-            .par_iter_mut()
-            .zip(wave.par_chunks(BLOCKS_PER_TASK))
-            .for_each(|(part, chunk)| {
-                part.done.clear();
-                part.out.clear();
-                let mut values = [0.0f64; 512];
-                for &s in chunk {
-                    let i = index[s as usize];
-                    let b = [
-                        i % dims[0],
-                        (i / dims[0]) % dims[1],
-                        i / (dims[0] * dims[1]),
-                    ];
-                    let out = &mut part.out;
-                    let got =
-                        evaluate_block(field, &blocks, lattice, dims, b, normals, &mut values, out)
-                            .map(|a| (a, Faces::new(&a.signs, a.n), crossed_mask(&a.signs, a.n)));
-                    part.done.push((s, got));
-                }
-            });
-        ws.wave.clear();
-        for p in used_parts..used_parts + tasks {
-            let part = &ws.parts[p];
-            stats.evaluations += part.out.evaluations;
-            for &(s, ref got) in &part.done {
-                let st = &mut ws.states[s as usize];
-                match got {
-                    None => st.kind = Kind::Empty,
-                    Some((active, faces, crossed)) => {
-                        st.kind = Kind::Mixed;
-                        st.part = p as u32;
-                        st.active = *active;
-                        st.faces = *faces;
-                        st.crossed = *crossed;
-                        st.listed = true;
-                        ws.work.push(s);
-                    }
-                }
-            }
-        }
-        used_parts += tasks;
+    loop {
         // Flood: serial bit arithmetic, entering neighbouring blocks through crossed faces on
         // the blocks' sides (new ones are evaluated in the next wave).
         while let Some(s) = ws.work.pop() {
@@ -427,11 +499,16 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
                 }
             }
         }
+        if ws.wave.is_empty() {
+            break;
+        }
+        stats.evaluations += eval(ws);
     }
     stats.add_time("track", t);
 
     // Vertex bases (parts in order), the evaluated blocks with their reached cells.
     let t = Instant::now();
+    let used_parts = ws.used_parts;
     let mut offsets = Vec::with_capacity(used_parts);
     let mut vertices = 0usize;
     for p in &ws.parts[..used_parts] {
@@ -452,11 +529,15 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
         ws.amap[ws.index[s] as usize] = ws.active.len() as u32;
         ws.active.push(Active {
             base: (offsets[st.part as usize] + st.active.base as usize) as u32,
-            triangles: cases.count(&st.active, &st.reach),
             ..st.active
         });
         ws.reach.push(st.reach);
     }
+    ws.active
+        .par_iter_mut()
+        .zip(ws.reach.par_iter())
+        .with_min_len(16)
+        .for_each(|(a, r)| a.triangles = cases.count(a, r));
     let outputs: Vec<&BlockOutput> = ws.parts[..used_parts].iter().map(|p| &p.out).collect();
     let mut mesh = gather_outputs(&outputs, normals);
     let (mut triangles, crossed) =
@@ -526,8 +607,8 @@ mod tests {
         out
     }
 
-    /// Block tracking from the seeds cell tracking walks to: the same triangles, vertices and
-    /// normals (bits), every vertex used.
+    /// Block tracking and cell tracking, each walking its seeds from the blob centres: the same
+    /// triangles, vertices and normals (bits), every vertex used.
     fn check(
         field: &crate::field::blob::BlobField,
         l: &Lattice,
@@ -539,14 +620,12 @@ mod tests {
             ..Default::default()
         };
         let mut tess = tracking::Tessellator::new();
-        let mut st = Stats::default();
-        tess.start(l);
         let max_walk = 12;
-        let seeds = tess
-            .walk_seeds(field, l, field.centers(), max_walk, &s, &mut st)
+        let (cells, st) = tess
+            .polygonize(field, l, field.centers(), max_walk, &[], &s)
             .unwrap();
-        let cells = tess.track(field, l, &seeds, &s, &mut st).unwrap().clone();
-        let (m, t, bs) = polygonize_as::<_, u32>(field, l, &seeds, &s, ws).unwrap();
+        let walk = (field.centers(), max_walk);
+        let (m, t, bs) = polygonize_as::<_, u32>(field, l, walk, &[], &s, ws).unwrap();
         assert_eq!(
             canonical(&m.vertices, &t),
             canonical(&cells.vertices, &cells.triangles)
@@ -615,15 +694,9 @@ mod tests {
         for centre in &centers {
             // Walked from inside the blob along +x to its surface.
             let c = *centre - DVec3::new(0.05, 0.0, 0.0);
-            let mut tess = tracking::Tessellator::new();
-            let mut st = Stats::default();
-            tess.start(&l);
-            let seeds = tess
-                .walk_seeds(&f, &l, &[c], 20, &Settings::default(), &mut st)
-                .unwrap();
-            assert_eq!(seeds.len(), 1);
+            let walk = (&[c][..], 20);
             let (m, t, _) =
-                polygonize_as::<_, u32>(&f, &l, &seeds, &Settings::default(), &mut ws).unwrap();
+                polygonize_as::<_, u32>(&f, &l, walk, &[], &Settings::default(), &mut ws).unwrap();
             let near = |v: DVec3| (v.x - centre.x).abs() < 0.15;
             let own = all.triangles.iter();
             let own = own.filter(|t| near(all.vertices[t[0] as usize]));
@@ -637,6 +710,67 @@ mod tests {
         }
     }
 
+    /// A blob field whose bounds wrongly rule out every block with bx = 2.
+    struct Lying(crate::field::blob::BlobField);
+
+    impl crate::field::Field for Lying {
+        fn value(&self, p: DVec3) -> f64 {
+            self.0.value(p)
+        }
+    }
+
+    impl BlockField for Lying {
+        type Blocks = <crate::field::blob::BlobField as BlockField>::Blocks;
+        fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
+            self.0.blocks(lattice, blocks)
+        }
+        fn block_values(
+            &self,
+            blocks: &Self::Blocks,
+            lattice: &Lattice,
+            block: &crate::field::Block,
+            out: &mut [f64; 512],
+        ) -> crate::field::BlockSign {
+            if block.index[0] == 2 {
+                return crate::field::BlockSign::Outside;
+            }
+            self.0.block_values(blocks, lattice, block, out)
+        }
+    }
+
+    #[test]
+    fn wrong_bounds_give_an_error_not_a_panic() {
+        use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+        let one = |r| PerPrimitive::All(r);
+        let blob = BlobField::new(
+            &[DVec3::ZERO],
+            one(0.9),
+            one(1.0),
+            0.5,
+            BlobSettings::default(),
+        );
+        let f = Lying(blob.unwrap());
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
+        // Cell (8, 16, 16) holds the surface (at x = -0.487, in block 1); the sphere also crosses
+        // block 2, which the bounds wrongly rule out.
+        let mut ws = Workspace::default();
+        let (seed, none) = ([[8, 16, 16]], (&[][..], 0));
+        let e = polygonize_as::<_, u32>(&f, &l, none, &seed, &Settings::default(), &mut ws)
+            .unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidArgument { name: "field", .. }),
+            "{e}"
+        );
+        // The true field from the same seed: the whole sphere.
+        let (m, t, _) =
+            polygonize_as::<_, u32>(&f.0, &l, none, &seed, &Settings::default(), &mut ws).unwrap();
+        let (d, _) = dense::polygonize(&f.0, &l, &Settings::default()).unwrap();
+        assert_eq!(
+            (m.vertices.len(), t.len()),
+            (d.vertices.len(), d.triangles.len())
+        );
+    }
+
     #[test]
     fn seeds_not_crossed_or_outside_find_nothing() {
         let f = blobs(10, 0.2, 8);
@@ -645,6 +779,7 @@ mod tests {
         let (m, t, st) = polygonize_as::<_, u32>(
             &f,
             &l,
+            (&[][..], 0),
             &[[0, 0, 0], [30, 2, 2], [u32::MAX, 0, 0]],
             &Settings::default(),
             &mut ws,

@@ -33,11 +33,63 @@ const WALK_ORDER: [usize; 6] = [1, 0, 3, 2, 5, 4];
 /// A seed walk: its current cell, the cell it started from, the index into [`WALK_ORDER`] of
 /// its direction and the steps taken in that direction.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-struct Walker {
-    cell: [u32; 3],
+pub(super) struct Walker {
+    pub(super) cell: [u32; 3],
     start: [u32; 3],
     direction: u8,
     steps: u32,
+}
+
+impl Walker {
+    /// Moves to the next cell of the walk (its current cell is not crossed): along its
+    /// direction, or, when the walk meets the side of a lattice with `cells` per axis, to the
+    /// first cell from the start along the next direction. False when the walk is over: out of
+    /// directions, or `max_steps` taken (the surface is farther than the walk may go, deep
+    /// inside a cluster, which other walks reach; only a walk cut by the box tries the next
+    /// direction).
+    pub(super) fn advance(&mut self, cells: [u32; 3], max_steps: u32) -> bool {
+        loop {
+            let (axis, step) = FACE_STEP[WALK_ORDER[self.direction as usize]];
+            let n = self.cell[axis] as i64 + step;
+            if self.steps >= max_steps {
+                return false;
+            }
+            if n >= 0 && n < cells[axis] as i64 {
+                self.cell[axis] = n as u32;
+                self.steps += 1;
+                return true;
+            }
+            if self.direction as usize + 1 == WALK_ORDER.len() {
+                return false;
+            }
+            self.direction += 1;
+            self.cell = self.start;
+            self.steps = 0;
+        }
+    }
+}
+
+/// The walks from `starts` (finite ones): each from the cell holding it, or the nearest cell
+/// for points outside the lattice; sorted, each once.
+pub(super) fn start_walkers(starts: &[DVec3], lattice: &Lattice) -> Vec<Walker> {
+    let cells = lattice.cells;
+    let mut walkers: Vec<Walker> = starts
+        .iter()
+        .filter(|p| p.is_finite())
+        .map(|p| {
+            let q = (*p - lattice.origin) / lattice.cell;
+            let c = [0, 1, 2].map(|k| q[k].floor().clamp(0.0, (cells[k] - 1) as f64) as u32);
+            Walker {
+                cell: c,
+                start: c,
+                direction: 0,
+                steps: 0,
+            }
+        })
+        .collect();
+    walkers.sort_unstable();
+    walkers.dedup();
+    walkers
 }
 
 /// Caches and buffers kept between calls, for animation: polygonize, move the field, polygonize
@@ -134,22 +186,7 @@ impl Tessellator {
         stats: &mut Stats,
     ) -> Result<Vec<[u32; 3]>> {
         let cells = lattice.cells;
-        let mut walkers: Vec<Walker> = starts
-            .iter()
-            .filter(|p| p.is_finite())
-            .map(|p| {
-                let q = (*p - lattice.origin) / lattice.cell;
-                let c = [0, 1, 2].map(|k| q[k].floor().clamp(0.0, (cells[k] - 1) as f64) as u32);
-                Walker {
-                    cell: c,
-                    start: c,
-                    direction: 0,
-                    steps: 0,
-                }
-            })
-            .collect();
-        walkers.sort_unstable();
-        walkers.dedup();
+        let mut walkers = start_walkers(starts, lattice);
         let mut seeds = Vec::new();
         while !walkers.is_empty() {
             let cells_now: Vec<[u32; 3]> = walkers.iter().map(|w| w.cell).collect();
@@ -162,29 +199,7 @@ impl Tessellator {
                     seeds.push(w.cell);
                     continue;
                 }
-                // Next cell along the walker's direction; when the walk is over, the first cell
-                // along the next direction from the start (which is known not to be crossed).
-                let moved = loop {
-                    let (axis, step) = FACE_STEP[WALK_ORDER[w.direction as usize]];
-                    let n = w.cell[axis] as i64 + step;
-                    // Out of steps: the surface is farther than the walk may go (deep inside a
-                    // cluster, which other walks reach); the walk ends. Only a walk cut by the
-                    // box tries the next direction.
-                    if w.steps >= max_steps {
-                        break false;
-                    }
-                    if n >= 0 && n < cells[axis] as i64 {
-                        w.cell[axis] = n as u32;
-                        w.steps += 1;
-                        break true;
-                    }
-                    if w.direction as usize + 1 == WALK_ORDER.len() {
-                        break false;
-                    }
-                    w.direction += 1;
-                    w.cell = w.start;
-                    w.steps = 0;
-                };
+                let moved = w.advance(cells, max_steps);
                 if !moved {
                     continue;
                 }
@@ -351,20 +366,14 @@ impl Tessellator {
         seed_cells: &[[u32; 3]],
         settings: &Settings,
     ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-        let mut walk = Stats::default();
-        let seeds = self.seeds(
+        block_tracking::polygonize_as(
             field,
             lattice,
             (starts, max_walk),
             seed_cells,
             settings,
-            &mut walk,
-        )?;
-        let (mesh, triangles, mut stats) =
-            block_tracking::polygonize_as(field, lattice, &seeds, settings, &mut self.blocks)?;
-        stats.evaluations += walk.evaluations;
-        stats.seconds.splice(0..0, walk.seconds);
-        Ok((mesh, triangles, stats))
+            &mut self.blocks,
+        )
     }
 }
 
