@@ -303,6 +303,35 @@ pub(crate) mod testing {
         worst
     }
 
+    /// A blob field whose block bounds wrongly rule out every block with bx = 2 (for the
+    /// errors of polygonizers that trust them).
+    pub struct Lying(pub super::blob::BlobField);
+
+    impl Field for Lying {
+        fn value(&self, p: DVec3) -> f64 {
+            self.0.value(p)
+        }
+    }
+
+    impl BlockField for Lying {
+        type Blocks = <super::blob::BlobField as BlockField>::Blocks;
+        fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
+            self.0.blocks(lattice, blocks)
+        }
+        fn block_values(
+            &self,
+            blocks: &Self::Blocks,
+            lattice: &Lattice,
+            block: &Block,
+            out: &mut [f64; 512],
+        ) -> BlockSign {
+            if block.index[0] == 2 {
+                return BlockSign::Outside;
+            }
+            self.0.block_values(blocks, lattice, block, out)
+        }
+    }
+
     /// `n` blobs of radius `r` (strength 1, threshold 0.5) at random centres in [-0.8, 0.8]³.
     pub fn random_blobs(n: usize, r: f64, seed: u64) -> super::blob::BlobField {
         use super::blob::{BlobField, PerPrimitive, Settings};

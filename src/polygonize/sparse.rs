@@ -912,34 +912,6 @@ mod tests {
         );
     }
 
-    /// A blob field whose bounds wrongly rule out every block with bx = 2.
-    struct Lying(BlobField);
-
-    impl crate::field::Field for Lying {
-        fn value(&self, p: DVec3) -> f64 {
-            self.0.value(p)
-        }
-    }
-
-    impl BlockField for Lying {
-        type Blocks = <BlobField as BlockField>::Blocks;
-        fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
-            self.0.blocks(lattice, blocks)
-        }
-        fn block_values(
-            &self,
-            blocks: &Self::Blocks,
-            lattice: &Lattice,
-            block: &Block,
-            out: &mut [f64; 512],
-        ) -> BlockSign {
-            if block.index[0] == 2 {
-                return BlockSign::Outside;
-            }
-            self.0.block_values(blocks, lattice, block, out)
-        }
-    }
-
     #[test]
     fn wrong_bounds_give_an_error_not_a_panic() {
         use crate::field::blob::{PerPrimitive, Settings as BlobSettings};
@@ -951,7 +923,7 @@ mod tests {
             0.5,
             BlobSettings::default(),
         );
-        let f = Lying(blob.unwrap());
+        let f = crate::field::testing::Lying(blob.unwrap());
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
         let r = polygonize(&f, &l, &Settings::default());
         let e = r.unwrap_err();
