@@ -4,9 +4,9 @@
 //! The control mesh is a triangle mesh whose vertices lie on the surface (typically the mesh the
 //! surface was fitted to). Each level splits every triangle into four at its edge midpoints
 //! ([`split`]) and moves the new midpoints onto the zero set by Newton steps along the gradient
-//! ([`project`]), the "second way" of Jin §3: every level starts from vertices already on the
+//! (`project`), the "second way" of Jin §3: every level starts from vertices already on the
 //! surface, so the midpoints start close to it; Newton starts from the middle of the Hermite
-//! curve along the edge with the end normals ([`hermite_midpoint`]), closer still. Old vertices
+//! curve along the edge with the end normals (`hermite_midpoint`), closer still. Old vertices
 //! keep their index and their exact coordinates, so level `k` is a sub-mesh of level `k + 1`.
 //!
 //! [`butterfly`] makes the same connectivity with positions from the modified butterfly scheme,
@@ -337,7 +337,7 @@ fn not_finite(p: DVec3) -> Error {
     }
 }
 
-/// What [`project`] did to a batch of points.
+/// What `project` did to a batch of points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Projection {
     /// Projected points.

@@ -55,7 +55,7 @@ pub enum Ambiguity {
 /// Corner k of the unit cell sits at offset (k & 1, (k >> 1) & 1, (k >> 2) & 1): bit 0 = x, bit 1 = y, bit 2 = z.
 pub const CORNERS: [[u8; 3]; 8] = make_corners();
 
-/// Edge e joins CORNER indices EDGES[e][0] (lower end) and EDGES[e][1] (upper end along the edge's axis).
+/// Edge e joins CORNER indices `EDGES[e][0]` (lower end) and `EDGES[e][1]` (upper end along the edge's axis).
 /// Edges 0..4 run along x, 4..8 along y, 8..12 along z. Within an axis group the index is
 /// (first other coordinate) + 2*(second other coordinate), the "other" axes taken in increasing order:
 /// x-edges: e = y + 2z; y-edges: e = 4 + x + 2z; z-edges: e = 8 + x + 2y.
@@ -65,7 +65,7 @@ pub const EDGES: [[u8; 2]; 12] = make_edges();
 pub const EDGE_AXIS: [u8; 12] = make_edge_axes();
 
 /// Faces: f = 2*axis + side, side 0 = the face at coordinate 0 on that axis, side 1 = at coordinate 1.
-/// FACE_CORNERS[f] lists that face's 4 corners in cyclic order, counter-clockwise when the
+/// `FACE_CORNERS[f]` lists that face's 4 corners in cyclic order, counter-clockwise when the
 /// face is seen from outside the cube, starting with the face's lowest corner index.
 pub const FACE_CORNERS: [[u8; 4]; 6] = make_face_corners();
 
