@@ -431,26 +431,37 @@ def bench(a: argparse.Namespace) -> str:
     def centers_at(frame: int):
         return base + 0.05 * np.sin(0.05 * frame + phase)
 
-    def animate(make_step):
-        fld = im.BlobField(centers_at(0), ANIM_R, threshold=THRESHOLD)
-        step = make_step(fld)
-        times, tris, evals = [], [], []
-        s0 = c0 = None
+    def animate_all(makers):
+        """Every method in turn on each frame (the order rotating from frame to frame), so that a
+        change in the machine's speed during the run reaches all of them alike."""
+        runs = []
+        for label, make in makers:
+            fld = im.BlobField(centers_at(0), ANIM_R, threshold=THRESHOLD)
+            runs.append((label, fld, make(fld)))
+        times = {label: [] for label, _ in makers}
+        tris = {label: [] for label, _ in makers}
+        evals = {label: [] for label, _ in makers}
+        cpu = {label: 0.0 for label, _ in makers}
+        s0 = None
         for f in range(warm_frames + frames):
             if f == warm_frames:
-                s0, c0 = cpu_snapshot(), time.process_time()
+                log(f"animation: {frames} frames, all methods in turn")
+                s0 = cpu_snapshot()
             c = centers_at(f)
-            t0 = time.perf_counter()
-            fld.update(c)
-            res = step()
-            dt = time.perf_counter() - t0
-            if f >= warm_frames:
-                times.append(dt)
-                tris.append(res[0])
-                evals.append(res[1])
-        cpu = time.process_time() - c0
+            k = f % len(runs)
+            for label, fld, step in runs[k:] + runs[:k]:
+                c0, t0 = time.process_time(), time.perf_counter()
+                fld.update(c)
+                res = step()
+                dt = time.perf_counter() - t0
+                if f >= warm_frames:
+                    times[label].append(dt)
+                    cpu[label] += time.process_time() - c0
+                    tris[label].append(res[0])
+                    evals[label].append(res[1])
         fl = foreign_load(s0, cpu_snapshot())
-        return times, tris, evals, fl, cpu / sum(times) if times else None
+        return {label: (times[label], tris[label], evals[label], fl, cpu[label] / sum(times[label]))
+                for label, _ in makers}
 
     def ours_tracking(normals, blocks=True):
         def make(fld):
@@ -498,7 +509,7 @@ def bench(a: argparse.Namespace) -> str:
     tess_label = "ours `Tessellator().polygonize` (tracking block by block, buffers kept)"
     dense_label = "ours `polygonize(method=\"dense\")`"
     sparse_label = "ours `polygonize(method=\"sparse\")`"
-    for label, make in (
+    makers = (
         (tess_label, ours_tracking(True)),
         ("ours `Tessellator().polygonize`, normals=False", ours_tracking(False)),
         ("ours `Tessellator().polygonize(blocks=False)` (tracking cell by cell, caches kept)",
@@ -509,9 +520,8 @@ def bench(a: argparse.Namespace) -> str:
         ("ours `polygonize(method=\"sparse\")`, normals=False", ours_method("sparse", False)),
         (f"peer: numpy grid ({anim_splat}) + VTK flying edges ({anim_vtk}), no normals", peer_vtk(False)),
         (f"peer: numpy grid + VTK flying edges ({anim_vtk}) + normals", peer_vtk(True)),
-    ):
-        log(f"animation: {label}")
-        times, tris, evals, fl, cpw = animate(make)
+    )
+    for label, (times, tris, evals, fl, cpw) in animate_all(makers).items():
         anim_tris[label] = tris
         med = statistics.median(times)
         fps = 1.0 / med
@@ -622,7 +632,9 @@ def bench(a: argparse.Namespace) -> str:
         f"### Animation: {ANIM_N} primitives (R = {ANIM_R}) at {ANIM_RES}³ over [-1, 1]³",
         "",
         f"Centres c + 0.05 sin(0.05 frame + phase) (random phase per coordinate); each frame "
-        f"`BlobField.update(centers)` then polygonize (both timed); median over {frames} frames after "
+        f"`BlobField.update(centers)` then polygonize (both timed); every method runs each frame in turn "
+        f"(each on its own `BlobField`, the order rotating from frame to frame, so that the machine's drift "
+        f"reaches all alike); median over {frames} frames after "
         f"{warm_frames} warm-up frames; frames per second = 1 / median. The peer rows recompute the numpy grid "
         "from the centres each frame (for orientation; the issue sets no peer for the animation).",
         "",
