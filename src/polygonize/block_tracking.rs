@@ -400,28 +400,48 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     };
     let normals = settings.normals;
     let eval = |ws: &mut Workspace| ws.evaluate_wave(field, &blocks, lattice, normals);
-    // Seeds: each walk reads the signs of the blocks it enters, evaluated in waves.
-    let mut walkers = start_walkers(starts, lattice);
-    let mut seeds = Vec::new();
-    while !walkers.is_empty() {
-        for w in &walkers {
-            ws.enter(locate(w.cell).0, &[0; 8]);
+    let block_index = |b: [u32; 3]| b[0] + dims[0] * (b[1] + dims[1] * b[2]);
+    // A seed cell: its bit, entering its block.
+    let seed = |ws: &mut Workspace, c: [u32; 3]| {
+        if (0..3).all(|a| c[a] < cells[a]) {
+            let (i, l) = locate(c);
+            let mut bits = [0u64; 8];
+            bits[l[2] as usize] = 1 << (l[0] + 8 * l[1]);
+            ws.enter(i, &bits);
         }
-        stats.evaluations += eval(ws);
+    };
+    for &c in seed_cells {
+        seed(ws, c);
+    }
+    // The seed walks read the signs of the blocks they enter; they and the flood share the
+    // waves of evaluation (the cells reached from a set of seeds do not depend on the order in
+    // which the seeds are found).
+    let mut walkers = start_walkers(starts, lattice);
+    for w in &walkers {
+        ws.enter(locate(w.cell).0, &[0; 8]);
+    }
+    let mut unreached = false;
+    loop {
+        if !ws.wave.is_empty() {
+            stats.evaluations += eval(ws);
+        }
         let mut keep = 0;
         for i in 0..walkers.len() {
             let mut w = walkers[i];
             let alive = loop {
                 let (b, l) = locate(w.cell);
                 let st = match ws.map[b as usize] {
-                    NONE => break true,
+                    NONE => {
+                        ws.enter(b, &[0; 8]);
+                        break true;
+                    }
                     s => &ws.states[s as usize],
                 };
                 if st.kind == Kind::Queued {
                     break true;
                 }
                 if st.crossed[l[2] as usize] >> (l[0] + 8 * l[1]) & 1 != 0 {
-                    seeds.push(w.cell);
+                    seed(ws, w.cell);
                     break false;
                 }
                 if !w.advance(cells, max_walk) {
@@ -436,23 +456,6 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
         walkers.truncate(keep);
         walkers.sort_unstable();
         walkers.dedup();
-    }
-    seeds.extend_from_slice(seed_cells);
-    for c in &seeds {
-        if (0..3).any(|a| c[a] >= cells[a]) {
-            continue;
-        }
-        let (i, l) = locate(*c);
-        let mut bits = [0u64; 8];
-        bits[l[2] as usize] = 1 << (l[0] + 8 * l[1]);
-        ws.enter(i, &bits);
-    }
-    stats.add_time("seeds", t);
-
-    let t = Instant::now();
-    let block_index = |b: [u32; 3]| b[0] + dims[0] * (b[1] + dims[1] * b[2]);
-    let mut unreached = false;
-    loop {
         // Flood: serial bit arithmetic, entering neighbouring blocks through crossed faces on
         // the blocks' sides (new ones are evaluated in the next wave).
         while let Some(s) = ws.work.pop() {
@@ -499,10 +502,10 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
                 }
             }
         }
+        // Walks still going wait for blocks of the next wave.
         if ws.wave.is_empty() {
             break;
         }
-        stats.evaluations += eval(ws);
     }
     stats.add_time("track", t);
 
