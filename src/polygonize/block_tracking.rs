@@ -3,8 +3,10 @@
 //! fields).
 //!
 //! The cells reached are exactly those of cell-by-cell tracking ([`super::tracking`]): the
-//! crossed cells joined to a seed cell through faces the surface crosses. A block is evaluated
-//! (all its 8³ points, vectorised) when the walk first enters one of its cells; within it, the
+//! crossed cells joined to a seed cell through faces the surface crosses, from the same seeds
+//! (the seed walks, by the same rule, read the signs of the blocks they pass). A block is
+//! evaluated (all its 8³ points, vectorised) when a seed walk or the walk first enters one of
+//! its cells; within it, the
 //! walk is a flood over bit sets (one 64-bit word per plane of cells, a cell joining its
 //! neighbour when the face between them has corners of both signs); a reached cell with a
 //! crossed face on the block's side enters the neighbouring block. Vertices, normals and
@@ -12,8 +14,9 @@
 //! the mesh is the dense mesh on every component that holds a seed, triangle for triangle and
 //! bit for bit, and, like cell tracking's, it holds whole components only.
 //!
-//! Blocks are evaluated in waves (those newly entered), each wave in parallel; the flood between
-//! waves is serial bit arithmetic. The output does not depend on the number of threads.
+//! Blocks are evaluated in waves (those newly entered), each wave in parallel; the seed walks'
+//! steps and the flood between waves are serial bit arithmetic. The output does not depend on
+//! the number of threads.
 //!
 //! ```
 //! use glam::DVec3;
@@ -35,8 +38,10 @@
 //! // x from -0.35 to -0.3: the first blob's surface (at x = -0.338) crosses the cell.
 //! let seed = [[13, 20, 20]];
 //! let mut ws = block_tracking::Workspace::default();
+//! let no_walks = (&[][..], 0);
+//! let settings = Settings::default();
 //! let (mesh, triangles, _) =
-//!     block_tracking::polygonize_as::<_, u32>(&blobs, &lattice, (&[], 0), &seed, &Settings::default(), &mut ws)
+//!     block_tracking::polygonize_as::<_, u32>(&blobs, &lattice, no_walks, &seed, &settings, &mut ws)
 //!         .unwrap();
 //! let (both, _) = dense::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
 //! let first = both.triangles.iter().filter(|t| both.vertices[t[0] as usize].x < 0.0);

@@ -320,39 +320,18 @@ impl Tessellator {
             lattice_points: lattice.num_points(),
             ..Default::default()
         };
-        let seeds = self.seeds(
-            field,
-            lattice,
-            (starts, max_walk),
-            seed_cells,
-            settings,
-            &mut stats,
-        )?;
+        self.start(lattice);
+        let t = Instant::now();
+        let mut seeds = self.walk_seeds(field, lattice, starts, max_walk, settings, &mut stats)?;
+        seeds.extend_from_slice(seed_cells);
+        stats.add_time("seeds", t);
         self.track(field, lattice, &seeds, settings, &mut stats)?;
         Ok((&self.mesh, stats))
     }
 
-    /// Starts a call and finds its seed cells: walked from `starts` (at most `max_walk` cells
-    /// each), and `seed_cells`.
-    fn seeds<F: Field + ?Sized>(
-        &mut self,
-        field: &F,
-        lattice: &Lattice,
-        (starts, max_walk): (&[DVec3], u32),
-        seed_cells: &[[u32; 3]],
-        settings: &Settings,
-        stats: &mut Stats,
-    ) -> Result<Vec<[u32; 3]>> {
-        self.start(lattice);
-        let t = Instant::now();
-        let mut seeds = self.walk_seeds(field, lattice, starts, max_walk, settings, stats)?;
-        seeds.extend_from_slice(seed_cells);
-        stats.add_time("seeds", t);
-        Ok(seeds)
-    }
-
     /// [`Tessellator::polygonize`] for fields that evaluate whole blocks of the lattice (blob
-    /// fields): the same seeds, then the walk block by block ([`super::block_tracking`]). The
+    /// fields): seeds walked by the same rule, then the walk block by block
+    /// ([`super::block_tracking`]). The
     /// mesh is the same (up to the order of vertices and triangles); more points are evaluated
     /// (whole blocks of 8³, vectorised), in much less time. The triangles come beside the mesh,
     /// as `I`.
