@@ -50,9 +50,8 @@
 //! ```
 
 use super::sparse::{
-    block_dims, bounds_error, crossed_cells, evaluate_block, finish_normals, gather_outputs,
-    plane_mask, triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, ALL_CELLS,
-    NONE, STEP,
+    block_dims, bounds_error, crossed_row_cells, evaluate_block, finish_normals, gather_outputs,
+    plane_mask, triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, NONE, STEP,
 };
 use super::tracking::start_walkers;
 use super::{check_memory, estimate_triangles, CaseTable, Settings, Stats, BYTES_PER_TRIANGLE};
@@ -108,11 +107,14 @@ impl Faces {
 
 /// Crossed cells of a block (bit `i + 8j` of word `k` for cell (i, j, k)).
 fn crossed_mask(signs: &[u64; 8], n: [u8; 3]) -> [u64; 8] {
-    let mut x = [0u64; 8];
-    crossed_cells(signs, n, &ALL_CELLS, |cell, _| {
-        x[cell >> 6] |= 1 << (cell & 63)
-    });
-    x
+    let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
+    std::array::from_fn(|k| {
+        if k + 1 < n[2] as usize {
+            crossed_row_cells(signs[k], signs[k + 1]) & cells
+        } else {
+            0
+        }
+    })
 }
 
 /// What is known of a block the walk entered.
@@ -334,6 +336,10 @@ fn flood(st: &State) -> [u64; 8] {
         }
     };
     loop {
+        // Every crossed cell reached: nothing left to grow into.
+        if r == st.crossed {
+            return r;
+        }
         let mut changed = false;
         // Up through the planes, then down.
         for k in (0..nc).chain((0..nc).rev()) {
