@@ -71,6 +71,24 @@ def test_tracking_callable_needs_seeds():
         im.polygonize(sphere, resolution=32, seeds=[[0.0, 0.0, 0.0]])
 
 
+def test_tessellator_blocks_must_be_a_bool():
+    b = im.BlobField(np.zeros((1, 3)), 0.5)
+    with pytest.raises(ValueError, match="blocks"):
+        im.Tessellator().polygonize(b, resolution=16, blocks="yes")
+
+
+def test_tessellator_walks_other_fields_cell_by_cell():
+    # blocks=True is ignored for a callable: the same mesh and evaluations as blocks=False.
+    def sphere(p):
+        return np.linalg.norm(p, axis=1) - 0.5
+
+    kw = dict(bounds=[[-1, -1, -1], [1, 1, 1]], resolution=24, seeds=[[0.0, 0.0, 0.0]])
+    a = im.Tessellator().polygonize(sphere, blocks=True, **kw)
+    c = im.Tessellator().polygonize(sphere, blocks=False, **kw)
+    assert a.stats["evaluations"] == c.stats["evaluations"] < 25**3
+    assert im.compare(a, c) == {"missing": 0, "extra": 0, "common": len(c.faces)} and len(c.faces) > 0
+
+
 def test_animation_memory_stays_flat():
     rng = np.random.default_rng(7)
     c0 = rng.uniform(-0.7, 0.7, (200, 3))

@@ -241,8 +241,8 @@ class Tessellator:
         -------
         Mesh
             A new mesh (its arrays are not shared with the caches). ``stats["evaluations"]``
-            counts the seed walks' points and, block by block, every point of each block
-            evaluated.
+            counts, cell by cell, the points the seed walks and the tracking evaluated; block by
+            block, every point of each block evaluated (seed walks included).
         """
         bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
         if not isinstance(blocks, (bool, np.bool_)):
