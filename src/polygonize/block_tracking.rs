@@ -50,7 +50,7 @@
 //! ```
 
 use super::sparse::{
-    block_dims, bounds_error, crossed_row_cells, evaluate_block, finish_normals, gather_outputs,
+    block_dims, bounds_error, crossed_layer_cells, evaluate_block, finish_normals, gather_outputs,
     plane_mask, triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, NONE, STEP,
 };
 use super::tracking::start_walkers;
@@ -110,7 +110,7 @@ fn crossed_mask(signs: &[u64; 8], n: [u8; 3]) -> [u64; 8] {
     let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
     std::array::from_fn(|k| {
         if k + 1 < n[2] as usize {
-            crossed_row_cells(signs[k], signs[k + 1]) & cells
+            crossed_layer_cells(signs[k], signs[k + 1]) & cells
         } else {
             0
         }

@@ -664,10 +664,11 @@ impl BlockCases {
     }
 }
 
-/// The cells between planes of signs `lo` and `hi` whose corners have both signs (bit `i + 8j`
-/// for the cell with lower corner (i, j); bits beyond the block's cells are to be masked off).
+/// The cells of the layer between planes of signs `lo` and `hi` whose corners have both signs
+/// (bit `i + 8j` for the cell with lower corner (i, j); bits beyond the block's cells are to be
+/// masked off).
 #[inline(always)]
-pub(super) fn crossed_row_cells(lo: u64, hi: u64) -> u64 {
+pub(super) fn crossed_layer_cells(lo: u64, hi: u64) -> u64 {
     let (mut any, mut all) = (0u64, !0u64);
     for s in [0, 1, 8, 9] {
         any |= (lo >> s) | (hi >> s);
@@ -692,7 +693,7 @@ pub(super) fn crossed_cells(
     let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
     for k in 0..n[2] as usize - 1 {
         let (lo, hi) = (signs[k], signs[k + 1]);
-        let mut m = crossed_row_cells(lo, hi) & cells & reach[k];
+        let mut m = crossed_layer_cells(lo, hi) & cells & reach[k];
         while m != 0 {
             let c = m.trailing_zeros();
             m &= m - 1;
