@@ -307,6 +307,49 @@ pub(crate) mod testing {
     /// errors of polygonizers that trust them).
     pub struct Lying(pub super::blob::BlobField);
 
+    impl Lying {
+        /// One blob of radius 0.9 at the origin: its surface (a sphere of radius 0.487) crosses
+        /// blocks with bx = 2 on a 32³ lattice over [-1, 1]³.
+        pub fn sphere() -> Lying {
+            use super::blob::{BlobField, PerPrimitive, Settings};
+            let one = |r| PerPrimitive::All(r);
+            let blob = BlobField::new(&[DVec3::ZERO], one(0.9), one(1.0), 0.5, Settings::default());
+            Lying(blob.unwrap())
+        }
+    }
+
+    /// Triangles as sorted triples of vertex bit patterns, each rotated so that its smallest
+    /// vertex comes first (keeping its orientation): order-free and bit-exact.
+    pub fn canonical_triangles(vertices: &[DVec3], triangles: &[[u32; 3]]) -> Vec<[[u64; 3]; 3]> {
+        let key = |v: u32| vertices[v as usize].to_array().map(f64::to_bits);
+        let mut t: Vec<[[u64; 3]; 3]> = triangles
+            .iter()
+            .map(|t| {
+                let k = t.map(key);
+                let s = (0..3).min_by_key(|&i| k[i]).unwrap();
+                [k[s], k[(s + 1) % 3], k[(s + 2) % 3]]
+            })
+            .collect();
+        t.sort_unstable();
+        t
+    }
+
+    /// (vertex, normal) bit patterns, sorted: order-free and bit-exact.
+    pub fn vertex_normal_bits(vertices: &[DVec3], normals: &[DVec3]) -> Vec<([u64; 3], [u64; 3])> {
+        let mut p: Vec<_> = vertices
+            .iter()
+            .zip(normals)
+            .map(|(v, n)| {
+                (
+                    v.to_array().map(f64::to_bits),
+                    n.to_array().map(f64::to_bits),
+                )
+            })
+            .collect();
+        p.sort_unstable();
+        p
+    }
+
     impl Field for Lying {
         fn value(&self, p: DVec3) -> f64 {
             self.0.value(p)

@@ -604,22 +604,8 @@ mod tests {
     use super::super::{dense, tracking, Ambiguity};
     use super::*;
     use crate::field::testing::random_blobs as blobs;
+    use crate::field::testing::{canonical_triangles as canonical, vertex_normal_bits, Lying};
     use glam::DVec3;
-
-    /// Triangles as sorted triples of vertex bit patterns (order-free, bit-exact).
-    fn canonical(v: &[DVec3], t: &[[u32; 3]]) -> Vec<[[u64; 3]; 3]> {
-        let key = |i: u32| v[i as usize].to_array().map(f64::to_bits);
-        let mut out: Vec<[[u64; 3]; 3]> = t
-            .iter()
-            .map(|t| {
-                let k = t.map(key);
-                let s = (0..3).min_by_key(|&i| k[i]).unwrap();
-                [k[s], k[(s + 1) % 3], k[(s + 2) % 3]]
-            })
-            .collect();
-        out.sort_unstable();
-        out
-    }
 
     /// Block tracking and cell tracking, each walking its seeds from the blob centres: the same
     /// triangles, vertices and normals (bits), every vertex used.
@@ -646,23 +632,9 @@ mod tests {
         );
         assert_eq!(m.vertices.len(), cells.vertices.len());
         assert_eq!(bs.cells_crossed, st.cells_crossed);
-        let pairs = |v: &[DVec3], n: &[DVec3]| {
-            let mut p: Vec<_> = v
-                .iter()
-                .zip(n)
-                .map(|(v, n)| {
-                    (
-                        v.to_array().map(f64::to_bits),
-                        n.to_array().map(f64::to_bits),
-                    )
-                })
-                .collect();
-            p.sort_unstable();
-            p
-        };
         assert_eq!(
-            pairs(&m.vertices, &m.normals),
-            pairs(&cells.vertices, &cells.normals)
+            vertex_normal_bits(&m.vertices, &m.normals),
+            vertex_normal_bits(&cells.vertices, &cells.normals)
         );
     }
 
@@ -726,16 +698,7 @@ mod tests {
 
     #[test]
     fn wrong_bounds_give_an_error_not_a_panic() {
-        use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
-        let one = |r| PerPrimitive::All(r);
-        let blob = BlobField::new(
-            &[DVec3::ZERO],
-            one(0.9),
-            one(1.0),
-            0.5,
-            BlobSettings::default(),
-        );
-        let f = crate::field::testing::Lying(blob.unwrap());
+        let f = Lying::sphere();
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
         // Cell (8, 16, 16) holds the surface (at x = -0.487, in block 1); the sphere also crosses
         // block 2, which the bounds wrongly rule out.

@@ -805,23 +805,12 @@ mod tests {
     use super::*;
     use crate::field::blob::BlobField;
     use crate::field::testing::random_blobs as blobs;
+    use crate::field::testing::{canonical_triangles, vertex_normal_bits, Lying};
     use crate::polygonize::Ambiguity;
 
-    /// Triangles as sorted triples of vertex bit patterns (order-free, bit-exact).
+    /// Triangles, order-free and bit-exact.
     fn canonical(m: &Mesh) -> Vec<[[u64; 3]; 3]> {
-        let key = |v: u32| m.vertices[v as usize].to_array().map(f64::to_bits);
-        let mut t: Vec<[[u64; 3]; 3]> = m
-            .triangles
-            .iter()
-            .map(|t| {
-                // Rotate so the smallest vertex comes first (keeps the orientation).
-                let k = t.map(key);
-                let s = (0..3).min_by_key(|&i| k[i]).unwrap();
-                [k[s], k[(s + 1) % 3], k[(s + 2) % 3]]
-            })
-            .collect();
-        t.sort_unstable();
-        t
+        canonical_triangles(&m.vertices, &m.triangles)
     }
 
     fn check_equal(field: &BlobField, lattice: &Lattice, ambiguity: Ambiguity) -> Stats {
@@ -834,21 +823,7 @@ mod tests {
         assert_eq!(a.vertices.len(), b.vertices.len());
         assert_eq!(canonical(&a), canonical(&b));
         // Normals are the field's gradient at the same vertex: the same bits.
-        let pairs = |m: &Mesh| {
-            let mut p: Vec<_> = m
-                .vertices
-                .iter()
-                .zip(&m.normals)
-                .map(|(v, n)| {
-                    (
-                        v.to_array().map(f64::to_bits),
-                        n.to_array().map(f64::to_bits),
-                    )
-                })
-                .collect();
-            p.sort_unstable();
-            p
-        };
+        let pairs = |m: &Mesh| vertex_normal_bits(&m.vertices, &m.normals);
         let (na, nb) = (pairs(&a), pairs(&b));
         assert_eq!(na, nb);
         st
@@ -922,16 +897,7 @@ mod tests {
 
     #[test]
     fn wrong_bounds_give_an_error_not_a_panic() {
-        use crate::field::blob::{PerPrimitive, Settings as BlobSettings};
-        let one = |r| PerPrimitive::All(r);
-        let blob = BlobField::new(
-            &[DVec3::ZERO],
-            one(0.9),
-            one(1.0),
-            0.5,
-            BlobSettings::default(),
-        );
-        let f = crate::field::testing::Lying(blob.unwrap());
+        let f = Lying::sphere();
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
         let r = polygonize(&f, &l, &Settings::default());
         let e = r.unwrap_err();
