@@ -197,7 +197,7 @@ class Tessellator:
     block of 7 × 7 × 7 cells is evaluated at once (all 8³ points, vectorised) when the walk first
     enters one of its cells, and within the block the walk is a flood over bit sets, one 64-bit
     word per plane of cells. It evaluates more points than the walk cell by cell but is several
-    times faster. With ``blocks=False``, and for other fields, the walk goes cell by cell with
+    times faster. Its output is ordered block by block: it does not depend on earlier calls. With ``blocks=False``, and for other fields, the walk goes cell by cell with
     time-stamped caches of corner values and edge vertices (Triquet et al. §4.1, §4.4): nothing
     is cleared between calls, and that walk evaluates the fewest points, which pays for costly
     fields (a Python callable, a large variational fit). In steady state neither walk
@@ -242,7 +242,9 @@ class Tessellator:
         Mesh
             A new mesh (its arrays are not shared with the caches). ``stats["evaluations"]``
             counts, cell by cell, the points the seed walks and the tracking evaluated; block by
-            block, every point of each block evaluated (seed walks included).
+            block, every point of each block evaluated (seed walks included, and the blocks the
+            previous call on the same lattice used, which are evaluated ahead: an animation's
+            surface moves little between frames).
         """
         bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
         if not isinstance(blocks, (bool, np.bool_)):

@@ -6,17 +6,20 @@
 //! crossed cells joined to a seed cell through faces the surface crosses, from the same seeds
 //! (the seed walks, by the same rule, read the signs of the blocks they pass). A block is
 //! evaluated (all its 8³ points, vectorised) when a seed walk or the walk first enters one of
-//! its cells; within it, the
-//! walk is a flood over bit sets (one 64-bit word per plane of cells, a cell joining its
-//! neighbour when the face between them has corners of both signs); a reached cell with a
-//! crossed face on the block's side enters the neighbouring block. Vertices, normals and
-//! triangles are then made as by [`super::sparse`], triangles only for the cells reached, so
-//! the mesh is the dense mesh on every component that holds a seed, triangle for triangle and
-//! bit for bit, and, like cell tracking's, it holds whole components only.
+//! its cells; the same task splits its crossed cells into components (cells joined through
+//! crossed faces, by a flood over bit sets, one 64-bit word per plane of cells), and the walk
+//! takes each component it enters whole, entering the neighbouring blocks through the
+//! component's crossed faces on the block's sides. Vertices, normals and triangles are then
+//! made as by [`super::sparse`], triangles only for the cells reached and vertices only for
+//! their edges, so the mesh is the dense mesh on every component that holds a seed, triangle
+//! for triangle and bit for bit, and, like cell tracking's, it holds whole components only.
 //!
 //! Blocks are evaluated in waves (those newly entered), each wave in parallel; the seed walks'
-//! steps and the flood between waves are serial bit arithmetic. The output does not depend on
-//! the number of threads.
+//! steps and the walk between waves are serial bit arithmetic. An animation's surface moves
+//! little from call to call, so the blocks the last call used (kept in the [`Workspace`]) are
+//! evaluated in the first wave, and the walk rarely waits for a second. The output is
+//! ordered by block, like sparse's: it depends neither on the number of threads nor on the
+//! calls before.
 //!
 //! ```
 //! use glam::DVec3;
@@ -50,11 +53,13 @@
 //! ```
 
 use super::sparse::{
-    block_dims, bounds_error, crossed_layer_cells, evaluate_block, finish_normals, gather_outputs,
-    plane_mask, triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, NONE, STEP,
+    block_dims, bounds_error, crossed_layer_cells, evaluate_block, finish_normals, plane_mask,
+    triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, ALL_CELLS, NONE, STEP,
 };
 use super::tracking::start_walkers;
-use super::{check_memory, estimate_triangles, CaseTable, Settings, Stats, BYTES_PER_TRIANGLE};
+use super::{
+    check_memory, estimate_triangles, gather, CaseTable, Settings, Stats, BYTES_PER_TRIANGLE,
+};
 use crate::error::{Error, Result};
 use crate::field::BlockField;
 use crate::lattice::Lattice;
@@ -64,7 +69,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// Blocks per task of a wave's evaluation.
-const BLOCKS_PER_TASK: usize = 4;
+const BLOCKS_PER_TASK: usize = 8;
 
 /// Bits of a plane word at x = 0 (one per row).
 const COLUMN_0: u64 = 0x0101_0101_0101_0101;
@@ -134,27 +139,47 @@ struct State {
     kind: Kind,
     /// Whether the state is on the flood's work list.
     listed: bool,
-    /// The part holding its vertices (for `Mixed`).
+    /// Whether a seed, a seed walk or the flood entered the block (not only the previous
+    /// call's blocks, evaluated ahead).
+    used: bool,
+    /// Where it is: its part (holding its vertices) and its place in the part's `evaluated`
+    /// (for `Mixed`).
     part: u32,
-    active: Active,
-    faces: Faces,
+    slot: u32,
+    block: [u32; 3],
     crossed: [u64; 8],
     /// Cells reached.
     reach: [u64; 8],
     /// Cells entered and not yet flooded from.
     pending: [u64; 8],
+    /// Its components (crossed cells joined through crossed faces): `comps` of its part.
+    comps: (u32, u32),
 }
 
-/// An evaluated block with both signs: its signs and owned vertices, crossed faces and
-/// crossed cells.
-type Evaluated = (Active, Faces, [u64; 8]);
+/// A component of a block's crossed cells (joined through crossed faces; the walk reaches it
+/// whole or not at all), and the cells it enters in the neighbouring blocks (sides −x, +x,
+/// −y, +y, −z, +z; bits as in [`State::reach`] of the neighbour).
+#[derive(Clone, Copy)]
+struct Component {
+    cells: [u64; 8],
+    exits: [[u64; 8]; 6],
+    /// Bit `side` set when `exits[side]` has cells.
+    sides: u8,
+}
+
+/// An evaluated block with both signs: its signs and owned vertices, crossed cells and
+/// components (a range of its part's `comps`).
+type Evaluated = (Active, [u64; 8], (u32, u32));
 
 /// What one task of a wave produces.
 #[derive(Default)]
 struct Part {
-    /// Per block evaluated: its state, and what it holds (None: one sign).
-    done: Vec<(u32, Option<Evaluated>)>,
+    /// Per block evaluated: its state and its place in `evaluated` (`NONE`: one sign).
+    done: Vec<(u32, u32)>,
+    evaluated: Vec<Evaluated>,
     out: BlockOutput,
+    /// The components of its blocks' crossed cells.
+    comps: Vec<Component>,
 }
 
 /// Buffers kept between calls (an animation allocates nothing here in steady state).
@@ -170,6 +195,17 @@ pub struct Workspace {
     used_parts: usize,
     wave: Vec<u32>,
     work: Vec<u32>,
+    /// The blocks the last call used (block index, ascending), on `last_lattice`: evaluated in
+    /// the first wave of the next call on the same lattice.
+    last: Vec<u32>,
+    last_lattice: Option<Lattice>,
+    /// The blocks with reached cells (block index, state), ascending.
+    order: Vec<(u32, u32)>,
+    /// Where each block's vertices come from: (part, range), or (`NONE`, range of `kept`).
+    sources: Vec<(u32, usize, usize)>,
+    /// The vertices (and normals) kept of blocks partly reached.
+    kept: Vec<DVec3>,
+    kept_normals: Vec<DVec3>,
     /// The evaluated blocks with crossed cells, their reached cells, block index → position.
     active: Vec<Active>,
     reach: Vec<[u64; 8]>,
@@ -182,16 +218,22 @@ impl Workspace {
         self.parts
             .iter()
             .map(|p| {
-                p.done.capacity() * std::mem::size_of::<(u32, Option<Evaluated>)>()
+                p.done.capacity() * 8
+                    + p.evaluated.capacity() * std::mem::size_of::<Evaluated>()
                     + p.out.capacity_bytes()
+                    + p.comps.capacity() * std::mem::size_of::<Component>()
             })
             .sum::<usize>()
             + (self.map.capacity()
                 + self.index.capacity()
                 + self.wave.capacity()
                 + self.work.capacity()
+                + self.last.capacity()
                 + self.amap.capacity())
                 * 4
+            + self.order.capacity() * 8
+            + self.sources.capacity() * std::mem::size_of::<(u32, usize, usize)>()
+            + (self.kept.capacity() + self.kept_normals.capacity()) * 24
             + self.states.capacity() * std::mem::size_of::<State>()
             + self.active.capacity() * std::mem::size_of::<Active>()
             + self.reach.capacity() * 64
@@ -202,6 +244,7 @@ impl Workspace {
     fn evaluate_wave<F: BlockField + ?Sized>(
         &mut self,
         field: &F,
+        cases: &BlockCases,
         blocks: &F::Blocks,
         lattice: &Lattice,
         normals: bool,
@@ -218,7 +261,9 @@ impl Workspace {
             .zip(wave.par_chunks(BLOCKS_PER_TASK))
             .for_each(|(part, chunk)| {
                 part.done.clear();
+                part.evaluated.clear();
                 part.out.clear();
+                part.comps.clear();
                 let mut values = [0.0f64; 512];
                 for &s in chunk {
                     let i = index[s as usize];
@@ -228,10 +273,26 @@ impl Workspace {
                         i / (dims[0] * dims[1]),
                     ];
                     let out = &mut part.out;
+                    // Triangles counted for all crossed cells (those usually all reached), and
+                    // the components that the walk will reach whole.
                     let got =
-                        evaluate_block(field, blocks, lattice, dims, b, normals, &mut values, out)
-                            .map(|a| (a, Faces::new(&a.signs, a.n), crossed_mask(&a.signs, a.n)));
-                    part.done.push((s, got));
+                        evaluate_block(field, blocks, lattice, dims, b, normals, &mut values, out);
+                    let slot = match got {
+                        None => NONE,
+                        Some(a) => {
+                            let a = Active {
+                                triangles: cases.count(&a, &ALL_CELLS),
+                                ..a
+                            };
+                            let crossed = crossed_mask(&a.signs, a.n);
+                            let first = part.comps.len() as u32;
+                            components(&a, &crossed, &mut part.comps);
+                            let comps = (first, part.comps.len() as u32);
+                            part.evaluated.push((a, crossed, comps));
+                            part.evaluated.len() as u32 - 1
+                        }
+                    };
+                    part.done.push((s, slot));
                 }
             });
         self.wave.clear();
@@ -239,16 +300,16 @@ impl Workspace {
         for p in used..used + tasks {
             let part = &self.parts[p];
             evaluations += part.out.evaluations;
-            for &(s, ref got) in &part.done {
+            for &(s, slot) in &part.done {
                 let st = &mut self.states[s as usize];
-                match got {
+                match part.evaluated.get(slot as usize) {
                     None => st.kind = Kind::Empty,
-                    Some((active, faces, crossed)) => {
+                    Some(&(_, crossed, comps)) => {
                         st.kind = Kind::Mixed;
                         st.part = p as u32;
-                        st.active = *active;
-                        st.faces = *faces;
-                        st.crossed = *crossed;
+                        st.slot = slot;
+                        st.crossed = crossed;
+                        st.comps = comps;
                         if st.pending.iter().any(|&w| w != 0) {
                             st.listed = true;
                             self.work.push(s);
@@ -264,25 +325,14 @@ impl Workspace {
     /// Adds `cells` (bits as in [`State::reach`]) to the block with index `i`, entering it
     /// when new; returns false when the block is known to have one sign (its cells cannot be
     /// crossed, so the field's bounds or values disagree).
-    fn enter(&mut self, i: u32, cells: &[u64; 8]) -> bool {
+    fn enter(&mut self, i: u32, cells: &[u64; 8], dims: [u32; 3]) -> bool {
         let s = self.map[i as usize];
         if s == NONE {
-            self.map[i as usize] = self.states.len() as u32;
-            self.wave.push(self.states.len() as u32);
-            self.index.push(i);
-            self.states.push(State {
-                kind: Kind::Queued,
-                listed: false,
-                part: 0,
-                active: EMPTY_ACTIVE,
-                faces: Faces::default(),
-                crossed: [0; 8],
-                reach: [0; 8],
-                pending: *cells,
-            });
+            self.queue(i, cells, true, dims);
             return true;
         }
         let st = &mut self.states[s as usize];
+        st.used = true;
         let mut new = false;
         for ((p, &r), &c) in st.pending.iter_mut().zip(&st.reach).zip(cells) {
             let add = c & !r & !*p;
@@ -299,27 +349,37 @@ impl Workspace {
             _ => true,
         }
     }
+
+    /// Queues block `i` (not yet entered) for the next wave.
+    fn queue(&mut self, i: u32, cells: &[u64; 8], used: bool, dims: [u32; 3]) {
+        self.map[i as usize] = self.states.len() as u32;
+        self.wave.push(self.states.len() as u32);
+        self.index.push(i);
+        self.states.push(State {
+            kind: Kind::Queued,
+            listed: false,
+            used,
+            part: 0,
+            slot: NONE,
+            block: [
+                i % dims[0],
+                (i / dims[0]) % dims[1],
+                i / (dims[0] * dims[1]),
+            ],
+            crossed: [0; 8],
+            reach: [0; 8],
+            pending: *cells,
+            comps: (0, 0),
+        });
+    }
 }
 
-const EMPTY_ACTIVE: Active = Active {
-    block: [0; 3],
-    n: [2; 3],
-    last: [false; 3],
-    signs: [0; 8],
-    edges: [0; 24],
-    before: [0; 24],
-    base: 0,
-    triangles: 0,
-};
-
-/// Floods the cells of a block from `reach` ∪ `pending` (crossed cells only) through crossed
-/// faces; returns the cells reached.
-fn flood(st: &State) -> [u64; 8] {
-    let n = st.active.n;
+/// Floods the crossed cells of a block (`crossed`, with crossed faces `f`, `n` points per axis)
+/// from the cells `from` through crossed faces; returns the cells reached.
+fn flood(from: &[u64; 8], f: &Faces, crossed: &[u64; 8], n: [u8; 3]) -> [u64; 8] {
     let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
     let nc = n[2] as usize - 1;
-    let f = &st.faces;
-    let mut r: [u64; 8] = std::array::from_fn(|k| (st.reach[k] | st.pending[k]) & st.crossed[k]);
+    let mut r: [u64; 8] = std::array::from_fn(|k| from[k] & crossed[k]);
     let grow = |x: u64, k: usize| {
         let mut x = x;
         loop {
@@ -337,7 +397,7 @@ fn flood(st: &State) -> [u64; 8] {
     };
     loop {
         // Every crossed cell reached: nothing left to grow into.
-        if r == st.crossed {
+        if r == *crossed {
             return r;
         }
         let mut changed = false;
@@ -359,6 +419,47 @@ fn flood(st: &State) -> [u64; 8] {
         if !changed {
             return r;
         }
+    }
+}
+
+/// Appends the components of a block's crossed cells to `out`: the sets of cells joined
+/// through crossed faces, with the cells each enters in the neighbouring blocks.
+fn components(a: &Active, crossed: &[u64; 8], out: &mut Vec<Component>) {
+    let f = Faces::new(&a.signs, a.n);
+    let [nx, ny, nz] = a.n.map(|v| v as usize);
+    let nc = nz - 1;
+    let mut left = *crossed;
+    while let Some(k) = left.iter().position(|&w| w != 0) {
+        let mut from = [0u64; 8];
+        from[k] = left[k] & left[k].wrapping_neg();
+        let r = flood(&from, &f, crossed, a.n);
+        for (l, w) in left.iter_mut().zip(&r) {
+            *l &= !w;
+        }
+        // Reached cells with a crossed face on the block's side, as the neighbour's cells.
+        let mut exits = [[0u64; 8]; 6];
+        for k in 0..nc {
+            exits[0][k] = (r[k] & f.x[k] & COLUMN_0) << 6;
+            exits[2][k] = (r[k] & f.y[k] & ROW_0) << 48;
+            if !a.last[0] {
+                exits[1][k] = (r[k] & (f.x[k] >> 1) & (COLUMN_0 << (nx - 2))) >> 6;
+            }
+            if !a.last[1] {
+                exits[3][k] = (r[k] & (f.y[k] >> 8) & (ROW_0 << (8 * (ny - 2)))) >> 48;
+            }
+        }
+        exits[4][6] = r[0] & f.z[0];
+        if !a.last[2] {
+            exits[5][0] = r[nc - 1] & f.z[nz - 1];
+        }
+        let sides = (0..6).fold(0u8, |m, side| {
+            m | ((exits[side].iter().any(|&w| w != 0) as u8) << side)
+        });
+        out.push(Component {
+            cells: r,
+            exits,
+            sides,
+        });
     }
 }
 
@@ -401,6 +502,13 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     ws.wave.clear();
     ws.work.clear();
     ws.used_parts = 0;
+    // An animation's surface moves little from call to call: the blocks the last call used are
+    // evaluated in the first wave, beside the seeds' (the walk then rarely waits for a wave).
+    if ws.last_lattice == Some(*lattice) {
+        for k in 0..ws.last.len() {
+            ws.queue(ws.last[k], &[0; 8], false, dims);
+        }
+    }
     let cells = lattice.cells;
     let locate = |c: [u32; 3]| {
         let b = c.map(|v| v / STEP);
@@ -410,7 +518,7 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
         )
     };
     let normals = settings.normals;
-    let eval = |ws: &mut Workspace| ws.evaluate_wave(field, &blocks, lattice, normals);
+    let eval = |ws: &mut Workspace| ws.evaluate_wave(field, cases, &blocks, lattice, normals);
     let block_index = |b: [u32; 3]| b[0] + dims[0] * (b[1] + dims[1] * b[2]);
     // A seed cell: its bit, entering its block.
     let seed = |ws: &mut Workspace, c: [u32; 3]| {
@@ -418,7 +526,7 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
             let (i, l) = locate(c);
             let mut bits = [0u64; 8];
             bits[l[2] as usize] = 1 << (l[0] + 8 * l[1]);
-            ws.enter(i, &bits);
+            ws.enter(i, &bits, dims);
         }
     };
     for &c in seed_cells {
@@ -429,12 +537,15 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     // which the seeds are found).
     let mut walkers = start_walkers(starts, lattice);
     for w in &walkers {
-        ws.enter(locate(w.cell).0, &[0; 8]);
+        ws.enter(locate(w.cell).0, &[0; 8], dims);
     }
-    let mut unreached = false;
+    // Seconds evaluating (the rest of the walk is serial).
+    let mut waves = 0.0;
     loop {
         if !ws.wave.is_empty() {
+            let w = Instant::now();
             stats.evaluations += eval(ws);
+            waves += w.elapsed().as_secs_f64();
         }
         let mut keep = 0;
         for i in 0..walkers.len() {
@@ -443,10 +554,14 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
                 let (b, l) = locate(w.cell);
                 let st = match ws.map[b as usize] {
                     NONE => {
-                        ws.enter(b, &[0; 8]);
+                        ws.enter(b, &[0; 8], dims);
                         break true;
                     }
-                    s => &ws.states[s as usize],
+                    s => {
+                        let st = &mut ws.states[s as usize];
+                        st.used = true;
+                        &*st
+                    }
                 };
                 if st.kind == Kind::Queued {
                     break true;
@@ -472,98 +587,148 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
         while let Some(s) = ws.work.pop() {
             let st = &mut ws.states[s as usize];
             st.listed = false;
-            let r = flood(st);
-            st.reach = r;
-            st.pending = [0; 8];
-            let (a, f) = (st.active, st.faces);
-            let [nx, ny, nz] = a.n.map(|v| v as usize);
-            let nc = nz - 1;
-            let b = a.block;
-            let mut out = [[0u64; 8]; 6];
-            for k in 0..nc {
-                out[0][k] = (r[k] & f.x[k] & COLUMN_0) << 6;
-                out[2][k] = (r[k] & f.y[k] & ROW_0) << 48;
-                if !a.last[0] {
-                    out[1][k] = (r[k] & (f.x[k] >> 1) & (COLUMN_0 << (nx - 2))) >> 6;
-                }
-                if !a.last[1] {
-                    out[3][k] = (r[k] & (f.y[k] >> 8) & (ROW_0 << (8 * (ny - 2)))) >> 48;
-                }
-            }
-            out[4][6] = r[0] & f.z[0];
-            if !a.last[2] {
-                out[5][0] = r[nc - 1] & f.z[nz - 1];
-            }
-            for (side, bits) in out.iter().enumerate() {
-                if bits.iter().all(|&w| w == 0) {
+            // The components entered, not reached before, join the reached cells whole; their
+            // cells on the block's sides enter the neighbours.
+            let (first, end) = st.comps;
+            let b = st.block;
+            for c in first..end {
+                let st = &mut ws.states[s as usize];
+                let comp = &ws.parts[st.part as usize].comps[c as usize];
+                let hit = (0..8).any(|k| comp.cells[k] & st.pending[k] != 0);
+                if !hit || (0..8).any(|k| comp.cells[k] & st.reach[k] != 0) {
                     continue;
                 }
-                let axis = side / 2;
-                let mut nb = b;
-                if side % 2 == 0 {
-                    if b[axis] == 0 {
+                for (w, &x) in st.reach.iter_mut().zip(&comp.cells) {
+                    *w |= x;
+                }
+                let (sides, part) = (comp.sides, st.part as usize);
+                for side in 0..6 {
+                    if sides >> side & 1 == 0 {
                         continue;
                     }
-                    nb[axis] -= 1;
-                } else {
-                    nb[axis] += 1;
-                }
-                if !ws.enter(block_index(nb), bits) {
-                    return Err(bounds_error());
+                    let axis = side / 2;
+                    let mut nb = b;
+                    if side % 2 == 0 {
+                        if b[axis] == 0 {
+                            continue;
+                        }
+                        nb[axis] -= 1;
+                    } else {
+                        nb[axis] += 1;
+                    }
+                    let bits = ws.parts[part].comps[c as usize].exits[side];
+                    if !ws.enter(block_index(nb), &bits, dims) {
+                        return Err(bounds_error());
+                    }
                 }
             }
+            ws.states[s as usize].pending = [0; 8];
         }
         // Walks still going wait for blocks of the next wave.
         if ws.wave.is_empty() {
             break;
         }
     }
-    stats.add_time("track", t);
+    // The phases: the waves' evaluation, the walks and the flood.
+    stats.seconds.push(("evaluate", waves));
+    stats
+        .seconds
+        .push(("track", t.elapsed().as_secs_f64() - waves));
 
-    // Vertex bases (parts in order), the evaluated blocks with their reached cells.
+    // The blocks with reached cells, in block order (so the mesh depends neither on the order
+    // of the waves nor on earlier calls: it is sparse's, less the cells not reached), their
+    // vertices gathered block by block; the blocks used, for the next call.
     let t = Instant::now();
-    let used_parts = ws.used_parts;
-    let mut offsets = Vec::with_capacity(used_parts);
-    let mut vertices = 0usize;
-    for p in &ws.parts[..used_parts] {
-        offsets.push(vertices);
-        vertices += p.out.vertices.len();
+    ws.last.clear();
+    ws.order.clear();
+    for (s, st) in ws.states.iter().enumerate() {
+        if st.used {
+            ws.last.push(ws.index[s]);
+        }
+        if st.kind == Kind::Mixed && st.reach.iter().any(|&w| w != 0) {
+            ws.order.push((ws.index[s], s as u32));
+        }
     }
-    u32::try_from(vertices).map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
+    ws.last.sort_unstable();
+    ws.last_lattice = Some(*lattice);
+    ws.order.sort_unstable();
     ws.active.clear();
     ws.reach.clear();
     ws.amap.clear();
     ws.amap.resize(num_blocks, NONE);
-    for (s, st) in ws.states.iter().enumerate() {
-        if st.kind != Kind::Mixed {
-            continue;
-        }
-        unreached |= (0..8).any(|k| st.crossed[k] & !st.reach[k] != 0);
+    ws.kept.clear();
+    ws.kept_normals.clear();
+    ws.sources.clear();
+    let mut vertices = 0usize;
+    for &(i, s) in &ws.order {
+        let st = &ws.states[s as usize];
+        let part = &ws.parts[st.part as usize];
+        let (active, out) = (&part.evaluated[st.slot as usize].0, &part.out);
+        let from = active.base as usize;
         stats.cells_visited += st.reach.iter().map(|w| w.count_ones() as u64).sum::<u64>();
-        ws.amap[ws.index[s] as usize] = ws.active.len() as u32;
-        ws.active.push(Active {
-            base: (offsets[st.part as usize] + st.active.base as usize) as u32,
-            ..st.active
-        });
+        ws.amap[i as usize] = ws.active.len() as u32;
+        let base = u32::try_from(vertices)
+            .map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
+        let mut a = Active { base, ..*active };
+        if st.reach == st.crossed {
+            ws.sources.push((st.part, from, from + active.vertices()));
+        } else {
+            // Crossed cells no seed reaches: fewer triangles, and only the vertices of edges
+            // next to a reached cell (copied aside).
+            a.triangles = cases.count(&a, &st.reach);
+            let used = used_edges(&a, &st.reach);
+            let start = ws.kept.len();
+            let mut v = from;
+            for (&e, &u) in a.edges.iter().zip(&used) {
+                let mut m = e;
+                while m != 0 {
+                    if u & m & m.wrapping_neg() != 0 {
+                        ws.kept.push(out.vertices[v]);
+                        if normals {
+                            ws.kept_normals.push(out.normals[v]);
+                        }
+                    }
+                    m &= m - 1;
+                    v += 1;
+                }
+            }
+            ws.sources.push((NONE, start, ws.kept.len()));
+            a.edges = used;
+            let mut count = 0u16;
+            for (b, e) in a.before.iter_mut().zip(&used) {
+                *b = count;
+                count += e.count_ones() as u16;
+            }
+        }
+        vertices += a.vertices();
+        ws.active.push(a);
         ws.reach.push(st.reach);
     }
-    ws.active
-        .par_iter_mut()
-        .zip(ws.reach.par_iter())
-        .with_min_len(16)
-        .for_each(|(a, r)| a.triangles = cases.count(a, r));
-    let outputs: Vec<&BlockOutput> = ws.parts[..used_parts].iter().map(|p| &p.out).collect();
-    let mut mesh = gather_outputs(&outputs, normals);
-    let (mut triangles, crossed) =
+    let slices = |normals: bool| -> Vec<&[DVec3]> {
+        let pick = |&(p, a, b): &(u32, usize, usize)| match (p, normals) {
+            (NONE, false) => &ws.kept[a..b],
+            (NONE, true) => &ws.kept_normals[a..b],
+            (p, false) => &ws.parts[p as usize].out.vertices[a..b],
+            (p, true) => &ws.parts[p as usize].out.normals[a..b],
+        };
+        ws.sources.iter().map(pick).collect()
+    };
+    let mut mesh = Mesh {
+        vertices: gather(&slices(false)),
+        normals: if normals {
+            gather(&slices(true))
+        } else {
+            Vec::new()
+        },
+        ..Default::default()
+    };
+    let (triangles, crossed) =
         triangulate_blocks::<I, true>(cases, &ws.active, Some(&ws.reach), &ws.amap, dims)?;
     stats.cells_crossed = crossed;
-    if unreached {
-        // Crossed cells in the blocks entered that no seed reaches: their edges' vertices go.
-        compact(&mut mesh, &mut triangles);
-    }
     stats.add_time("triangulate", t);
     if normals {
         let t = Instant::now();
+        let outputs: Vec<&BlockOutput> = ws.parts[..ws.used_parts].iter().map(|p| &p.out).collect();
         finish_normals(&mut mesh, &triangles, &outputs)?;
         stats.normal_evaluations = mesh.vertices.len() as u64;
         stats.add_time("normals", t);
@@ -571,32 +736,28 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     Ok((mesh, triangles, stats))
 }
 
-/// Drops the vertices (and normals) no triangle uses, renumbering the triangles.
-fn compact<I: TriangleIndex>(mesh: &mut Mesh, triangles: &mut [[I; 3]]) {
-    let mut new = vec![NONE; mesh.vertices.len()];
-    for t in triangles.iter() {
-        for v in t {
-            new[v.to_u32() as usize] = 0;
+/// The crossed edges `a` owns that its cells in `reach` use: those whose vertices the mesh
+/// keeps. The four cells around a crossed edge are joined through crossed faces (each face
+/// holding the edge has corners of both signs), so the walk reaches all or none of them, and
+/// one in the block (the nearest, as the block's upper faces have no cells beyond) decides.
+fn used_edges(a: &Active, reach: &[u64; 8]) -> [u64; 24] {
+    let [nx, ny, nz] = a.n.map(|v| v as usize);
+    // Bits of the last column (x) and row (y) of cells, moved onto the points beyond them (the
+    // column's whole, for the row's moved bits too).
+    let column = COLUMN_0 << (nx - 2);
+    let row = ROW_0 << (8 * (ny - 2));
+    let up_y = |r: u64| r | ((r & row) << 8);
+    let up_x = |r: u64| r | ((r & column) << 1);
+    let mut used = [0u64; 24];
+    for k in 0..nz {
+        let r = reach[k.min(nz - 2)];
+        used[k] = a.edges[k] & up_y(r);
+        used[8 + k] = a.edges[8 + k] & up_x(r);
+        if k + 1 < nz {
+            used[16 + k] = a.edges[16 + k] & up_x(up_y(reach[k]));
         }
     }
-    let mut kept = 0u32;
-    for (i, n) in new.iter_mut().enumerate() {
-        if *n == 0 {
-            *n = kept;
-            mesh.vertices[kept as usize] = mesh.vertices[i];
-            if let Some(&g) = mesh.normals.get(i) {
-                mesh.normals[kept as usize] = g;
-            }
-            kept += 1;
-        }
-    }
-    mesh.vertices.truncate(kept as usize);
-    if !mesh.normals.is_empty() {
-        mesh.normals.truncate(kept as usize);
-    }
-    for t in triangles.iter_mut() {
-        *t = t.map(|v| I::from_u32(new[v.to_u32() as usize]));
-    }
+    used
 }
 
 #[cfg(test)]
@@ -626,8 +787,14 @@ mod tests {
             .unwrap();
         let walk = (field.centers(), max_walk);
         let (m, t, bs) = polygonize_as::<_, u32>(field, l, walk, &[], &s, ws).unwrap();
+        assert_same((&m, &t, &bs), (&cells, &st));
+    }
+
+    /// The walk block by block's output equals the walk cell by cell's: the same triangles,
+    /// vertices and normals (bits), every vertex used, the same cells crossed.
+    fn assert_same((m, t, bs): (&Mesh, &[[u32; 3]], &Stats), (cells, st): (&Mesh, &Stats)) {
         assert_eq!(
-            canonical(&m.vertices, &t),
+            canonical(&m.vertices, t),
             canonical(&cells.vertices, &cells.triangles)
         );
         assert_eq!(m.vertices.len(), cells.vertices.len());
@@ -736,5 +903,137 @@ mod tests {
         .unwrap();
         assert!(t.is_empty() && m.vertices.is_empty());
         assert_eq!(st.cells_crossed, 0);
+    }
+
+    /// A seed cell in every triangle of `m` (the cell holding its centroid).
+    fn seeds_of(m: &Mesh, l: &Lattice) -> Vec<[u32; 3]> {
+        m.triangles
+            .iter()
+            .map(|t| {
+                let c = t.iter().map(|&v| m.vertices[v as usize]).sum::<DVec3>() / 3.0;
+                ((c - l.origin) / l.cell)
+                    .floor()
+                    .to_array()
+                    .map(|v| v as u32)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn equals_sparse_exactly_whatever_the_earlier_calls() {
+        // Every component seeded: sparse's mesh, array for array (same order, same bits),
+        // from a fresh workspace and from one that polygonized other fields and lattices first
+        // (whose blocks it evaluates ahead).
+        let s = Settings::default();
+        let mut kept = Workspace::default();
+        let cube = |res| Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), res).unwrap();
+        for (n, r, res, seed) in [
+            (200, 0.25, 64, 11),
+            (200, 0.25, 64, 12),
+            (60, 0.12, 37, 13),
+            (500, 0.08, 50, 14),
+            (500, 0.08, 64, 14),
+            (3, 0.5, 20, 15),
+        ] {
+            let f = blobs(n, r, seed);
+            let l = cube(res);
+            let (sp, _) = super::super::sparse::polygonize(&f, &l, &s).unwrap();
+            let seeds = seeds_of(&sp, &l);
+            let none = (&[][..], 0);
+            let (m, t, _) =
+                polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut Workspace::default())
+                    .unwrap();
+            assert!(!t.is_empty());
+            assert_eq!(t, sp.triangles);
+            assert_eq!(m.vertices, sp.vertices);
+            assert_eq!(m.normals, sp.normals);
+            let (again, t_again, _) =
+                polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut kept).unwrap();
+            assert_eq!(t_again, sp.triangles);
+            assert_eq!(again.vertices, sp.vertices);
+            assert_eq!(again.normals, sp.normals);
+        }
+    }
+
+    #[test]
+    fn blocks_evaluated_ahead_change_nothing() {
+        // A workspace that last polygonized all of a field, then one seed: only that seed's
+        // component, the same arrays as from a fresh workspace (the blocks evaluated ahead that
+        // no seed reaches add nothing; those partly reached give up their unused vertices).
+        let s = Settings::default();
+        let f = blobs(40, 0.2, 21);
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 48).unwrap();
+        let (sp, _) = super::super::sparse::polygonize(&f, &l, &s).unwrap();
+        let seeds = seeds_of(&sp, &l);
+        let none = (&[][..], 0);
+        let mut kept = Workspace::default();
+        let (all, all_t, _) = polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut kept).unwrap();
+        let mut smaller = 0;
+        for seed in seeds.iter().step_by(97) {
+            let one = std::slice::from_ref(seed);
+            let (m, t, st) =
+                polygonize_as::<_, u32>(&f, &l, none, one, &s, &mut Workspace::default()).unwrap();
+            // Evaluated ahead: at least the blocks of the whole surface.
+            polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut kept).unwrap();
+            let (k, kt, kst) = polygonize_as::<_, u32>(&f, &l, none, one, &s, &mut kept).unwrap();
+            assert!(kst.evaluations > st.evaluations);
+            assert_eq!(
+                (kt, k.vertices, k.normals),
+                (t.clone(), m.vertices, m.normals)
+            );
+            smaller += (t.len() < all_t.len()) as usize;
+        }
+        // The seeds found components smaller than the whole.
+        assert!(smaller > 0 && !all.vertices.is_empty());
+    }
+
+    #[test]
+    fn blobs_apart_in_the_last_blocks_one_at_a_time() {
+        // Blobs 0.08 apart on a grid by the lattice's upper corner, cut by its sides, in
+        // blocks shared by several (and last blocks of 2 points along each axis): seeded one at
+        // a time, each equals cell tracking's, bit for bit, and keeps only its own vertices.
+        use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+        let mut centers = vec![];
+        for i in 0..4 {
+            for j in 0..4 {
+                for k in 0..4 {
+                    centers.push(
+                        DVec3::new(0.75, 0.751, 0.752)
+                            + 0.08 * DVec3::new(i as f64, j as f64, k as f64),
+                    );
+                }
+            }
+        }
+        let f = BlobField::new(
+            &centers,
+            PerPrimitive::All(0.055),
+            PerPrimitive::All(1.0),
+            0.5,
+            BlobSettings::default(),
+        )
+        .unwrap();
+        // 36 cells per axis: blocks of 7, 7, 7, 7, 7 and a last block of 1 cell.
+        let l = Lattice::cubic(DVec3::splat(0.64), DVec3::splat(1.0), 36).unwrap();
+        let (s, mut ws, mut tess) = (
+            Settings::default(),
+            Workspace::default(),
+            tracking::Tessellator::new(),
+        );
+        let mut found = 0;
+        for c in &centers {
+            let start = std::slice::from_ref(c);
+            let (cells, st) = tess.polygonize(&f, &l, start, 10, &[], &s).unwrap();
+            let (m, t, bs) =
+                polygonize_as::<_, u32>(&f, &l, (start, 10), &[], &s, &mut ws).unwrap();
+            assert_same((&m, &t, &bs), (&cells, &st));
+            found += !t.is_empty() as usize;
+        }
+        // Every blob found alone (the blobs do not touch).
+        assert_eq!(found, centers.len());
+        let (all, _) = dense::polygonize(&f, &l, &s).unwrap();
+        assert!(all
+            .vertices
+            .iter()
+            .any(|v| v.max_element() > l.origin.x + 35.0 * l.cell.x));
     }
 }

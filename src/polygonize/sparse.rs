@@ -89,6 +89,12 @@ pub(super) struct Active {
 }
 
 impl Active {
+    /// Vertices of the block (on the crossed edges it owns).
+    #[inline]
+    pub(super) fn vertices(&self) -> usize {
+        self.before[23] as usize + self.edges[23].count_ones() as usize
+    }
+
     /// Index of the vertex on the owned crossed edge along `axis` from local point `l`.
     #[inline(always)]
     fn vertex(&self, axis: usize, l: [u32; 3]) -> u32 {
@@ -735,7 +741,9 @@ pub(super) fn triangulate_block<I: TriangleIndex, const TRACKED: bool>(
             next += 1;
         }
     }
-    // Crossed edges of the block that a neighbour owns (lower end on an upper face).
+    // Crossed edges of the block that a neighbour owns (lower end on an upper face). (A block
+    // that tracking reached in part owns only the edges of its reached cells and those of its
+    // lower neighbours: the others, looked up here too, get ids that no reached cell uses.)
     let masks = [
         plane_mask(nx - 1, ny),
         plane_mask(nx, ny - 1),
