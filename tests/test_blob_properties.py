@@ -478,8 +478,9 @@ def test_octree_on_blobs_keeps_its_promise(cfg):
 @settings(max_examples=20, **SETTINGS)
 @given(cfgs=st.lists(configs(max_cells=40), min_size=2, max_size=4))
 def test_reused_tessellator_equals_one_shot_tracking(cfgs):
-    """The time-stamped caches of a reused Tessellator never leak values between calls, also
-    when the lattice, the blobs and the ambiguity change from call to call."""
+    """The time-stamped caches of a reused Tessellator never leak values between calls, nor do
+    the blocks it evaluates ahead, also when the lattice, the blobs and the ambiguity change from
+    call to call."""
     tess = im.Tessellator()
     for cfg in cfgs:
         field = cfg.field()
@@ -492,6 +493,12 @@ def test_reused_tessellator_equals_one_shot_tracking(cfgs):
             if not blocks:
                 # Cell by cell: the same walk, so the same points evaluated.
                 assert again.stats["evaluations"] == once.stats["evaluations"]
+            else:
+                # Block by block the blocks of the call before are evaluated ahead, but the
+                # output is in block order: a fresh Tessellator gives the same arrays.
+                fresh = im.Tessellator().polygonize(field, bounds=BOX, resolution=cfg.n, ambiguity=cfg.ambiguity, normals=False)
+                assert np.array_equal(again.faces, fresh.faces)
+                assert np.array_equal(again.vertices, fresh.vertices)
 
 
 @settings(max_examples=200, **SETTINGS)

@@ -89,6 +89,26 @@ def test_tessellator_walks_other_fields_cell_by_cell():
     assert im.compare(a, c) == {"missing": 0, "extra": 0, "common": len(c.faces)} and len(c.faces) > 0
 
 
+def test_tessellator_output_does_not_depend_on_earlier_calls():
+    # Block by block the Tessellator evaluates the blocks of its previous call first; its
+    # output is still in block order: after frames of other blobs on the same lattice (their
+    # blocks evaluated ahead, some where the new blobs are, most not), the same arrays as a
+    # fresh Tessellator's.
+    rng = np.random.default_rng(11)
+    kw = dict(bounds=[[-1, -1, -1], [1, 1, 1]], resolution=48)
+    frames = [im.BlobField(rng.uniform(-0.7, 0.7, (n, 3)), 0.2) for n in (60, 30, 90)]
+    tess = im.Tessellator()
+    for k, field in enumerate(frames):
+        kept = tess.polygonize(field, **kw)
+        fresh = im.Tessellator().polygonize(field, **kw)
+        assert len(fresh.faces) > 0
+        assert np.array_equal(kept.faces, fresh.faces)
+        assert np.array_equal(kept.vertices, fresh.vertices)
+        assert np.array_equal(kept.normals, fresh.normals)
+        if k > 0:
+            assert kept.stats["evaluations"] > fresh.stats["evaluations"]
+
+
 def test_animation_memory_stays_flat():
     rng = np.random.default_rng(7)
     c0 = rng.uniform(-0.7, 0.7, (200, 3))

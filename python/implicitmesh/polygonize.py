@@ -197,11 +197,13 @@ class Tessellator:
     block of 7 × 7 × 7 cells is evaluated at once (all 8³ points, vectorised) when the walk first
     enters one of its cells, and within the block the walk is a flood over bit sets, one 64-bit
     word per plane of cells. It evaluates more points than the walk cell by cell but is several
-    times faster. Its output is ordered block by block: it does not depend on earlier calls. With ``blocks=False``, and for other fields, the walk goes cell by cell with
-    time-stamped caches of corner values and edge vertices (Triquet et al. §4.1, §4.4): nothing
-    is cleared between calls, and that walk evaluates the fewest points, which pays for costly
-    fields (a Python callable, a large variational fit). In steady state neither walk
-    reallocates its buffers; each call returns new arrays.
+    times faster; the blocks the previous call used are evaluated first, as an animation's
+    surface moves little between frames. Its output is ordered block by block and does not
+    depend on earlier calls. With ``blocks=False``, and for other fields, the walk goes cell by
+    cell with time-stamped caches of corner values and edge vertices (Triquet et al. §4.1,
+    §4.4): nothing is cleared between calls, and that walk evaluates the fewest points, which
+    pays for costly fields (a Python callable, a large variational fit). In steady state neither
+    walk reallocates its buffers; each call returns new arrays.
 
     Examples
     --------
