@@ -18,6 +18,9 @@ pub struct VoxelGrid {
     items: Vec<u32>,
     /// Per-voxel fill cursor used while building.
     cursor: Vec<u32>,
+    /// The runs of voxels each primitive touches (first voxel, count, primitive), found once
+    /// per rebuild and read by its counting and filling passes.
+    runs: Vec<(u32, u32, u32)>,
 }
 
 /// Largest number of voxels a grid may have (the voxel size is grown to stay under it).
@@ -54,13 +57,22 @@ impl VoxelGrid {
         self.size = size;
         self.inv_size = 1.0 / size;
         let nvox = self.dims.iter().map(|&d| d as usize).product::<usize>();
-        // Counting pass, then fill pass (the same voxel ranges twice).
+        // The runs of voxels each primitive touches, then a counting pass and a fill pass
+        // over them.
         self.start.clear();
         self.start.resize(nvox + 1, 0);
         let (origin, dims) = (self.origin, self.dims);
-        for (c, r) in centers.iter().zip(radii) {
-            let start = &mut self.start;
-            voxels_touching(origin, size, dims, *c, *r, |v| start[v] += 1);
+        self.runs.clear();
+        for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
+            let runs = &mut self.runs;
+            voxels_touching(origin, size, dims, *c, *r, |first, count| {
+                runs.push((first as u32, count as u32, i as u32));
+            });
+        }
+        for &(first, count, _) in &self.runs {
+            for s in &mut self.start[first as usize..(first + count) as usize] {
+                *s += 1;
+            }
         }
         let mut total = 0u32;
         for s in self.start.iter_mut() {
@@ -72,14 +84,11 @@ impl VoxelGrid {
         self.items.resize(total as usize, 0);
         self.cursor.clear();
         self.cursor.extend_from_slice(&self.start[..nvox]);
-        for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
-            let (origin, size, dims) = (self.origin, self.size, self.dims);
-            let cursor = &mut self.cursor;
-            let items = &mut self.items;
-            voxels_touching(origin, size, dims, *c, *r, |v| {
-                items[cursor[v] as usize] = i as u32;
-                cursor[v] += 1;
-            });
+        for &(first, count, i) in &self.runs {
+            for c in &mut self.cursor[first as usize..(first + count) as usize] {
+                self.items[*c as usize] = i;
+                *c += 1;
+            }
         }
     }
 
@@ -131,17 +140,19 @@ impl VoxelGrid {
     /// Bytes held by the grid's arrays (capacity).
     pub fn capacity_bytes(&self) -> usize {
         4 * (self.start.capacity() + self.items.capacity() + self.cursor.capacity())
+            + 12 * self.runs.capacity()
     }
 }
 
-/// Calls `f` with every voxel index whose box intersects the sphere (c, r).
+/// Calls `f(first, count)` for every run of consecutive voxels (along x) whose boxes intersect
+/// the sphere (c, r).
 fn voxels_touching(
     origin: DVec3,
     size: f64,
     dims: [u32; 3],
     c: DVec3,
     r: f64,
-    mut f: impl FnMut(usize),
+    mut f: impl FnMut(usize, usize),
 ) {
     // The radius gets a relative margin of 1e-9 so that rounding can only add a voxel (a
     // primitive listed in a voxel it misses adds +0.0 to a sum), never drop one.
@@ -179,8 +190,8 @@ fn voxels_touching(
             let xa = clamp(((c.x - h - origin.x) * inv).max(0.0), dims[0]).max(x0);
             let xb = clamp(((c.x + h - origin.x) * inv).max(0.0), dims[0]).min(x1);
             let row = dims[0] as usize * (y as usize + dims[1] as usize * z as usize);
-            for x in xa..=xb {
-                f(x as usize + row);
+            if xa <= xb {
+                f(xa as usize + row, (xb - xa + 1) as usize);
             }
         }
     }
