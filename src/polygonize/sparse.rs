@@ -467,18 +467,16 @@ pub(super) fn finish_normals<I: TriangleIndex>(
     triangles: &[[I; 3]],
     outputs: &[&BlockOutput],
 ) -> Result<()> {
+    // (Block tracking's outputs may hold vertices the mesh dropped: only the mesh's count.)
     if outputs.iter().any(|p| p.bad_normal) {
-        let i = mesh
-            .normals
-            .iter()
-            .position(|g| !g.is_finite())
-            .unwrap_or(0);
-        let p = mesh.vertices[i];
-        return Err(Error::FieldNotFinite {
-            x: p.x,
-            y: p.y,
-            z: p.z,
-        });
+        if let Some(i) = mesh.normals.iter().position(|g| !g.is_finite()) {
+            let p = mesh.vertices[i];
+            return Err(Error::FieldNotFinite {
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            });
+        }
     }
     if outputs.iter().any(|p| p.zero_normal) {
         // Rare (the gradient vanishes at a vertex): the face normals need the triangles as u32,
@@ -742,8 +740,8 @@ pub(super) fn triangulate_block<I: TriangleIndex, const TRACKED: bool>(
         }
     }
     // Crossed edges of the block that a neighbour owns (lower end on an upper face). (A block
-    // that tracking reached in part owns only the edges of its reached cells and those of its
-    // lower neighbours: the others, looked up here too, get ids that no reached cell uses.)
+    // that tracking reached in part owns only the edges of its reached cells: its other crossed
+    // edges, looked up here too, get ids that no reached cell uses.)
     let masks = [
         plane_mask(nx - 1, ny),
         plane_mask(nx, ny - 1),
