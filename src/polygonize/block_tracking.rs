@@ -787,7 +787,7 @@ mod tests {
             .unwrap();
         let walk = (field.centers(), max_walk);
         let (m, t, bs) = polygonize_as::<_, u32>(field, l, walk, &[], &s, ws).unwrap();
-        assert_same((&m, &t, &bs), (&cells, &st));
+        assert_same((&m, &t, &bs), (cells, &st));
     }
 
     /// The walk block by block's output equals the walk cell by cell's: the same triangles,
@@ -1025,7 +1025,7 @@ mod tests {
             let (cells, st) = tess.polygonize(&f, &l, start, 10, &[], &s).unwrap();
             let (m, t, bs) =
                 polygonize_as::<_, u32>(&f, &l, (start, 10), &[], &s, &mut ws).unwrap();
-            assert_same((&m, &t, &bs), (&cells, &st));
+            assert_same((&m, &t, &bs), (cells, &st));
             found += !t.is_empty() as usize;
         }
         // Every blob found alone (the blobs do not touch).
