@@ -18,6 +18,24 @@ impl Isa {
         *ISA.get_or_init(Isa::probe)
     }
 
+    /// Every instruction set this CPU can run the hot loops with (for tests that compare the
+    /// paths).
+    #[cfg(test)]
+    pub(crate) fn available() -> Vec<Isa> {
+        #[allow(unused_mut)]
+        let mut isas = vec![Isa::Generic];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx2") {
+                isas.push(Isa::Avx2);
+            }
+            if std::is_x86_feature_detected!("avx512f") {
+                isas.push(Isa::Avx512);
+            }
+        }
+        isas
+    }
+
     fn probe() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {

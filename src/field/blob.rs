@@ -460,6 +460,175 @@ impl BlobField {
         }
     }
 
+    /// Fills a block's values (see [`BlockField::block_values`]) from the primitives of `list`
+    /// with the vector path of `isa` (which the CPU must have): the same bits on every path.
+    fn splat_block(&self, isa: Isa, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
+        match isa {
+            // SAFETY: the caller passes an instruction set the CPU has.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { self.splat_block_avx512(list, block, out) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { self.splat_block_avx2(list, block, out) },
+            Isa::Generic => self.splat_block_with(list, block, out, |row, qx, k, a| {
+                for (v, q) in row.iter_mut().zip(qx) {
+                    let t = (k - q).max(0.0);
+                    *v += a * (t * t);
+                }
+            }),
+        }
+    }
+
+    /// [`BlobField::gradient_over`] at each point, with the vector path of `isa` (which the CPU
+    /// must have) for whole vectors of points: the same bits on every path.
+    fn gradients_over(&self, isa: Isa, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        let done = match isa {
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => {
+                let full = points.len() / 8 * 8;
+                // SAFETY: the caller passes an instruction set the CPU has.
+                unsafe { self.gradients8_avx512(list, &points[..full], &mut out[..full]) };
+                full
+            }
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => {
+                let full = points.len() / 4 * 4;
+                // SAFETY: as above.
+                unsafe { self.gradients4_avx2(list, &points[..full], &mut out[..full]) };
+                full
+            }
+            Isa::Generic => 0,
+        };
+        for (p, o) in points[done..].iter().zip(&mut out[done..]) {
+            *o = self.gradient_over(list, *p);
+        }
+    }
+
+    /// [`BlobField::splat_block_avx512`] for AVX2: each row of eight as two vectors of four. The
+    /// same operations on each value as [`unit_term`], in the same order, so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn splat_block_avx2(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
+        use std::arch::x86_64::*;
+        let BlockCoords { xs, ys, zs, n, .. } = block;
+        let in_block = (1u32 << n[1]) - 1;
+        out.fill(0.0);
+        // SAFETY: the coordinate arrays hold eight f64 each.
+        let vx = unsafe { [0, 4].map(|h| _mm256_loadu_pd(xs.as_ptr().add(h))) };
+        let vy = unsafe { [0, 4].map(|h| _mm256_loadu_pd(ys.as_ptr().add(h))) };
+        let (one, zero) = (_mm256_set1_pd(1.0), _mm256_setzero_pd());
+        for &i in list {
+            let (c, inv, a, r) = self.primitive(i);
+            let vinv = _mm256_set1_pd(inv);
+            let qx = vx.map(|x| {
+                let dx = _mm256_sub_pd(x, _mm256_set1_pd(c.x));
+                _mm256_mul_pd(_mm256_mul_pd(dx, dx), vinv)
+            });
+            // The smallest lane (min is exact, so the generic fold's value).
+            let m = _mm256_min_pd(qx[0], qx[1]);
+            let m = _mm_min_pd(_mm256_castpd256_pd128(m), _mm256_extractf128_pd::<1>(m));
+            let near = _mm256_set1_pd(_mm_cvtsd_f64(_mm_min_sd(m, _mm_unpackhi_pd(m, m))));
+            let dy2 = vy.map(|y| {
+                let dy = _mm256_sub_pd(y, _mm256_set1_pd(c.y));
+                _mm256_mul_pd(dy, dy)
+            });
+            let va = _mm256_set1_pd(a);
+            let planes = block.planes(c.z, r);
+            #[allow(clippy::needless_range_loop)] // k also indexes `out`
+            for k in planes {
+                let dz = zs[k] - c.z;
+                let dz2 = _mm256_set1_pd(dz * dz);
+                let ks =
+                    dy2.map(|d| _mm256_sub_pd(one, _mm256_mul_pd(_mm256_add_pd(d, dz2), vinv)));
+                // Rows whose nearest lane has a positive term (see `splat_block_with`).
+                let gt =
+                    ks.map(|k| _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(k, near)) as u32);
+                let mut rows = (gt[0] | gt[1] << 4) & in_block;
+                if rows == 0 {
+                    continue;
+                }
+                let mut kv = [0.0f64; 8];
+                // SAFETY: eight f64.
+                unsafe {
+                    _mm256_storeu_pd(kv.as_mut_ptr(), ks[0]);
+                    _mm256_storeu_pd(kv.as_mut_ptr().add(4), ks[1]);
+                }
+                while rows != 0 {
+                    let j = rows.trailing_zeros() as usize;
+                    rows &= rows - 1;
+                    let kj = _mm256_set1_pd(kv[j]);
+                    for (h, q) in qx.iter().enumerate() {
+                        let t = _mm256_max_pd(_mm256_sub_pd(kj, *q), zero);
+                        let at = _mm256_mul_pd(va, _mm256_mul_pd(t, t));
+                        // SAFETY: 8j + 64k + 4h + 4 ≤ 512 (j, k < 8, h < 2).
+                        unsafe {
+                            let p = out.as_mut_ptr().add(8 * j + 64 * k + 4 * h);
+                            _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), at));
+                        }
+                    }
+                }
+            }
+        }
+        let th = _mm256_set1_pd(self.threshold);
+        for row in out.chunks_exact_mut(4) {
+            // SAFETY: four f64.
+            unsafe {
+                let p = row.as_mut_ptr();
+                _mm256_storeu_pd(p, _mm256_sub_pd(th, _mm256_loadu_pd(p)));
+            }
+        }
+    }
+
+    /// [`BlobField::gradients8_avx512`] for AVX2, four points per vector (`points.len()` a
+    /// multiple of 4). The same operations in the same order, so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gradients4_avx2(&self, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        use std::arch::x86_64::*;
+        let (one, zero) = (_mm256_set1_pd(1.0), _mm256_setzero_pd());
+        for (p4, o4) in points.chunks_exact(4).zip(out.chunks_exact_mut(4)) {
+            let lane = |f: fn(&DVec3) -> f64| -> [f64; 4] { std::array::from_fn(|k| f(&p4[k])) };
+            let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
+            // SAFETY: the arrays hold four f64 each.
+            let (px, py, pz) = unsafe {
+                (
+                    _mm256_loadu_pd(x.as_ptr()),
+                    _mm256_loadu_pd(y.as_ptr()),
+                    _mm256_loadu_pd(z.as_ptr()),
+                )
+            };
+            let (mut gx, mut gy, mut gz) = (zero, zero, zero);
+            for &i in list {
+                let q = &self.packed[i as usize];
+                let dx = _mm256_sub_pd(px, _mm256_set1_pd(q.center.x));
+                let dy = _mm256_sub_pd(py, _mm256_set1_pd(q.center.y));
+                let dz = _mm256_sub_pd(pz, _mm256_set1_pd(q.center.z));
+                let s = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                    _mm256_mul_pd(dz, dz),
+                );
+                let t = _mm256_max_pd(
+                    _mm256_sub_pd(one, _mm256_mul_pd(s, _mm256_set1_pd(q.inv_r2))),
+                    zero,
+                );
+                let k = _mm256_mul_pd(_mm256_set1_pd(q.grad), t);
+                gx = _mm256_add_pd(gx, _mm256_mul_pd(dx, k));
+                gy = _mm256_add_pd(gy, _mm256_mul_pd(dy, k));
+                gz = _mm256_add_pd(gz, _mm256_mul_pd(dz, k));
+            }
+            let (mut ox, mut oy, mut oz) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+            // SAFETY: the arrays hold four f64 each.
+            unsafe {
+                _mm256_storeu_pd(ox.as_mut_ptr(), gx);
+                _mm256_storeu_pd(oy.as_mut_ptr(), gy);
+                _mm256_storeu_pd(oz.as_mut_ptr(), gz);
+            }
+            for (k, o) in o4.iter_mut().enumerate() {
+                *o = DVec3::new(ox[k], oy[k], oz[k]);
+            }
+        }
+    }
+
     /// [`BlobField::gradient_over`] for eight points per step (`points.len()` a multiple of 8).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
@@ -748,6 +917,25 @@ struct BlockCoords {
 }
 
 impl BlockCoords {
+    /// The block of `n` points per axis from lattice point `lo`, its coordinates exactly as
+    /// [`Lattice::point`] computes them (repeating the last point up to eight).
+    fn new(lattice: &Lattice, lo: [u32; 3], n: [u32; 3]) -> BlockCoords {
+        let coord = |a: usize| -> [f64; BLOCK_POINTS] {
+            std::array::from_fn(|i| {
+                let mut g = [0; 3];
+                g[a] = lo[a] + (i as u32).min(n[a] - 1);
+                lattice.point(g)[a]
+            })
+        };
+        BlockCoords {
+            xs: coord(0),
+            ys: coord(1),
+            zs: coord(2),
+            n,
+            inv_h: (DVec3::ONE / lattice.cell).to_array(),
+        }
+    }
+
     /// The block's planes within [cz − r, cz + r], with a point of margin for rounding (the
     /// exact test is per row); empty when none.
     #[inline(always)]
@@ -921,36 +1109,12 @@ impl BlockField for BlobField {
                 return s;
             }
         }
-        // Coordinates exactly as Lattice::point computes them (repeating the last point).
-        let coord = |a: usize| -> [f64; BLOCK_POINTS] {
-            std::array::from_fn(|i| {
-                let mut g = [0; 3];
-                g[a] = lo[a] + (i as u32).min(n[a] - 1);
-                lattice.point(g)[a]
-            })
-        };
-        let block = BlockCoords {
-            xs: coord(0),
-            ys: coord(1),
-            zs: coord(2),
-            n,
-            inv_h: (DVec3::ONE / lattice.cell).to_array(),
-        };
-        match Isa::detect() {
-            // SAFETY: the variant is only chosen when the CPU has the feature.
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { self.splat_block_avx512(list, &block, out) },
-            _ => self.splat_block_with(list, &block, out, |row, qx, k, a| {
-                for (v, q) in row.iter_mut().zip(qx) {
-                    let t = (k - q).max(0.0);
-                    *v += a * (t * t);
-                }
-            }),
-        }
+        let block = BlockCoords::new(lattice, lo, n);
+        self.splat_block(Isa::detect(), list, &block, out);
         BlockSign::Mixed
     }
 
-    /// Eight points at a time over the block's list where AVX-512 is available (the same
+    /// Eight points at a time over the block's list with AVX-512, four with AVX2 (the same
     /// operations in the same order as [`Field::gradient`], so the same bits).
     fn block_gradients(
         &self,
@@ -960,23 +1124,13 @@ impl BlockField for BlobField {
         out: &mut [DVec3],
     ) {
         let list = blocks.list(block.index);
-        let mut done = 0;
         // A block much larger than the primitives (a coarse lattice) lists far more of them than
         // reach any one point: the voxel lists are shorter then (the same terms, the same bits).
         if list.len() > LONG_BLOCK_LIST {
             map_points(points, out, |p| self.gradient_at(p));
             return;
         }
-        #[cfg(target_arch = "x86_64")]
-        if let Isa::Avx512 = Isa::detect() {
-            let full = points.len() / 8 * 8;
-            // SAFETY: AVX-512F is available (detected).
-            unsafe { self.gradients8_avx512(list, &points[..full], &mut out[..full]) };
-            done = full;
-        }
-        for (p, o) in points[done..].iter().zip(&mut out[done..]) {
-            *o = self.gradient_over(list, *p);
-        }
+        self.gradients_over(Isa::detect(), list, points, out);
     }
 }
 
@@ -984,6 +1138,43 @@ impl BlockField for BlobField {
 mod tests {
     use super::super::testing::*;
     use super::*;
+
+    #[test]
+    fn every_vector_path_gives_the_same_bits() {
+        let f = random_blobs(300, 17);
+        let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [37, 30, 45]).unwrap();
+        let all: Vec<u32> = (0..300).collect();
+        let points = random_points(23, -0.9, 0.9, 5);
+        let isas = Isa::available();
+        // A whole block, and blocks cut by the lattice's upper sides.
+        for (lo, n) in [
+            ([0, 0, 0], [8, 8, 8]),
+            ([32, 24, 40], [6, 7, 6]),
+            ([8, 16, 0], [8, 3, 1]),
+        ] {
+            let block = BlockCoords::new(&lattice, lo, n);
+            let mut want = [0.0; 512];
+            f.splat_block(Isa::Generic, &all, &block, &mut want);
+            for &isa in &isas {
+                let mut got = [1.0; 512];
+                f.splat_block(isa, &all, &block, &mut got);
+                assert!(
+                    want.iter()
+                        .zip(&got)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{isa:?}"
+                );
+            }
+        }
+        let mut want = vec![DVec3::ZERO; points.len()];
+        f.gradients_over(Isa::Generic, &all, &points, &mut want);
+        assert!(want.iter().any(|g| *g != DVec3::ZERO));
+        for &isa in &isas {
+            let mut got = vec![DVec3::ONE; points.len()];
+            f.gradients_over(isa, &all, &points, &mut got);
+            assert_eq!(want, got, "{isa:?}");
+        }
+    }
 
     fn random_blobs(n: usize, seed: u64) -> BlobField {
         let c = random_points(n, -0.8, 0.8, seed);

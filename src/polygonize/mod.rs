@@ -227,12 +227,20 @@ pub fn compute_normals<F: Field + ?Sized>(
 /// length zero stay zero and non-finite ones stay as they are. Returns the number of zero
 /// vectors and the index of the first non-finite one.
 pub(crate) fn normalize(g: &mut [DVec3]) -> (usize, Option<usize>) {
-    let mut done = 0;
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::Isa::detect() == crate::simd::Isa::Avx512 {
-        // SAFETY: the CPU has AVX-512F.
-        done = unsafe { normalize_avx512(g) };
-    }
+    normalize_with(crate::simd::Isa::detect(), g)
+}
+
+/// [`normalize`] with the vector path of `isa`, which the CPU must have.
+fn normalize_with(isa: crate::simd::Isa, g: &mut [DVec3]) -> (usize, Option<usize>) {
+    let done = match isa {
+        // SAFETY: the caller passes an instruction set the CPU has.
+        #[cfg(target_arch = "x86_64")]
+        crate::simd::Isa::Avx512 => unsafe { normalize_avx512(g) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        crate::simd::Isa::Avx2 => unsafe { normalize_avx2(g) },
+        crate::simd::Isa::Generic => 0,
+    };
     normalize_from(g, done)
 }
 
@@ -252,6 +260,52 @@ fn normalize_from(g: &mut [DVec3], start: usize) -> (usize, Option<usize>) {
         }
     }
     (zero, bad)
+}
+
+/// [`normalize_avx512`] for AVX2, four vectors at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn normalize_avx2(g: &mut [DVec3]) -> usize {
+    use std::arch::x86_64::*;
+    let mut done = 0;
+    for c in g.chunks_exact_mut(4) {
+        let lane = |f: fn(&DVec3) -> f64| -> [f64; 4] { std::array::from_fn(|k| f(&c[k])) };
+        let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
+        // SAFETY: the arrays hold four f64 each.
+        let (vx, vy, vz) = unsafe {
+            (
+                _mm256_loadu_pd(x.as_ptr()),
+                _mm256_loadu_pd(y.as_ptr()),
+                _mm256_loadu_pd(z.as_ptr()),
+            )
+        };
+        // DVec3::length: ((x·x + y·y) + z·z).sqrt().
+        let l = _mm256_sqrt_pd(_mm256_add_pd(
+            _mm256_add_pd(_mm256_mul_pd(vx, vx), _mm256_mul_pd(vy, vy)),
+            _mm256_mul_pd(vz, vz),
+        ));
+        // 0 < l < ∞ in every lane (false for NaN); otherwise the scalar loop takes over here.
+        let fine = _mm256_and_pd(
+            _mm256_cmp_pd::<_CMP_GT_OQ>(l, _mm256_setzero_pd()),
+            _mm256_cmp_pd::<_CMP_LT_OQ>(l, _mm256_set1_pd(f64::INFINITY)),
+        );
+        if _mm256_movemask_pd(fine) != 0xf {
+            break;
+        }
+        let inv = _mm256_div_pd(_mm256_set1_pd(1.0), l);
+        let (mut ox, mut oy, mut oz) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+        // SAFETY: the arrays hold four f64 each.
+        unsafe {
+            _mm256_storeu_pd(ox.as_mut_ptr(), _mm256_mul_pd(vx, inv));
+            _mm256_storeu_pd(oy.as_mut_ptr(), _mm256_mul_pd(vy, inv));
+            _mm256_storeu_pd(oz.as_mut_ptr(), _mm256_mul_pd(vz, inv));
+        }
+        for (k, v) in c.iter_mut().enumerate() {
+            *v = DVec3::new(ox[k], oy[k], oz[k]);
+        }
+        done += 4;
+    }
+    done
 }
 
 /// [`normalize`] eight vectors at a time, up to the first group of eight holding a vector that
@@ -340,8 +394,8 @@ pub(crate) fn gather_map<T: Sync, U: Send, P: AsRef<[T]> + Sync>(
 mod tests {
     use super::*;
 
-    /// The vectorised path gives the scalar loop's bits, zero and non-finite vectors included,
-    /// wherever they fall among the groups of eight.
+    /// Every vectorised path gives the scalar loop's bits, zero and non-finite vectors
+    /// included, wherever they fall among the groups of four or eight.
     #[test]
     fn normalize_matches_the_scalar_loop() {
         let mut state = 7u64;
@@ -361,11 +415,14 @@ mod tests {
                 }
                 let mut expected = g.clone();
                 let counts = normalize_from(&mut expected, 0);
-                assert_eq!(normalize(&mut g), counts);
                 let bits = |v: &[DVec3]| -> Vec<[u64; 3]> {
                     v.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
                 };
-                assert_eq!(bits(&g), bits(&expected), "{special:?} {kind}");
+                for isa in crate::simd::Isa::available() {
+                    let mut g = g.clone();
+                    assert_eq!(normalize_with(isa, &mut g), counts);
+                    assert_eq!(bits(&g), bits(&expected), "{special:?} {kind} {isa:?}");
+                }
             }
         }
     }

@@ -491,11 +491,21 @@ pub(super) fn finish_normals<I: TriangleIndex>(
 /// Bit `i + 8j` of word `k` set when `values[i + 8j + 64k] < 0`, for the first `planes` planes.
 #[inline]
 fn inside_bits(values: &[f64; 512], planes: usize) -> [u64; 8] {
+    inside_bits_with(crate::simd::Isa::detect(), values, planes)
+}
+
+/// [`inside_bits`] with the vector path of `isa`, which the CPU must have.
+#[inline]
+fn inside_bits_with(isa: crate::simd::Isa, values: &[f64; 512], planes: usize) -> [u64; 8] {
     #[cfg(target_arch = "x86_64")]
-    if crate::simd::Isa::detect() == crate::simd::Isa::Avx512 {
-        // SAFETY: the CPU has AVX-512F.
-        return unsafe { inside_bits_avx512(values, planes) };
+    match isa {
+        // SAFETY: the caller passes an instruction set the CPU has.
+        crate::simd::Isa::Avx512 => return unsafe { inside_bits_avx512(values, planes) },
+        // SAFETY: as above.
+        crate::simd::Isa::Avx2 => return unsafe { inside_bits_avx2(values, planes) },
+        crate::simd::Isa::Generic => {}
     }
+    let _ = isa;
     let mut signs = [0u64; 8];
     for (k, s) in signs.iter_mut().enumerate().take(planes) {
         for (j, row) in values[64 * k..64 * k + 64].chunks_exact(8).enumerate() {
@@ -520,6 +530,23 @@ fn inside_bits_avx512(values: &[f64; 512], planes: usize) -> [u64; 8] {
             // SAFETY: 64k + 8j + 8 ≤ 512: eight f64 within the array.
             let v = unsafe { _mm512_loadu_pd(values.as_ptr().add(64 * k + 8 * j)) };
             *s |= (_mm512_cmp_pd_mask::<_CMP_LT_OQ>(v, zero) as u64) << (8 * j);
+        }
+    }
+    signs
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn inside_bits_avx2(values: &[f64; 512], planes: usize) -> [u64; 8] {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_pd();
+    let mut signs = [0u64; 8];
+    for (k, s) in signs.iter_mut().enumerate().take(planes) {
+        for q in 0..16 {
+            // SAFETY: 64k + 4q + 4 ≤ 512: four f64 within the array.
+            let v = unsafe { _mm256_loadu_pd(values.as_ptr().add(64 * k + 4 * q)) };
+            let m = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(v, zero)) as u64;
+            *s |= m << (4 * q);
         }
     }
     signs
@@ -812,6 +839,28 @@ mod tests {
     use crate::field::blob::BlobField;
     use crate::field::testing::random_blobs as blobs;
     use crate::field::testing::{canonical_triangles, vertex_normal_bits, Lying};
+
+    #[test]
+    fn inside_bits_agree_on_every_vector_path() {
+        let mut values = [0.0; 512];
+        for (i, v) in values.iter_mut().enumerate() {
+            // Negative, positive, ±0 and NaN (never inside) in an irregular pattern.
+            *v = match (i * 7919) % 11 {
+                0 => -0.0,
+                1 => 0.0,
+                2 => f64::NAN,
+                k => (k as f64 - 6.5) * (1.0 + i as f64),
+            };
+        }
+        for planes in [0, 1, 5, 8] {
+            let want = inside_bits_with(crate::simd::Isa::Generic, &values, planes);
+            assert_eq!(want[planes..], [0; 8][planes..]);
+            assert!(planes == 0 || want[0] != 0);
+            for isa in crate::simd::Isa::available() {
+                assert_eq!(inside_bits_with(isa, &values, planes), want, "{isa:?}");
+            }
+        }
+    }
     use crate::polygonize::Ambiguity;
 
     /// Triangles, order-free and bit-exact.
