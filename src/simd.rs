@@ -51,3 +51,137 @@ impl Isa {
         Isa::Generic
     }
 }
+
+/// Vectors of f64 lanes for the loops written once for AVX2 and AVX-512: each method is one
+/// intrinsic, compiled with its feature and inlined into callers that have it.
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod lanes {
+    use std::arch::x86_64::*;
+
+    /// A vector of [`F64s::LANES`] f64 (at most 8). The methods' only requirement is the
+    /// vector's CPU feature.
+    pub(crate) trait F64s: Copy {
+        const LANES: usize;
+        /// Every lane `x`.
+        unsafe fn splat(x: f64) -> Self;
+        /// The first `LANES` values of `a`, which must hold that many.
+        unsafe fn load(a: &[f64]) -> Self;
+        /// Into the first `LANES` values of `a`, which must hold that many.
+        unsafe fn store(self, a: &mut [f64]);
+        unsafe fn add(self, o: Self) -> Self;
+        unsafe fn sub(self, o: Self) -> Self;
+        unsafe fn mul(self, o: Self) -> Self;
+        unsafe fn div(self, o: Self) -> Self;
+        /// Lane by lane `self > o ? self : o` (so `o` where either is NaN).
+        unsafe fn max(self, o: Self) -> Self;
+        unsafe fn sqrt(self) -> Self;
+        /// Bit per lane: `self < o` (false for NaN).
+        unsafe fn lt(self, o: Self) -> u32;
+        /// Bit per lane: `self > o` (false for NaN).
+        unsafe fn gt(self, o: Self) -> u32;
+    }
+
+    macro_rules! binary {
+        ($feature:literal, $($name:ident = $f:ident),*) => {
+            $(
+                #[inline]
+                #[target_feature(enable = $feature)]
+                unsafe fn $name(self, o: Self) -> Self {
+                    $f(self, o)
+                }
+            )*
+        };
+    }
+
+    impl F64s for __m256d {
+        const LANES: usize = 4;
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn splat(x: f64) -> Self {
+            _mm256_set1_pd(x)
+        }
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn load(a: &[f64]) -> Self {
+            debug_assert!(a.len() >= Self::LANES);
+            // SAFETY: the caller passes at least four f64.
+            unsafe { _mm256_loadu_pd(a.as_ptr()) }
+        }
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn store(self, a: &mut [f64]) {
+            debug_assert!(a.len() >= Self::LANES);
+            // SAFETY: as in `load`.
+            unsafe { _mm256_storeu_pd(a.as_mut_ptr(), self) }
+        }
+        binary!(
+            "avx2",
+            add = _mm256_add_pd,
+            sub = _mm256_sub_pd,
+            mul = _mm256_mul_pd,
+            div = _mm256_div_pd,
+            max = _mm256_max_pd
+        );
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn sqrt(self) -> Self {
+            _mm256_sqrt_pd(self)
+        }
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn lt(self, o: Self) -> u32 {
+            _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(self, o)) as u32
+        }
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn gt(self, o: Self) -> u32 {
+            _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(self, o)) as u32
+        }
+    }
+
+    impl F64s for __m512d {
+        const LANES: usize = 8;
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn splat(x: f64) -> Self {
+            _mm512_set1_pd(x)
+        }
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn load(a: &[f64]) -> Self {
+            debug_assert!(a.len() >= Self::LANES);
+            // SAFETY: the caller passes at least eight f64.
+            unsafe { _mm512_loadu_pd(a.as_ptr()) }
+        }
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn store(self, a: &mut [f64]) {
+            debug_assert!(a.len() >= Self::LANES);
+            // SAFETY: as in `load`.
+            unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self) }
+        }
+        binary!(
+            "avx512f",
+            add = _mm512_add_pd,
+            sub = _mm512_sub_pd,
+            mul = _mm512_mul_pd,
+            div = _mm512_div_pd,
+            max = _mm512_max_pd
+        );
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn sqrt(self) -> Self {
+            _mm512_sqrt_pd(self)
+        }
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn lt(self, o: Self) -> u32 {
+            _mm512_cmp_pd_mask::<_CMP_LT_OQ>(self, o) as u32
+        }
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn gt(self, o: Self) -> u32 {
+            _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self, o) as u32
+        }
+    }
+}

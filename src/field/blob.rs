@@ -9,6 +9,8 @@ use super::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::lanes::F64s;
 use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -579,103 +581,60 @@ impl BlobField {
         }
     }
 
-    /// [`BlobField::gradients8_avx512`] for AVX2, four points per vector (`points.len()` a
-    /// multiple of 4). The same operations in the same order, so the same bits.
+    /// [`BlobField::gradient_over`] for `V::LANES` points per step (`points.len()` a multiple
+    /// of it). The same operations in the same order, so the same bits.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn gradients4_avx2(&self, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
-        use std::arch::x86_64::*;
-        let (one, zero) = (_mm256_set1_pd(1.0), _mm256_setzero_pd());
-        for (p4, o4) in points.chunks_exact(4).zip(out.chunks_exact_mut(4)) {
-            let lane = |f: fn(&DVec3) -> f64| -> [f64; 4] { std::array::from_fn(|k| f(&p4[k])) };
-            let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
-            // SAFETY: the arrays hold four f64 each.
-            let (px, py, pz) = unsafe {
-                (
-                    _mm256_loadu_pd(x.as_ptr()),
-                    _mm256_loadu_pd(y.as_ptr()),
-                    _mm256_loadu_pd(z.as_ptr()),
-                )
-            };
-            let (mut gx, mut gy, mut gz) = (zero, zero, zero);
-            for &i in list {
-                let q = &self.packed[i as usize];
-                let dx = _mm256_sub_pd(px, _mm256_set1_pd(q.center.x));
-                let dy = _mm256_sub_pd(py, _mm256_set1_pd(q.center.y));
-                let dz = _mm256_sub_pd(pz, _mm256_set1_pd(q.center.z));
-                let s = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
-                    _mm256_mul_pd(dz, dz),
-                );
-                let t = _mm256_max_pd(
-                    _mm256_sub_pd(one, _mm256_mul_pd(s, _mm256_set1_pd(q.inv_r2))),
-                    zero,
-                );
-                let k = _mm256_mul_pd(_mm256_set1_pd(q.grad), t);
-                gx = _mm256_add_pd(gx, _mm256_mul_pd(dx, k));
-                gy = _mm256_add_pd(gy, _mm256_mul_pd(dy, k));
-                gz = _mm256_add_pd(gz, _mm256_mul_pd(dz, k));
-            }
-            let (mut ox, mut oy, mut oz) = ([0.0; 4], [0.0; 4], [0.0; 4]);
-            // SAFETY: the arrays hold four f64 each.
-            unsafe {
-                _mm256_storeu_pd(ox.as_mut_ptr(), gx);
-                _mm256_storeu_pd(oy.as_mut_ptr(), gy);
-                _mm256_storeu_pd(oz.as_mut_ptr(), gz);
-            }
-            for (k, o) in o4.iter_mut().enumerate() {
-                *o = DVec3::new(ox[k], oy[k], oz[k]);
+    #[inline(always)]
+    unsafe fn gradients_lanes<V: F64s>(&self, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        // SAFETY (every vector operation below): the caller runs where V's feature is.
+        unsafe {
+            let (one, zero) = (V::splat(1.0), V::splat(0.0));
+            for (pc, oc) in points
+                .chunks_exact(V::LANES)
+                .zip(out.chunks_exact_mut(V::LANES))
+            {
+                let (mut x, mut y, mut z) = ([0.0; 8], [0.0; 8], [0.0; 8]);
+                for (k, p) in pc.iter().enumerate() {
+                    (x[k], y[k], z[k]) = (p.x, p.y, p.z);
+                }
+                let (px, py, pz) = (V::load(&x), V::load(&y), V::load(&z));
+                let (mut gx, mut gy, mut gz) = (zero, zero, zero);
+                for &i in list {
+                    let q = &self.packed[i as usize];
+                    let dx = px.sub(V::splat(q.center.x));
+                    let dy = py.sub(V::splat(q.center.y));
+                    let dz = pz.sub(V::splat(q.center.z));
+                    let s = dx.mul(dx).add(dy.mul(dy)).add(dz.mul(dz));
+                    let t = one.sub(s.mul(V::splat(q.inv_r2))).max(zero);
+                    let k = V::splat(q.grad).mul(t);
+                    gx = gx.add(dx.mul(k));
+                    gy = gy.add(dy.mul(k));
+                    gz = gz.add(dz.mul(k));
+                }
+                gx.store(&mut x);
+                gy.store(&mut y);
+                gz.store(&mut z);
+                for (k, o) in oc.iter_mut().enumerate() {
+                    *o = DVec3::new(x[k], y[k], z[k]);
+                }
             }
         }
     }
 
-    /// [`BlobField::gradient_over`] for eight points per step (`points.len()` a multiple of 8).
+    /// [`BlobField::gradients_lanes`] with AVX-512, eight points per step.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     unsafe fn gradients8_avx512(&self, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
-        use std::arch::x86_64::*;
-        let (one, zero) = (_mm512_set1_pd(1.0), _mm512_setzero_pd());
-        for (p8, o8) in points.chunks_exact(8).zip(out.chunks_exact_mut(8)) {
-            let lane = |f: fn(&DVec3) -> f64| -> [f64; 8] { std::array::from_fn(|k| f(&p8[k])) };
-            let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
-            // SAFETY: the arrays hold eight f64 each.
-            let (px, py, pz) = unsafe {
-                (
-                    _mm512_loadu_pd(x.as_ptr()),
-                    _mm512_loadu_pd(y.as_ptr()),
-                    _mm512_loadu_pd(z.as_ptr()),
-                )
-            };
-            let (mut gx, mut gy, mut gz) = (zero, zero, zero);
-            for &i in list {
-                let q = &self.packed[i as usize];
-                let dx = _mm512_sub_pd(px, _mm512_set1_pd(q.center.x));
-                let dy = _mm512_sub_pd(py, _mm512_set1_pd(q.center.y));
-                let dz = _mm512_sub_pd(pz, _mm512_set1_pd(q.center.z));
-                let s = _mm512_add_pd(
-                    _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
-                    _mm512_mul_pd(dz, dz),
-                );
-                let t = _mm512_max_pd(
-                    _mm512_sub_pd(one, _mm512_mul_pd(s, _mm512_set1_pd(q.inv_r2))),
-                    zero,
-                );
-                let k = _mm512_mul_pd(_mm512_set1_pd(q.grad), t);
-                gx = _mm512_add_pd(gx, _mm512_mul_pd(dx, k));
-                gy = _mm512_add_pd(gy, _mm512_mul_pd(dy, k));
-                gz = _mm512_add_pd(gz, _mm512_mul_pd(dz, k));
-            }
-            let (mut ox, mut oy, mut oz) = ([0.0; 8], [0.0; 8], [0.0; 8]);
-            // SAFETY: the arrays hold eight f64 each.
-            unsafe {
-                _mm512_storeu_pd(ox.as_mut_ptr(), gx);
-                _mm512_storeu_pd(oy.as_mut_ptr(), gy);
-                _mm512_storeu_pd(oz.as_mut_ptr(), gz);
-            }
-            for (k, o) in o8.iter_mut().enumerate() {
-                *o = DVec3::new(ox[k], oy[k], oz[k]);
-            }
-        }
+        // SAFETY: AVX-512F is enabled here.
+        unsafe { self.gradients_lanes::<std::arch::x86_64::__m512d>(list, points, out) }
+    }
+
+    /// [`BlobField::gradients_lanes`] with AVX2, four points per step.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gradients4_avx2(&self, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        // SAFETY: AVX2 is enabled here.
+        unsafe { self.gradients_lanes::<std::arch::x86_64::__m256d>(list, points, out) }
     }
 
     /// An upper bound on |∇f| over all space: one primitive's gradient is largest at

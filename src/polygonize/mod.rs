@@ -262,96 +262,55 @@ fn normalize_from(g: &mut [DVec3], start: usize) -> (usize, Option<usize>) {
     (zero, bad)
 }
 
-/// [`normalize_avx512`] for AVX2, four vectors at a time.
+/// [`normalize`] `V::LANES` vectors at a time, up to the first group holding a vector that is
+/// zero or not of finite length; returns how many vectors it normalized (the rest is left to
+/// the scalar loop). The same operations in the same order, so the same bits.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn normalize_avx2(g: &mut [DVec3]) -> usize {
-    use std::arch::x86_64::*;
+#[inline(always)]
+unsafe fn normalize_lanes<V: crate::simd::lanes::F64s>(g: &mut [DVec3]) -> usize {
+    let all = (1u32 << V::LANES) - 1;
     let mut done = 0;
-    for c in g.chunks_exact_mut(4) {
-        let lane = |f: fn(&DVec3) -> f64| -> [f64; 4] { std::array::from_fn(|k| f(&c[k])) };
-        let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
-        // SAFETY: the arrays hold four f64 each.
-        let (vx, vy, vz) = unsafe {
-            (
-                _mm256_loadu_pd(x.as_ptr()),
-                _mm256_loadu_pd(y.as_ptr()),
-                _mm256_loadu_pd(z.as_ptr()),
-            )
-        };
-        // DVec3::length: ((x·x + y·y) + z·z).sqrt().
-        let l = _mm256_sqrt_pd(_mm256_add_pd(
-            _mm256_add_pd(_mm256_mul_pd(vx, vx), _mm256_mul_pd(vy, vy)),
-            _mm256_mul_pd(vz, vz),
-        ));
-        // 0 < l < ∞ in every lane (false for NaN); otherwise the scalar loop takes over here.
-        let fine = _mm256_and_pd(
-            _mm256_cmp_pd::<_CMP_GT_OQ>(l, _mm256_setzero_pd()),
-            _mm256_cmp_pd::<_CMP_LT_OQ>(l, _mm256_set1_pd(f64::INFINITY)),
-        );
-        if _mm256_movemask_pd(fine) != 0xf {
-            break;
+    // SAFETY (every vector operation below): the caller runs where V's feature is.
+    unsafe {
+        for c in g.chunks_exact_mut(V::LANES) {
+            let (mut x, mut y, mut z) = ([0.0; 8], [0.0; 8], [0.0; 8]);
+            for (k, p) in c.iter().enumerate() {
+                (x[k], y[k], z[k]) = (p.x, p.y, p.z);
+            }
+            let (vx, vy, vz) = (V::load(&x), V::load(&y), V::load(&z));
+            // DVec3::length: ((x·x + y·y) + z·z).sqrt().
+            let l = vx.mul(vx).add(vy.mul(vy)).add(vz.mul(vz)).sqrt();
+            // 0 < l < ∞ in every lane (false for NaN); otherwise the scalar loop takes over.
+            if l.gt(V::splat(0.0)) & l.lt(V::splat(f64::INFINITY)) != all {
+                break;
+            }
+            let inv = V::splat(1.0).div(l);
+            vx.mul(inv).store(&mut x);
+            vy.mul(inv).store(&mut y);
+            vz.mul(inv).store(&mut z);
+            for (k, v) in c.iter_mut().enumerate() {
+                *v = DVec3::new(x[k], y[k], z[k]);
+            }
+            done += V::LANES;
         }
-        let inv = _mm256_div_pd(_mm256_set1_pd(1.0), l);
-        let (mut ox, mut oy, mut oz) = ([0.0; 4], [0.0; 4], [0.0; 4]);
-        // SAFETY: the arrays hold four f64 each.
-        unsafe {
-            _mm256_storeu_pd(ox.as_mut_ptr(), _mm256_mul_pd(vx, inv));
-            _mm256_storeu_pd(oy.as_mut_ptr(), _mm256_mul_pd(vy, inv));
-            _mm256_storeu_pd(oz.as_mut_ptr(), _mm256_mul_pd(vz, inv));
-        }
-        for (k, v) in c.iter_mut().enumerate() {
-            *v = DVec3::new(ox[k], oy[k], oz[k]);
-        }
-        done += 4;
     }
     done
 }
 
-/// [`normalize`] eight vectors at a time, up to the first group of eight holding a vector that
-/// is zero or not of finite length; returns how many vectors it normalized (the rest is left to
-/// the scalar loop). The same operations in the same order, so the same bits.
+/// [`normalize_lanes`] with AVX-512, eight vectors at a time.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 fn normalize_avx512(g: &mut [DVec3]) -> usize {
-    use std::arch::x86_64::*;
-    let mut done = 0;
-    for c in g.chunks_exact_mut(8) {
-        let lane = |f: fn(&DVec3) -> f64| -> [f64; 8] { std::array::from_fn(|k| f(&c[k])) };
-        let (x, y, z) = (lane(|p| p.x), lane(|p| p.y), lane(|p| p.z));
-        // SAFETY: the arrays hold eight f64 each.
-        let (vx, vy, vz) = unsafe {
-            (
-                _mm512_loadu_pd(x.as_ptr()),
-                _mm512_loadu_pd(y.as_ptr()),
-                _mm512_loadu_pd(z.as_ptr()),
-            )
-        };
-        // DVec3::length: ((x·x + y·y) + z·z).sqrt().
-        let l = _mm512_sqrt_pd(_mm512_add_pd(
-            _mm512_add_pd(_mm512_mul_pd(vx, vx), _mm512_mul_pd(vy, vy)),
-            _mm512_mul_pd(vz, vz),
-        ));
-        // 0 < l < ∞ in every lane (false for NaN); otherwise the scalar loop takes over here.
-        let fine = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(l, _mm512_setzero_pd())
-            & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l, _mm512_set1_pd(f64::INFINITY));
-        if fine != 0xff {
-            break;
-        }
-        let inv = _mm512_div_pd(_mm512_set1_pd(1.0), l);
-        let (mut ox, mut oy, mut oz) = ([0.0; 8], [0.0; 8], [0.0; 8]);
-        // SAFETY: the arrays hold eight f64 each.
-        unsafe {
-            _mm512_storeu_pd(ox.as_mut_ptr(), _mm512_mul_pd(vx, inv));
-            _mm512_storeu_pd(oy.as_mut_ptr(), _mm512_mul_pd(vy, inv));
-            _mm512_storeu_pd(oz.as_mut_ptr(), _mm512_mul_pd(vz, inv));
-        }
-        for (k, v) in c.iter_mut().enumerate() {
-            *v = DVec3::new(ox[k], oy[k], oz[k]);
-        }
-        done += 8;
-    }
-    done
+    // SAFETY: AVX-512F is enabled here.
+    unsafe { normalize_lanes::<std::arch::x86_64::__m512d>(g) }
+}
+
+/// [`normalize_lanes`] with AVX2, four vectors at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn normalize_avx2(g: &mut [DVec3]) -> usize {
+    // SAFETY: AVX2 is enabled here.
+    unsafe { normalize_lanes::<std::arch::x86_64::__m256d>(g) }
 }
 
 /// Concatenates `parts` into one new vector, copying in parallel into its uninitialised

@@ -519,37 +519,40 @@ fn inside_bits_with(isa: crate::simd::Isa, values: &[f64; 512], planes: usize) -
     signs
 }
 
+/// [`inside_bits`] `V::LANES` values at a time.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-fn inside_bits_avx512(values: &[f64; 512], planes: usize) -> [u64; 8] {
-    use std::arch::x86_64::*;
-    let zero = _mm512_setzero_pd();
+#[inline(always)]
+unsafe fn inside_bits_lanes<V: crate::simd::lanes::F64s>(
+    values: &[f64; 512],
+    planes: usize,
+) -> [u64; 8] {
+    let zero = unsafe { V::splat(0.0) };
     let mut signs = [0u64; 8];
     for (k, s) in signs.iter_mut().enumerate().take(planes) {
-        for j in 0..8 {
-            // SAFETY: 64k + 8j + 8 ≤ 512: eight f64 within the array.
-            let v = unsafe { _mm512_loadu_pd(values.as_ptr().add(64 * k + 8 * j)) };
-            *s |= (_mm512_cmp_pd_mask::<_CMP_LT_OQ>(v, zero) as u64) << (8 * j);
+        for (q, v) in values[64 * k..64 * k + 64]
+            .chunks_exact(V::LANES)
+            .enumerate()
+        {
+            // SAFETY: the caller runs where V's feature is; a chunk holds V::LANES values.
+            let m = unsafe { V::load(v).lt(zero) } as u64;
+            *s |= m << (V::LANES * q);
         }
     }
     signs
 }
 
 #[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn inside_bits_avx512(values: &[f64; 512], planes: usize) -> [u64; 8] {
+    // SAFETY: AVX-512F is enabled here.
+    unsafe { inside_bits_lanes::<std::arch::x86_64::__m512d>(values, planes) }
+}
+
+#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn inside_bits_avx2(values: &[f64; 512], planes: usize) -> [u64; 8] {
-    use std::arch::x86_64::*;
-    let zero = _mm256_setzero_pd();
-    let mut signs = [0u64; 8];
-    for (k, s) in signs.iter_mut().enumerate().take(planes) {
-        for q in 0..16 {
-            // SAFETY: 64k + 4q + 4 ≤ 512: four f64 within the array.
-            let v = unsafe { _mm256_loadu_pd(values.as_ptr().add(64 * k + 4 * q)) };
-            let m = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(v, zero)) as u64;
-            *s |= m << (4 * q);
-        }
-    }
-    signs
+    // SAFETY: AVX2 is enabled here.
+    unsafe { inside_bits_lanes::<std::arch::x86_64::__m256d>(values, planes) }
 }
 
 /// Signs and owned crossed edges of an evaluated block; appends its vertices in rank order.
