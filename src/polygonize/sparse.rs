@@ -505,7 +505,7 @@ fn inside_bits_with(isa: crate::simd::Isa, values: &[f64; 512], planes: usize) -
         crate::simd::Isa::Avx2 => return unsafe { inside_bits_avx2(values, planes) },
         crate::simd::Isa::Generic => {}
     }
-    let _ = isa;
+    let _ = isa; // (only x86-64 has vector paths)
     let mut signs = [0u64; 8];
     for (k, s) in signs.iter_mut().enumerate().take(planes) {
         for (j, row) in values[64 * k..64 * k + 64].chunks_exact(8).enumerate() {
@@ -842,7 +842,9 @@ mod tests {
     use crate::field::blob::BlobField;
     use crate::field::testing::random_blobs as blobs;
     use crate::field::testing::{canonical_triangles, vertex_normal_bits, Lying};
+    use crate::polygonize::Ambiguity;
 
+    /// Every vector path gives the plain loop's sign words.
     #[test]
     fn inside_bits_agree_on_every_vector_path() {
         let mut values = [0.0; 512];
@@ -864,7 +866,6 @@ mod tests {
             }
         }
     }
-    use crate::polygonize::Ambiguity;
 
     /// Triangles, order-free and bit-exact.
     fn canonical(m: &Mesh) -> Vec<[[u64; 3]; 3]> {
