@@ -181,9 +181,10 @@ fn sum_values<K: RadialFn>(c: &Centres, b: &Block) -> [f64; LANES] {
     acc
 }
 
-/// (Σ_j w_j φ, Σ_j w_j ∇φ) for each lane.
+/// (Σ_j w_j φ, Σ_j w_j ∇φ) for each lane; without `VALUES` the values stay 0 (the gradients
+/// are the same bits).
 #[inline(always)]
-fn sum_values_gradients<K: RadialFn>(c: &Centres, b: &Block) -> [[f64; LANES]; 4] {
+fn sum_with<K: RadialFn, const VALUES: bool>(c: &Centres, b: &Block) -> [[f64; LANES]; 4] {
     let mut v = [0.0; LANES];
     let mut gx = [0.0; LANES];
     let mut gy = [0.0; LANES];
@@ -197,7 +198,9 @@ fn sum_values_gradients<K: RadialFn>(c: &Centres, b: &Block) -> [[f64; LANES]; 4
             let dy = b.y[l] - y;
             let dz = b.z[l] - z;
             let r2 = dx * dx + dy * dy + dz * dz;
-            v[l] += w * K::phi_r2(r2);
+            if VALUES {
+                v[l] += w * K::phi_r2(r2);
+            }
             let s = w * K::dphi_over_r_r2(r2);
             gx[l] += s * dx;
             gy[l] += s * dy;
@@ -205,6 +208,18 @@ fn sum_values_gradients<K: RadialFn>(c: &Centres, b: &Block) -> [[f64; LANES]; 4
         }
     }
     [v, gx, gy, gz]
+}
+
+/// (Σ_j w_j φ, Σ_j w_j ∇φ) for each lane.
+#[inline(always)]
+fn sum_values_gradients<K: RadialFn>(c: &Centres, b: &Block) -> [[f64; LANES]; 4] {
+    sum_with::<K, true>(c, b)
+}
+
+/// Σ_j w_j ∇φ for each lane (the values left 0).
+#[inline(always)]
+fn sum_gradients<K: RadialFn>(c: &Centres, b: &Block) -> [[f64; LANES]; 4] {
+    sum_with::<K, false>(c, b)
 }
 
 macro_rules! dispatch {
@@ -225,6 +240,7 @@ dispatch!(
     values_gradients_avx2,
     [[f64; LANES]; 4]
 );
+dispatch!(sum_gradients, gradients_avx2, [[f64; LANES]; 4]);
 
 /// AVX-512 sums for the triharmonic and biharmonic kernels without `sqrt`: 1/√r² from the
 /// 14-bit `rsqrt14` estimate refined by two Newton steps (14 → 28 → 53+ bits), then r = r²·(1/r),
@@ -493,7 +509,15 @@ pub fn block_gradients<K: RadialFn>(c: &Centres, blocks: &[Block], out: &mut [[[
             return;
         }
     }
-    block_values_gradients::<K>(c, blocks, out);
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2_fma() {
+        // SAFETY: the CPU supports AVX2 and FMA, checked just above.
+        unsafe { gradients_avx2::<K>(c, blocks, out) };
+        return;
+    }
+    for (b, o) in blocks.iter().zip(out.iter_mut()) {
+        *o = sum_gradients::<K>(c, b);
+    }
 }
 
 #[cfg(test)]
@@ -526,6 +550,17 @@ mod tests {
             let mut g = vec![[[0.0; LANES]; 4]; blocks.len()];
             block_values::<K>(c, blocks, &mut v);
             block_values_gradients::<K>(c, blocks, &mut g);
+            // Gradients alone: the same bits.
+            let mut only = vec![[[f64::NAN; LANES]; 4]; blocks.len()];
+            block_gradients::<K>(c, blocks, &mut only);
+            for (a, b) in g.iter().zip(&only) {
+                for m in 1..4 {
+                    assert!(a[m]
+                        .iter()
+                        .zip(&b[m])
+                        .all(|(x, y)| x.to_bits() == y.to_bits()));
+                }
+            }
             for (bi, b) in blocks.iter().enumerate() {
                 for l in 0..LANES {
                     let (mut sv, mut sg) = (0.0, [0.0; 3]);
