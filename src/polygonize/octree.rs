@@ -12,8 +12,9 @@
 //!
 //! Beyond the paper (on by default, see [`Settings::corner_test`]), values already known do
 //! more of the work, by the same argument (no surface lies within |f(x)| / safety of x): a
-//! block covered by the balls around its known corners is dropped unevaluated; and the leaves
-//! are settled by signs, not values. Marching cubes needs only the signs of a cell's corners,
+//! block covered by the balls around its known corners is dropped unevaluated; every point of a
+//! block dropped either way has its sign, which the leaves' corners on its faces take; and the
+//! leaves are settled by signs, not values. Marching cubes needs only the signs of a cell's corners,
 //! and values at the ends of its crossed edges; a corner inside the ball of a known value has
 //! that value's sign. So the leaves' corners are evaluated in rounds (their blocks' corners,
 //! then the rest), each followed by inferring signs from the balls of the values known; a
@@ -25,7 +26,8 @@
 //! cells). The values live in a block-sparse store: a dense table of bricks of 8³ lattice
 //! points, each brick an array of indices into the values and one of the values themselves,
 //! so finding, claiming and reading a point is array indexing, and memory grows with the
-//! surface, not with the lattice. Leaves are triangulated in order, their cases found in
+//! surface, not with the lattice (besides the brick table, 4 bytes per 512 points, and the
+//! decided blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are triangulated in order, their cases found in
 //! parallel, each edge vertex indexed through the value index of the edge's lower end.
 
 use super::cell::{case_index, corner_offset, emit_triangles};
@@ -59,14 +61,17 @@ pub struct Settings {
     ///   |f| / safety that together cover it is dropped without evaluating its centre
     ///   (covering is proven by splitting the box into octants, three levels deep, or exactly
     ///   for two balls at opposite corners);
+    /// - a block dropped (by its centre's ball, which holds the whole block, or by its corners')
+    ///   holds one sign, so the leaves' corners on its faces, edges and corners have that sign
+    ///   without evaluation (a map of one byte per block of 2 × 2 × 2 cells records them);
     /// - leaf cells are settled by the signs of their corners: a corner in the ball of a known
     ///   value has its sign, so the corners are evaluated in two rounds (the parent blocks'
     ///   corners, then those still without a sign), a leaf whose corners all have one sign
     ///   needs no more, and of a crossed leaf only the ends of its crossed edges need values.
     ///
-    /// The mesh is the same. On the shared meshes at 128³ over [-1, 1]³ this evaluates a third
-    /// fewer points than the paper's test alone (torus2 2.65 % of the lattice instead of
-    /// 5.33 %, icosahedron 7.35 % instead of 14.60 %). `false` gives §4.3 exactly.
+    /// The mesh is the same. On the shared meshes at 128³ over [-1, 1]³ this evaluates about
+    /// half the points the paper's test alone does (torus2 2.41 % of the lattice instead of
+    /// 5.33 %, icosahedron 6.50 % instead of 14.60 %). `false` gives §4.3 exactly.
     pub corner_test: bool,
 }
 
@@ -396,7 +401,32 @@ impl Store {
             let s = b as usize * BRICK_POINTS + l;
             return std::array::from_fn(|p| self.at[s + BLOCK_SLOTS[p]]);
         }
-        std::array::from_fn(|p| self.at_point(block_offset(o, p), cells))
+        // Across bricks: per axis, the brick and offset of the block's three coordinates (None
+        // beyond the lattice), then one table lookup per brick touched.
+        let axis = |a: usize| -> [Option<(usize, usize)>; 3] {
+            std::array::from_fn(|i| {
+                let c = o[a] + i as u32;
+                (c <= cells[a]).then_some(((c >> BRICK_BITS) as usize, (c & (BRICK - 1)) as usize))
+            })
+        };
+        let (ax, ay, az) = (axis(0), axis(1), axis(2));
+        let mut v = [f64::NAN; 27];
+        for (k, z) in az.iter().enumerate() {
+            let Some((bz, lz)) = *z else { continue };
+            for (j, y) in ay.iter().enumerate() {
+                let Some((by, ly)) = *y else { continue };
+                let row = self.dims[0] * (by + self.dims[1] * bz);
+                let lrow = (ly << BRICK_BITS) | (lz << (2 * BRICK_BITS));
+                for (i, x) in ax.iter().enumerate() {
+                    let Some((bx, lx)) = *x else { continue };
+                    let b = self.table[row + bx];
+                    if b != NONE {
+                        v[i + 3 * j + 9 * k] = self.at[b as usize * BRICK_POINTS + (lrow | lx)];
+                    }
+                }
+            }
+        }
+        v
     }
 
     /// Evaluates `points` (queued by [`Store::claim`]) in batches and appends their values.
@@ -599,6 +629,112 @@ const BLOCK_CORNERS: u32 = {
     m
 };
 
+/// `SHARED[k]`: the points of a block of 2 × 2 × 2 cells (bits as in [`block_point`]) that it
+/// shares with its neighbour at offset `d` ∈ {−1, 0, 1}³, `k = (d.x + 1) + 3 (d.y + 1) +
+/// 9 (d.z + 1)`: along an axis with offset −1 its points at 0, with +1 those at 2.
+const SHARED: [u32; 27] = {
+    let mut t = [0; 27];
+    let mut k = 0;
+    while k < 27 {
+        let d = [k % 3, (k / 3) % 3, k / 9];
+        let mut p = 0;
+        while p < 27 {
+            let c = [p % 3, (p / 3) % 3, p / 9];
+            let mut shared = true;
+            let mut a = 0;
+            while a < 3 {
+                // Offset −1 (d = 0) shares coordinate 0; +1 (d = 2) coordinate 2.
+                shared &= d[a] == 1 || (d[a] == 0 && c[a] == 0) || (d[a] == 2 && c[a] == 2);
+                a += 1;
+            }
+            if shared {
+                t[k] |= 1 << p;
+            }
+            p += 1;
+        }
+        k += 1;
+    }
+    t
+};
+
+/// The signs of the blocks of 2 × 2 × 2 cells that the levels decided hold no surface: inside a
+/// block rejected by its centre's value (whose ball, of radius |f| / safety beyond the block's
+/// circumradius, holds the whole block) or covered by its corners' balls, at any level. Every
+/// lattice point of such a block has the sign decided, so the leaves' corners on the faces,
+/// edges and corners they share with decided neighbours need no evaluation. One byte per block
+/// (a 128³ lattice: 262 kB): 0 undecided, 1 negative, 2 positive.
+struct DecidedBlocks {
+    dims: [usize; 3],
+    sign: Vec<u8>,
+}
+
+impl DecidedBlocks {
+    fn dims(lattice: &Lattice) -> [usize; 3] {
+        lattice.cells.map(|c| c.div_ceil(2) as usize)
+    }
+
+    fn bytes(lattice: &Lattice) -> u64 {
+        Self::dims(lattice).iter().map(|&d| d as u64).product()
+    }
+
+    /// The map of `lattice`, all undecided; empty (nothing decided, nothing stored) when not
+    /// `wanted`.
+    fn new(lattice: &Lattice, wanted: bool) -> Self {
+        let dims = if wanted { Self::dims(lattice) } else { [0; 3] };
+        DecidedBlocks {
+            dims,
+            sign: vec![0; dims.iter().product()],
+        }
+    }
+
+    /// Marks the block of `s` cells per side (s ≥ 2) with lower corner `o` (clipped to the
+    /// lattice) as holding points of one sign only.
+    fn mark(&mut self, o: [u32; 3], s: u32, negative: bool) {
+        let lo = o.map(|c| (c / 2) as usize);
+        let hi: [usize; 3] = std::array::from_fn(|a| (lo[a] + (s / 2) as usize).min(self.dims[a]));
+        let v = if negative { 1 } else { 2 };
+        for z in lo[2]..hi[2] {
+            for y in lo[1]..hi[1] {
+                let row = self.dims[0] * (y + self.dims[1] * z);
+                if lo[0] < hi[0] {
+                    self.sign[row + lo[0]..row + hi[0]].fill(v);
+                }
+            }
+        }
+    }
+
+    /// The points of the block of 2 × 2 × 2 cells with lower corner `o` that lie in decided
+    /// neighbours: (negative, positive), bits as in [`block_point`].
+    #[inline]
+    fn masks(&self, o: [u32; 3]) -> (u32, u32) {
+        let b = o.map(|c| (c / 2) as usize);
+        let (mut neg, mut pos) = (0, 0);
+        for dz in 0..3 {
+            let Some(z) = (b[2] + dz).checked_sub(1).filter(|&z| z < self.dims[2]) else {
+                continue;
+            };
+            for dy in 0..3 {
+                let Some(y) = (b[1] + dy).checked_sub(1).filter(|&y| y < self.dims[1]) else {
+                    continue;
+                };
+                let row = self.dims[0] * (y + self.dims[1] * z);
+                for dx in 0..3 {
+                    let Some(x) = (b[0] + dx).checked_sub(1).filter(|&x| x < self.dims[0]) else {
+                        continue;
+                    };
+                    let shared = SHARED[dx + 3 * dy + 9 * dz];
+                    match self.sign[row + x] {
+                        1 => neg |= shared,
+                        2 => pos |= shared,
+                        _ => {}
+                    }
+                }
+            }
+        }
+        (neg, pos)
+    }
+}
+
 /// The block points within a distance of a block point: the ball of radius |f(p)| / safety
 /// around point p holds the points `mask` of the last entry of `REACH[p]` whose `reach` is below
 /// f(p)² (the distances, squared and times safety², in increasing order, each once).
@@ -705,6 +841,7 @@ struct Ends {
 /// they have both signs, nowhere when they have one. The signs inferred are stored as ±∞, and
 /// the blocks of the leaves newly crossed are added to `ends` with the ends of their crossed
 /// edges that have a sign but no value.
+#[allow(clippy::too_many_arguments)]
 fn settle_leaves(
     store: &mut Store,
     blocks: &[[u32; 3]],
@@ -712,6 +849,7 @@ fn settle_leaves(
     crossed: &mut [u8],
     reach: &[[Reach; 27]; 27],
     cells: [u32; 3],
+    decided: Option<&DecidedBlocks>,
     ends: &mut Ends,
 ) {
     // Per block: the signs inferred (negative, positive) and the crossed edges' ends wanted.
@@ -731,7 +869,11 @@ fn settle_leaves(
                 let unknown = LEAF_POINTS[*m as usize] & !(neg | pos);
                 let (mut n, mut p) = (0, 0);
                 if unknown != 0 {
-                    let (bn, bp) = ball_masks(&v, reach);
+                    let (mut bn, mut bp) = ball_masks(&v, reach);
+                    if let Some(decided) = decided {
+                        let (dn, dp) = decided.masks(o);
+                        (bn, bp) = (bn | dn, bp | dp);
+                    }
                     (n, p) = (unknown & bn & !bp, unknown & bp & !bn);
                     neg |= n;
                     pos |= p;
@@ -849,11 +991,13 @@ pub fn polygonize<F: Field + ?Sized>(
             format!("must be positive and finite, got {}", octree.safety),
         ));
     }
-    // Output, working memory (see BYTES_PER_TRIANGLE_STORE) and the brick table.
+    // Output, working memory (see BYTES_PER_TRIANGLE_STORE), the brick table and the decided
+    // blocks' signs.
     check_memory(
         estimate_triangles(lattice)
             .saturating_mul(super::BYTES_PER_TRIANGLE + BYTES_PER_TRIANGLE_STORE)
-            .saturating_add(Store::table_bytes(lattice)),
+            .saturating_add(Store::table_bytes(lattice))
+            .saturating_add(DecidedBlocks::bytes(lattice)),
         settings.memory_limit,
     )?;
 
@@ -867,6 +1011,7 @@ pub fn polygonize<F: Field + ?Sized>(
     let levels = levels(lattice);
     let mut store = Store::new(lattice);
     let mut points: Vec<DVec3> = Vec::new();
+    let mut decided = DecidedBlocks::new(lattice, octree.corner_test);
 
     // Blocks of the current level, by their lowest lattice corner.
     let largest = *cells.iter().max().unwrap();
@@ -885,22 +1030,33 @@ pub fn polygonize<F: Field + ?Sized>(
                 // levels) already cover need no centre of their own.
                 let size = lattice.cell * s as f64;
                 let store = &store;
-                let free: Vec<bool> = blocks
+                // Per block: kept (None), or covered, with whether its known corners are all
+                // negative (its sign) or all positive (Some(None) where they differ, which the
+                // premise rules out).
+                let free: Vec<Option<Option<bool>>> = blocks
                     .par_iter()
                     .with_min_len(256)
                     .map(|o| {
-                        let radius = std::array::from_fn(|k| {
+                        let known: [f64; 8] = std::array::from_fn(|k| {
                             store
                                 .known(corner_scaled(*o, k, s), cells)
-                                .map_or(f64::NAN, |v| v.abs() / octree.safety)
+                                .unwrap_or(f64::NAN)
                         });
-                        covered(&radius, size)
+                        let radius = known.map(|v| v.abs() / octree.safety);
+                        covered(&radius, size).then(|| {
+                            let neg = known.iter().all(|&v| v.is_nan() || v < 0.0);
+                            let pos = known.iter().all(|&v| v.is_nan() || v >= 0.0);
+                            (neg != pos).then_some(neg)
+                        })
                     })
                     .collect();
                 let mut i = 0;
-                blocks.retain(|_| {
+                blocks.retain(|o| {
                     i += 1;
-                    !free[i - 1]
+                    if let Some(Some(negative)) = free[i - 1] {
+                        decided.mark(*o, s, negative);
+                    }
+                    free[i - 1].is_none()
                 });
             }
             // Centres are never shared: those of one level are distinct, and those of different
@@ -917,7 +1073,11 @@ pub fn polygonize<F: Field + ?Sized>(
             let mut kept = 0;
             for i in 0..blocks.len() {
                 let o = blocks[i];
-                if store.values[base + i].abs() <= r {
+                let v = store.values[base + i];
+                if octree.corner_test && v.abs() > r {
+                    decided.mark(o, s, v < 0.0);
+                }
+                if v.abs() <= r {
                     // Only kept blocks hold leaves, and a centre lies inside its own block, so
                     // only kept centres can be leaf corners (those inside the lattice).
                     let c = [o[0] + s / 2, o[1] + s / 2, o[2] + s / 2];
@@ -974,10 +1134,20 @@ pub fn polygonize<F: Field + ?Sized>(
         let reach = block_reach(lattice.cell, octree.safety);
         let reach = &*reach;
         let mut ends = Ends::default();
-        let mut settle = |store: &mut Store, masks: &mut [u8], crossed: &mut [u8]| {
-            settle_leaves(store, &blocks, masks, crossed, reach, cells, &mut ends)
+        stats.add_time("s.masks", t);
+        let mut settle = |store: &mut Store,
+                          masks: &mut [u8],
+                          crossed: &mut [u8],
+                          decided: Option<&DecidedBlocks>| {
+            settle_leaves(
+                store, &blocks, masks, crossed, reach, cells, decided, &mut ends,
+            )
         };
-        settle(&mut store, &mut masks, &mut crossed);
+        // First with the signs of the blocks the levels decided, on the faces, edges and
+        // corners the blocks share with them (only needed then: the leaves' corners without a
+        // sign are never more than before).
+        settle(&mut store, &mut masks, &mut crossed, Some(&decided));
+        drop(decided);
         // The blocks' corners first (farthest from the centre, which is known: their balls
         // reach the most points the centre's does not), then every corner still without a
         // sign. (A round of edge midpoints between them saved 0.1 % of the evaluations.)
@@ -989,7 +1159,7 @@ pub fn polygonize<F: Field + ?Sized>(
                 }
             }
             store.evaluate(field, &points, settings, &mut stats)?;
-            settle(&mut store, &mut masks, &mut crossed);
+            settle(&mut store, &mut masks, &mut crossed, None);
         }
         debug_assert!(masks.iter().all(|&m| m == 0));
         // The crossed edges need values at both ends, not only signs.
@@ -1271,6 +1441,53 @@ mod tests {
         };
         let (o, _) = polygonize(&f, &l, &s, &deep).unwrap();
         assert_eq!(d.compare(&o).missing, 0);
+    }
+
+    /// `SHARED` holds exactly the points a block of 2 × 2 × 2 cells has in common with each
+    /// neighbour, and the decided map gives those points, clipped to the lattice, the sign of
+    /// the decided region they lie in.
+    #[test]
+    fn decided_neighbours_give_their_shared_points() {
+        for k in 0..27 {
+            let d = [k % 3, (k / 3) % 3, k / 9].map(|c| c as i32 - 1);
+            let mine = |p: usize| [p % 3, (p / 3) % 3, p / 9].map(|c| c as i32);
+            let want = (0..27)
+                .filter(|&p| {
+                    (0..3).all(|a| (mine(p)[a] - 2 * d[a]).clamp(0, 2) == mine(p)[a] - 2 * d[a])
+                })
+                .fold(0u32, |m, p| m | 1 << p);
+            assert_eq!(SHARED[k], want, "neighbour {d:?}");
+        }
+        let lattice = Lattice::new(DVec3::ZERO, DVec3::ONE, [12, 12, 9]).unwrap();
+        let mut map = DecidedBlocks::new(&lattice, true);
+        assert_eq!(map.dims, [6, 6, 5]);
+        // Lattice points 4..=8 per axis negative; 8..=12 (x), 0..=4 (y), 8..=9 (z) positive.
+        map.mark([4, 4, 4], 4, true);
+        map.mark([8, 0, 8], 4, false);
+        let face = (0..27).filter(|p| p % 3 == 2).fold(0u32, |m, p| m | 1 << p);
+        // The block at x 2..=4 touches the negative region with its face x = 4.
+        assert_eq!(map.masks([2, 4, 4]), (face, 0));
+        // The block at 8..=10 shares its corner (8, 8, 8) with it, and its face z = 8 with the
+        // positive region only along y ≤ 4: none of its points.
+        assert_eq!(map.masks([8, 8, 8]), (1, 0));
+        // The block at (8, 4, 6): corner-edge (x = 8, y = 4..=6, z = 6..=8) with the negative
+        // region's face x = 8; z = 8, y = 4 with the positive region.
+        let (neg, pos) = map.masks([8, 4, 6]);
+        let at = |x: usize, y: usize, z: usize| 1u32 << block_point(x, y, z);
+        assert_eq!(
+            neg,
+            (0..3)
+                .flat_map(|y| (0..3).map(move |z| (y, z)))
+                .fold(0, |m, (y, z)| m | at(0, y, z))
+        );
+        assert_eq!(pos, at(0, 0, 2) | at(1, 0, 2) | at(2, 0, 2));
+        // Inside an undecided region and at the lattice's far corner: nothing.
+        assert_eq!(map.masks([0, 8, 0]), (0, 0));
+        assert_eq!(map.masks([10, 10, 8]), (0, 0));
+        // Without the corner test, the map is empty and decides nothing.
+        let mut none = DecidedBlocks::new(&lattice, false);
+        none.mark([0, 0, 0], 8, true);
+        assert_eq!(none.masks([2, 2, 2]), (0, 0));
     }
 
     /// The signs inferred are exactly those of the block points inside the balls of one sign,
