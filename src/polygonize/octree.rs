@@ -14,9 +14,9 @@
 //! more of the work, by the same argument (no surface lies within |f(x)| / safety of x): a
 //! block covered by the balls around its known corners is dropped unevaluated; every point of a
 //! block dropped either way has its sign, which the leaves' corners on its faces take; and the
-//! leaves are settled by signs, not values. Marching cubes needs only the signs of a cell's corners,
-//! and values at the ends of its crossed edges; a corner inside the ball of a known value has
-//! that value's sign. So the leaves' corners are evaluated in rounds (their blocks' corners,
+//! leaves are settled by signs, not values. Marching cubes needs only the signs of a cell's
+//! corners, and values at the ends of its crossed edges; a corner inside the ball of a known
+//! value has that value's sign. So the leaves' corners are evaluated in rounds (their blocks' corners,
 //! then the rest), each followed by inferring signs from the balls of the values known; a
 //! leaf whose corners all have one sign is done without evaluating the others, and the ends of
 //! crossed edges that only have a sign are evaluated last.
@@ -27,8 +27,9 @@
 //! points, each brick an array of indices into the values and one of the values themselves,
 //! so finding, claiming and reading a point is array indexing, and memory grows with the
 //! surface, not with the lattice (besides the brick table, 4 bytes per 512 points, and the
-//! decided blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are triangulated in order, their cases found in
-//! parallel, each edge vertex indexed through the value index of the edge's lower end.
+//! decided blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are
+//! triangulated in order, their cases found in parallel, each edge vertex indexed through the
+//! value index of the edge's lower end.
 
 use super::cell::{case_index, corner_offset, emit_triangles};
 use super::table::{EDGES, EDGE_AXIS};
@@ -1134,7 +1135,6 @@ pub fn polygonize<F: Field + ?Sized>(
         let reach = block_reach(lattice.cell, octree.safety);
         let reach = &*reach;
         let mut ends = Ends::default();
-        stats.add_time("s.masks", t);
         let mut settle = |store: &mut Store,
                           masks: &mut [u8],
                           crossed: &mut [u8],
