@@ -40,7 +40,30 @@ use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::Relaxed};
 use std::time::Instant;
+
+// The store's values and indices are written in parallel through atomic views of its vectors.
+const _: () = assert!(
+    std::mem::size_of::<AtomicU64>() == 8 && std::mem::align_of::<AtomicU64>() == 8,
+    "AtomicU64 must have f64's layout"
+);
+const _: () = assert!(std::mem::align_of::<f64>() == 8);
+
+/// `v` as atomics, for writes from several threads (the exclusive borrow guarantees that no
+/// one else reads it meanwhile).
+fn atomic_f64s(v: &mut [f64]) -> &[AtomicU64] {
+    // SAFETY: AtomicU64 has f64's size and alignment (asserted above), and the exclusive
+    // borrow means every access for its lifetime goes through the atomics.
+    unsafe { &*(v as *mut [f64] as *const [AtomicU64]) }
+}
+
+/// `v` as atomics, as [`atomic_f64s`].
+fn atomic_u32s(v: &mut [u32]) -> &[AtomicU32] {
+    // SAFETY: AtomicU32 has u32's size and alignment, and the exclusive borrow means every
+    // access for its lifetime goes through the atomics.
+    unsafe { &*(v as *mut [u32] as *const [AtomicU32]) }
+}
 
 /// Octree-specific settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,6 +126,8 @@ const BRICK_POINTS: usize = 1 << (3 * BRICK_BITS);
 const fn block_point(x: usize, y: usize, z: usize) -> usize {
     x + 3 * y + 9 * z
 }
+/// The block point at the block's centre.
+const CENTRE: usize = block_point(1, 1, 1);
 /// `LEAF_CORNERS[d][k]`: the block point of corner k of child cell d (both in case-bit order).
 const LEAF_CORNERS: [[u8; 8]; 8] = {
     let mut t = [[0; 8]; 8];
@@ -158,6 +183,26 @@ const BLOCK_SLOTS: [usize; 27] = {
 const BYTES_PER_TRIANGLE_STORE: u64 = 192;
 /// An empty brick-table entry, slot or edge.
 const NONE: u32 = u32::MAX;
+/// A leaf corner with a negative sign inferred and no value (in place of a value index).
+const NEGATIVE: u32 = u32::MAX - 1;
+/// A leaf corner with a positive sign inferred and no value (in place of a value index).
+const POSITIVE: u32 = u32::MAX - 2;
+/// Value indices stay below this (the codes above are not indices).
+const MAX_VALUES: usize = (u32::MAX - 2) as usize;
+/// What [`Store::at`] holds for a point unknown (a NaN, as `f64::NAN`)...
+const UNKNOWN: u64 = 0x7ff8_0000_0000_0000;
+/// ... and for a point claimed, not yet evaluated (another NaN).
+const QUEUED: u64 = 0x7ff8_0000_0000_0001;
+
+/// The value of a leaf corner from its index (see [`NEGATIVE`], [`POSITIVE`]).
+#[inline]
+fn corner_value(values: &[f64], i: u32) -> f64 {
+    match i {
+        NEGATIVE => f64::NEG_INFINITY,
+        POSITIVE => f64::INFINITY,
+        _ => values[i as usize],
+    }
+}
 /// Bricks whose slots and values [`Store::new`] reserves address space for (32³, a 256³
 /// lattice's: 20 bytes per point, 335 MB of address space, of which only the pages of the
 /// bricks used are touched).
@@ -176,11 +221,11 @@ struct Store {
     table: Vec<u32>,
     /// Per brick, a slot per lattice point (x fastest): the index of its value, or `NONE`.
     slots: Vec<u32>,
-    /// Per slot, the point's value, ±∞ for a sign inferred without a value (see
-    /// [`settle_leaves`]), NaN when unknown: what `values` holds, where blocks of points can be
-    /// read at once.
+    /// Per slot, the point's value (what `values` holds, where blocks of points can be read at
+    /// once), ±∞ for a sign inferred without a value (see [`settle_leaves`]), or a NaN:
+    /// [`UNKNOWN`], or [`QUEUED`] when claimed.
     at: Vec<f64>,
-    /// Every value evaluated (and sign inferred), in evaluation order.
+    /// Every value evaluated, in evaluation order.
     values: Vec<f64>,
     /// The slots of the points claimed and not yet evaluated, in claiming order.
     queued: Vec<u32>,
@@ -234,6 +279,90 @@ impl Store {
         (b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2]), l)
     }
 
+    /// Gives slots to the bricks of the points of the block of 2 × 2 × 2 cells with lower
+    /// corner `o` (those in the lattice of `cells`), so that [`Store::block_slots`] can find them.
+    fn give_block_bricks(&mut self, o: [u32; 3], cells: [u32; 3]) {
+        let hi: [u32; 3] = std::array::from_fn(|a| (o[a] + 2).min(cells[a]));
+        for z in [o[2], hi[2]] {
+            for y in [o[1], hi[1]] {
+                for x in [o[0], hi[0]] {
+                    self.slot_mut([x, y, z]);
+                }
+            }
+        }
+    }
+
+    /// The slots of the points in `wanted` of the block of 2 × 2 × 2 cells with lower corner
+    /// `o`, whose bricks have slots (see [`Store::give_block_bricks`]), in increasing order of
+    /// block point, with the block point.
+    #[inline]
+    fn block_slots(&self, o: [u32; 3], wanted: u32) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let base = o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3).then(|| {
+            let (t, l) = self.locate(o);
+            self.table[t] as usize * BRICK_POINTS + l
+        });
+        let mut m = wanted;
+        std::iter::from_fn(move || {
+            if m == 0 {
+                return None;
+            }
+            let p = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let s = match base {
+                Some(b) => b + BLOCK_SLOTS[p],
+                None => {
+                    let (t, l) = self.locate(block_offset(o, p));
+                    self.table[t] as usize * BRICK_POINTS + l
+                }
+            };
+            Some((s, p))
+        })
+    }
+
+    /// [`Store::claim_block`] for many blocks at once, in parallel: `wanted[i]` are the points
+    /// of block `blocks[i]`, whose bricks have slots (see [`Store::give_block_bricks`]). Which of two blocks claims a point they share is left to
+    /// the threads; what is claimed is not (every wanted point still unknown, once).
+    fn claim_blocks(
+        &mut self,
+        blocks: &[[u32; 3]],
+        wanted: &[u32],
+        lattice: &Lattice,
+        points: &mut Vec<DVec3>,
+    ) {
+        // `at` out of the store while its atomic view lives (the rest is only read).
+        let mut at_owned = std::mem::take(&mut self.at);
+        let claimed: Vec<(u32, [u32; 3])> = {
+            let (store, at) = (&*self, atomic_f64s(&mut at_owned));
+            blocks
+                .par_iter()
+                .zip(wanted.par_iter())
+                .with_min_len(512)
+                .flat_map_iter(|(&o, &w)| {
+                    store
+                        .block_slots(o, w)
+                        .filter(move |&(s, _)| {
+                            // (Most are known: a plain read first.)
+                            at[s].load(Relaxed) == UNKNOWN
+                                && at[s]
+                                    .compare_exchange(UNKNOWN, QUEUED, Relaxed, Relaxed)
+                                    .is_ok()
+                        })
+                        .map(move |(s, p)| (s as u32, block_offset(o, p)))
+                })
+                .collect()
+        };
+        self.at = at_owned;
+        let start = (self.values.len() + points.len()) as u32;
+        let slots = atomic_u32s(&mut self.slots);
+        claimed
+            .par_iter()
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(k, &(s, _))| slots[s as usize].store(start + k as u32, Relaxed));
+        self.queued.par_extend(claimed.par_iter().map(|&(s, _)| s));
+        points.par_extend(claimed.par_iter().map(|&(_, p)| lattice.point(p)));
+    }
+
     /// Index in `slots` of lattice point `p`, giving its brick slots on first touch.
     #[inline]
     fn slot_mut(&mut self, p: [u32; 3]) -> usize {
@@ -243,18 +372,20 @@ impl Store {
             b = (self.slots.len() / BRICK_POINTS) as u32;
             self.table[t] = b;
             self.slots.resize(self.slots.len() + BRICK_POINTS, NONE);
-            self.at.resize(self.slots.len(), f64::NAN);
+            self.at.resize(self.slots.len(), f64::from_bits(UNKNOWN));
         }
         b as usize * BRICK_POINTS + l
     }
 
-    /// Queues `p` for evaluation unless its value is known or queued already: its value will be
+    /// Queues `p` for evaluation unless its value or sign is known or it is queued already
+    /// (returns `NONE` for a sign without a value): its value will be
     /// `values[values.len() + points.len()]` once `points` are evaluated.
     #[inline]
     fn claim(&mut self, p: [u32; 3], lattice: &Lattice, points: &mut Vec<DVec3>) -> u32 {
         let s = self.slot_mut(p);
-        if self.slots[s] == NONE {
+        if self.at[s].to_bits() == UNKNOWN {
             self.slots[s] = (self.values.len() + points.len()) as u32;
+            self.at[s] = f64::from_bits(QUEUED);
             self.queued.push(s as u32);
             points.push(lattice.point(p));
         }
@@ -280,13 +411,14 @@ impl Store {
             while m != 0 {
                 let p = m.trailing_zeros() as usize;
                 m &= m - 1;
-                let slot = &mut self.slots[s + BLOCK_SLOTS[p]];
-                if *slot == NONE {
-                    *slot = (self.values.len() + points.len()) as u32;
-                    self.queued.push((s + BLOCK_SLOTS[p]) as u32);
+                let q = s + BLOCK_SLOTS[p];
+                if self.at[q].to_bits() == UNKNOWN {
+                    self.slots[q] = (self.values.len() + points.len()) as u32;
+                    self.at[q] = f64::from_bits(QUEUED);
+                    self.queued.push(q as u32);
                     points.push(lattice.point(block_offset(o, p)));
                 }
-                idx[p] = *slot;
+                idx[p] = self.slots[q];
             }
         } else {
             while m != 0 {
@@ -302,12 +434,11 @@ impl Store {
     /// whether the slot's sign is now `sign`.
     #[inline]
     fn set_sign(&mut self, s: usize, sign: f64) -> bool {
-        if self.slots[s] == NONE {
-            self.slots[s] = self.values.len() as u32;
-            self.values.push(sign);
-            self.at[s] = sign;
+        let at = &mut self.at[s];
+        if at.to_bits() == UNKNOWN {
+            *at = sign;
         }
-        (self.at[s] < 0.0) == (sign < 0.0)
+        (*at < 0.0) == (sign < 0.0)
     }
 
     /// [`Store::set_sign`] for the points in `neg` (sign −∞) and then those in `pos` (+∞) of the
@@ -337,8 +468,8 @@ impl Store {
     }
 
     /// The indices in `values` of the points in `wanted` of the block of 2 × 2 × 2 cells with
-    /// lower corner `o`, all of which must have a value or an inferred sign (those of the other
-    /// points are `NONE`).
+    /// lower corner `o`, all of which must have a value or an inferred sign ([`NEGATIVE`] or
+    /// [`POSITIVE`] for those; the other points get `NONE`).
     #[inline]
     fn block_indices(&self, o: [u32; 3], wanted: u32) -> [u32; 27] {
         let mut idx = [NONE; 27];
@@ -362,7 +493,11 @@ impl Store {
                 },
                 |b| b + BLOCK_SLOTS[p],
             );
-            idx[p] = self.slots[s];
+            idx[p] = match self.slots[s] {
+                NONE if self.at[s] < 0.0 => NEGATIVE,
+                NONE if self.at[s] > 0.0 => POSITIVE,
+                i => i,
+            };
         }
         debug_assert!((0..27).all(|p| wanted & 1 << p == 0 || idx[p] != NONE));
         idx
@@ -430,6 +565,28 @@ impl Store {
         v
     }
 
+    /// [`Store::block_known`] of a block of leaves whose centre has the value with index
+    /// `centre` (kept with the block, not in the store; `NONE` when not evaluated).
+    #[inline]
+    fn leaf_block_known(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [f64; 27] {
+        let mut v = self.block_known(o, cells);
+        if centre != NONE {
+            v[CENTRE] = self.values[centre as usize];
+        }
+        v
+    }
+
+    /// The points of `wanted` of a block of leaves that the store has to give (the centre is
+    /// kept with the block when it was evaluated, see [`Store::leaf_block_known`]).
+    #[inline]
+    fn stored(wanted: u32, centre: u32) -> u32 {
+        if centre != NONE {
+            wanted & !(1 << CENTRE)
+        } else {
+            wanted
+        }
+    }
+
     /// Evaluates `points` (queued by [`Store::claim`]) in batches and appends their values.
     fn evaluate<F: Field + ?Sized>(
         &mut self,
@@ -439,11 +596,11 @@ impl Store {
         stats: &mut Stats,
     ) -> Result<()> {
         let start = self.values.len();
-        if start + points.len() >= NONE as usize {
+        if start + points.len() >= MAX_VALUES {
             return Err(crate::Error::TooMuchMemory {
                 name: "resolution",
                 needed_mib: ((start + points.len()) as u64 * 8).div_ceil(1 << 20),
-                limit_mib: (NONE as u64 * 8) >> 20,
+                limit_mib: (MAX_VALUES as u64 * 8) >> 20,
             });
         }
         self.values.resize(start + points.len(), 0.0);
@@ -845,9 +1002,10 @@ struct Ends {
 #[allow(clippy::too_many_arguments)]
 fn settle_leaves(
     store: &mut Store,
-    blocks: &[[u32; 3]],
+    (blocks, centres): (&[[u32; 3]], &[u32]),
     masks: &mut [u8],
     crossed: &mut [u8],
+    open: &mut [u32],
     reach: &[[Reach; 27]; 27],
     cells: [u32; 3],
     decided: Option<&DecidedBlocks>,
@@ -859,13 +1017,14 @@ fn settle_leaves(
         blocks
             .par_iter()
             .zip(masks.par_iter_mut().zip(crossed.par_iter_mut()))
+            .zip(open.par_iter_mut())
             .enumerate()
             .with_min_len(256)
-            .filter_map(|(i, (&o, (m, x)))| {
+            .filter_map(|(i, ((&o, (m, x)), open))| {
                 if *m == 0 {
                     return None;
                 }
-                let mut v = store.block_known(o, cells);
+                let mut v = store.leaf_block_known(o, centres[i], cells);
                 let (mut neg, mut pos) = sign_masks(&v);
                 let unknown = LEAF_POINTS[*m as usize] & !(neg | pos);
                 let (mut n, mut p) = (0, 0);
@@ -900,18 +1059,54 @@ fn settle_leaves(
                         }
                     }
                 }
+                *open = LEAF_POINTS[*m as usize] & !(neg | pos);
                 (n | p | need != 0).then_some((i as u32, n, p, need))
             })
             .collect()
     };
-    // Stored one block after another: a point that two blocks both infer keeps the first sign
-    // (they differ only where the premise fails, and then the edge ends are served again).
-    for (i, neg, pos, need) in found {
-        ends.disagreed |= !store.set_block_signs(blocks[i as usize], neg, pos);
-        if need != 0 {
-            ends.blocks.push((i, need));
+    // Stored in parallel. Two blocks infer different signs for a point only where the premise
+    // fails; then the signs are stored again one block after another, the first sign kept (as
+    // it would be whatever the threads do), and the edge ends are served again.
+    let mut at_owned = std::mem::take(&mut store.at);
+    let agreed = {
+        let (st, at) = (&*store, atomic_f64s(&mut at_owned));
+        found.par_iter().with_min_len(256).all(|&(i, neg, pos, _)| {
+            let o = blocks[i as usize];
+            let mut agreed = true;
+            for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
+                for (s, _) in st.block_slots(o, m) {
+                    if let Err(v) =
+                        at[s].compare_exchange(UNKNOWN, sign.to_bits(), Relaxed, Relaxed)
+                    {
+                        agreed &= (f64::from_bits(v) < 0.0) == (sign < 0.0);
+                    }
+                }
+            }
+            agreed
+        })
+    };
+    store.at = at_owned;
+    if !agreed {
+        // Every point inferred here was unknown before.
+        for &(i, neg, pos, _) in &found {
+            let slots: Vec<usize> = store
+                .block_slots(blocks[i as usize], neg | pos)
+                .map(|(s, _)| s)
+                .collect();
+            for s in slots {
+                store.at[s] = f64::from_bits(UNKNOWN);
+            }
+        }
+        for &(i, neg, pos, _) in &found {
+            ends.disagreed |= !store.set_block_signs(blocks[i as usize], neg, pos);
         }
     }
+    ends.blocks.extend(
+        found
+            .iter()
+            .filter(|f| f.3 != 0)
+            .map(|&(i, _, _, need)| (i, need)),
+    );
 }
 
 /// Evaluates the ends of the crossed leaves' crossed edges that have only an inferred sign
@@ -924,12 +1119,12 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
     field: &F,
     lattice: &Lattice,
     store: &mut Store,
-    leaves: (&[[u32; 3]], &[u8]),
+    leaves: (&[[u32; 3]], &[u32], &[u8]),
     ends: Ends,
     settings: &super::Settings,
     stats: &mut Stats,
 ) -> Result<()> {
-    let (cells, (blocks, crossed)) = (lattice.cells, leaves);
+    let (cells, (blocks, centres, crossed)) = (lattice.cells, leaves);
     let (mut ends, mut disagreed) = (ends.blocks, ends.disagreed);
     while !ends.is_empty() || disagreed {
         let mut taken = Vec::new();
@@ -953,12 +1148,19 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
         let mut values = vec![0.0; points.len()];
         evaluate(field, &points, &mut values, settings.batch)?;
         stats.evaluations += points.len() as u64;
+        if store.values.len() + values.len() >= MAX_VALUES {
+            return Err(crate::Error::TooMuchMemory {
+                name: "resolution",
+                needed_mib: ((store.values.len() + values.len()) as u64 * 8).div_ceil(1 << 20),
+                limit_mib: (MAX_VALUES as u64 * 8) >> 20,
+            });
+        }
         let mut contradicted = false;
         for (&(s, sign), v) in taken.iter().zip(values) {
             contradicted |= (v < 0.0) != (sign < 0.0);
             store.at[s] = v;
-            let i = store.slots[s] as usize;
-            store.values[i] = v;
+            store.slots[s] = store.values.len() as u32;
+            store.values.push(v);
         }
         // Without contradictions, the cases are those the ends were listed for.
         if !contradicted && !std::mem::take(&mut disagreed) {
@@ -970,7 +1172,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             .zip(crossed.par_iter())
             .enumerate()
             .filter_map(|(i, (&o, &x))| {
-                let v = store.block_known(o, cells);
+                let v = store.leaf_block_known(o, centres[i], cells);
                 let need = bits(x).fold(0, |n, d| n | unknown_edge_ends(&v, d));
                 (need != 0).then_some((i as u32, need))
             })
@@ -1013,6 +1215,9 @@ pub fn polygonize<F: Field + ?Sized>(
     let mut store = Store::new(lattice);
     let mut points: Vec<DVec3> = Vec::new();
     let mut decided = DecidedBlocks::new(lattice, octree.corner_test);
+    // The value indices of the kept blocks' centres at the last level (blocks of 2 × 2 × 2
+    // cells), when that level was tested.
+    let mut centres: Vec<u32> = Vec::new();
 
     // Blocks of the current level, by their lowest lattice corner.
     let largest = *cells.iter().max().unwrap();
@@ -1080,9 +1285,13 @@ pub fn polygonize<F: Field + ?Sized>(
                 }
                 if v.abs() <= r {
                     // Only kept blocks hold leaves, and a centre lies inside its own block, so
-                    // only kept centres can be leaf corners (those inside the lattice).
+                    // only kept centres can be leaf corners (those inside the lattice). The
+                    // centre of a block of 2 × 2 × 2 cells is a corner of its own leaves only,
+                    // so it stays with the block instead of in the store.
                     let c = [o[0] + s / 2, o[1] + s / 2, o[2] + s / 2];
-                    if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
+                    if s == 2 {
+                        centres.push((base + i) as u32);
+                    } else if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
                         let slot = store.slot_mut(c);
                         store.slots[slot] = (base + i) as u32;
                         store.at[slot] = store.values[base + i];
@@ -1116,6 +1325,9 @@ pub fn polygonize<F: Field + ?Sized>(
     // of one cell, the root, whose only child inside is that cell): each with the mask of its
     // children inside the lattice, in case-bit order.
     let t = Instant::now();
+    if centres.len() != blocks.len() {
+        centres = vec![NONE; blocks.len()];
+    }
     let mut masks: Vec<u8> = blocks
         .iter()
         .map(|o| {
@@ -1135,31 +1347,52 @@ pub fn polygonize<F: Field + ?Sized>(
         let reach = block_reach(lattice.cell, octree.safety);
         let reach = &*reach;
         let mut ends = Ends::default();
+        // Per block, the points its undecided leaves need that had no sign when last settled.
+        let mut open = vec![0u32; blocks.len()];
+        // Every point the leaves may need, signs inferred or values, has slots from here on.
+        for (&o, &m) in blocks.iter().zip(&masks) {
+            if m != 0 {
+                store.give_block_bricks(o, cells);
+            }
+        }
         let mut settle = |store: &mut Store,
                           masks: &mut [u8],
                           crossed: &mut [u8],
+                          open: &mut [u32],
                           decided: Option<&DecidedBlocks>| {
             settle_leaves(
-                store, &blocks, masks, crossed, reach, cells, decided, &mut ends,
+                store,
+                (&blocks, &centres),
+                masks,
+                crossed,
+                open,
+                reach,
+                cells,
+                decided,
+                &mut ends,
             )
         };
         // First with the signs of the blocks the levels decided, on the faces, edges and
         // corners the blocks share with them (only needed then: the leaves' corners without a
         // sign are never more than before).
-        settle(&mut store, &mut masks, &mut crossed, Some(&decided));
+        settle(
+            &mut store,
+            &mut masks,
+            &mut crossed,
+            &mut open,
+            Some(&decided),
+        );
         drop(decided);
         // The blocks' corners first (farthest from the centre, which is known: their balls
         // reach the most points the centre's does not), then every corner still without a
         // sign. (A round of edge midpoints between them saved 0.1 % of the evaluations.)
         for round in [BLOCK_CORNERS, u32::MAX] {
             points.clear();
-            for (&o, &m) in blocks.iter().zip(&masks) {
-                if m != 0 {
-                    store.claim_block(o, LEAF_POINTS[m as usize] & round, lattice, &mut points);
-                }
-            }
+            // (Points that other blocks gave a sign meanwhile are not claimed.)
+            let wanted: Vec<u32> = open.par_iter().map(|&u| u & round).collect();
+            store.claim_blocks(&blocks, &wanted, lattice, &mut points);
             store.evaluate(field, &points, settings, &mut stats)?;
-            settle(&mut store, &mut masks, &mut crossed, None);
+            settle(&mut store, &mut masks, &mut crossed, &mut open, None);
         }
         debug_assert!(masks.iter().all(|&m| m == 0));
         // The crossed edges need values at both ends, not only signs.
@@ -1167,7 +1400,7 @@ pub fn polygonize<F: Field + ?Sized>(
             field,
             lattice,
             &mut store,
-            (&blocks, &crossed),
+            (&blocks, &centres, &crossed),
             ends,
             settings,
             &mut stats,
@@ -1180,9 +1413,15 @@ pub fn polygonize<F: Field + ?Sized>(
         let store = &store;
         let indices: Vec<[u32; 27]> = blocks
             .par_iter()
-            .zip(masks.par_iter())
+            .zip(masks.par_iter().zip(centres.par_iter()))
             .with_min_len(256)
-            .map(|(&o, &m)| store.block_indices(o, LEAF_POINTS[m as usize]))
+            .map(|(&o, (&m, &c))| {
+                let mut idx = store.block_indices(o, Store::stored(LEAF_POINTS[m as usize], c));
+                if c != NONE && m != 0 {
+                    idx[CENTRE] = c;
+                }
+                idx
+            })
             .collect();
         let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
         let (mut leaves, mut corners) = (Vec::with_capacity(n), Vec::with_capacity(n));
@@ -1201,11 +1440,15 @@ pub fn polygonize<F: Field + ?Sized>(
         let mut corners = Vec::with_capacity(n);
         points.clear();
         points.reserve(2 * n);
-        for (&o, &m) in blocks.iter().zip(&masks) {
+        for ((&o, &m), &c) in blocks.iter().zip(&masks).zip(&centres) {
             if m == 0 {
                 continue;
             }
-            let idx = store.claim_block(o, LEAF_POINTS[m as usize], lattice, &mut points);
+            let wanted = Store::stored(LEAF_POINTS[m as usize], c);
+            let mut idx = store.claim_block(o, wanted, lattice, &mut points);
+            if c != NONE {
+                idx[CENTRE] = c;
+            }
             for d in bits(m) {
                 leaves.push(corner(o, d));
                 corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
@@ -1233,7 +1476,7 @@ pub fn polygonize<F: Field + ?Sized>(
         .par_iter()
         .enumerate()
         .filter_map(|(i, idx)| {
-            let case = case_index(&idx.map(|i| values[i as usize]));
+            let case = case_index(&idx.map(|i| corner_value(&values, i)));
             (case != 0 && case != 255).then_some((i as u32, case))
         })
         .collect();
@@ -1404,6 +1647,42 @@ mod tests {
         )
         .unwrap();
         assert_eq!(d.compare(&o).missing, 0);
+    }
+
+    #[test]
+    fn same_mesh_and_count_on_any_number_of_threads() {
+        // Signs and claims are stored in parallel; where the premise fails (a field three times
+        // the distance), blocks infer different signs for shared points, and the outcome must
+        // still not depend on the threads.
+        struct Over(Torus);
+        impl Field for Over {
+            fn value(&self, p: DVec3) -> f64 {
+                3.0 * self.0.value(p)
+            }
+        }
+        let l = Lattice::new(DVec3::splat(-1.0), DVec3::new(1.0, 0.9, 1.0), [70, 64, 61]).unwrap();
+        let t = Torus {
+            center: DVec3::new(0.01, 0.0, -0.02),
+            major: 0.55,
+            minor: 0.2,
+        };
+        let s = crate::polygonize::Settings::default();
+        let run = |threads: usize, f: &(dyn Field + Sync)| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| polygonize(f, &l, &s, &Settings::default()).unwrap())
+        };
+        for f in [&Over(t) as &(dyn Field + Sync), &t] {
+            let (one, st1) = run(1, f);
+            for threads in [2, 3, 8] {
+                let (m, st) = run(threads, f);
+                assert_eq!(m.vertices, one.vertices);
+                assert_eq!(m.triangles, one.triangles);
+                assert_eq!(st.evaluations, st1.evaluations);
+            }
+        }
     }
 
     #[test]
