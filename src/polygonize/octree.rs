@@ -28,10 +28,10 @@
 //! so finding, claiming and reading a point is array indexing, and memory grows with the
 //! surface, not with the lattice (besides the brick table, 4 bytes per 512 points, and the
 //! decided blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are
-//! triangulated in order, their cases found in parallel, each edge vertex indexed through the
-//! value index of the edge's lower end.
+//! triangulated in parallel, each edge vertex indexed through the value index of the edge's
+//! lower end and numbered as a serial sweep over the leaves would (first use).
 
-use super::cell::{case_index, corner_offset, emit_triangles};
+use super::cell::{case_index, corner_offset};
 use super::table::{EDGES, EDGE_AXIS};
 use super::{check_memory, compute_normals, estimate_triangles, evaluate, CaseTable, Stats};
 use crate::error::Result;
@@ -81,10 +81,10 @@ pub struct Settings {
     pub safety: f64,
     /// Tests beyond the paper that decide with values already known, each by the rejection
     /// test's premise (no surface within |f(x)| / safety of x):
-    /// - a block whose known corners (kept centres of coarser levels) have balls of radius
-    ///   |f| / safety that together cover it is dropped without evaluating its centre
-    ///   (covering is proven by splitting the box into octants, three levels deep, or exactly
-    ///   for two balls at opposite corners);
+    /// - a block whose known corners have balls of radius |f| / safety that together cover it
+    ///   is dropped without evaluating its centre (the known corners are the centres of its
+    ///   parent and of ancestors further up, two at most, at opposite corners, where covering
+    ///   is decided exactly);
     /// - a block dropped (by its centre's ball, which holds the whole block, or by its corners')
     ///   holds one sign, so the leaves' corners on its faces, edges and corners have that sign
     ///   without evaluation (a map of one byte per block of 2 × 2 × 2 cells records them);
@@ -775,6 +775,44 @@ fn covered_piece(balls: &[(DVec3, f64)], mask: u32, lo: DVec3, hi: DVec3, depth:
     })
 }
 
+/// The values known at a block's corners during the levels: at most two, at opposite corners.
+/// A centre lies inside its block, so the coarser centres on a block's corners are those of its
+/// ancestors: its parent's centre, at the corner opposite to the one it shares with its parent,
+/// and whatever the parent knew at that shared corner. NaN: not known.
+#[derive(Clone, Copy)]
+struct KnownCorners {
+    /// The corner (case-bit order) shared with the parent.
+    corner: u8,
+    /// The values at `corner` and at the opposite corner, `7 - corner`.
+    values: [f64; 2],
+}
+
+impl KnownCorners {
+    const NONE: Self = KnownCorners {
+        corner: 0,
+        values: [f64::NAN; 2],
+    };
+
+    /// The value at corner `k` (NaN when unknown).
+    #[cfg_attr(not(debug_assertions), allow(dead_code))]
+    fn at(&self, k: usize) -> f64 {
+        match k {
+            _ if k == self.corner as usize => self.values[0],
+            _ if k == 7 - self.corner as usize => self.values[1],
+            _ => f64::NAN,
+        }
+    }
+
+    /// Those of child `d` (octant, case-bit order) of a block with these and centre value
+    /// `centre`: the child's corner `d` is the block's, its opposite corner the block's centre.
+    fn child(&self, d: usize, centre: f64) -> Self {
+        KnownCorners {
+            corner: d as u8,
+            values: [self.at(d), centre],
+        }
+    }
+}
+
 /// `SHARED[k]`: the points of a block of 2 × 2 × 2 cells (bits as in [`block_point`]) that it
 /// shares with its neighbour at offset `d` ∈ {−1, 0, 1}³, `k = (d.x + 1) + 3 (d.y + 1) +
 /// 9 (d.z + 1)`: along an axis with offset −1 its points at 0, with +1 those at 2.
@@ -1169,6 +1207,132 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
     Ok(())
 }
 
+/// A leaf cell the surface crosses: its lowest lattice point, the value indices of its corners
+/// (or [`NEGATIVE`] / [`POSITIVE`] for corners with a sign only) and its case.
+struct CrossedLeaf {
+    origin: [u32; 3],
+    corners: [u32; 8],
+    case: u8,
+}
+
+/// The triangles of the crossed leaves, with a vertex on each crossed edge, made in parallel
+/// but numbered as the serial loop over the leaves would number them: each edge vertex in the
+/// order of its first use (by leaf, then triangle, then edge). The first leaf that uses an edge
+/// (found with `fetch_min` on the edge's entry, keyed by the value index of its lower end and
+/// its axis) makes its vertex; the leaves' counts of vertices made give where each leaf's
+/// vertices start.
+fn triangulate(
+    table: &CaseTable,
+    lattice: &Lattice,
+    values: &[f64],
+    leaves: &[CrossedLeaf],
+) -> Mesh {
+    // The cell edges each case's triangles use.
+    let used: [u16; 256] = std::array::from_fn(|c| {
+        table
+            .triangles(c as u8)
+            .iter()
+            .flatten()
+            .fold(0, |m, &e| m | 1 << e)
+    });
+    let key = |l: &CrossedLeaf, e: usize| {
+        3 * l.corners[EDGES[e][0] as usize] as usize + EDGE_AXIS[e] as usize
+    };
+    // Per edge: the first leaf that uses it, then (once the leaves have their vertices) its
+    // vertex.
+    let mut entries = vec![NONE; 3 * values.len()];
+    let entry = atomic_u32s(&mut entries);
+    leaves
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(i, l)| {
+            let i = i as u32;
+            let mut m = used[l.case as usize];
+            while m != 0 {
+                let e = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let a = &entry[key(l, e)];
+                if a.load(Relaxed) > i {
+                    a.fetch_min(i, Relaxed);
+                }
+            }
+        });
+    // The edges each leaf makes the vertex of.
+    let makes: Vec<u16> = leaves
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .map(|(i, l)| {
+            let mut made = 0;
+            let mut m = used[l.case as usize];
+            while m != 0 {
+                let e = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if entry[key(l, e)].load(Relaxed) == i as u32 {
+                    made |= 1 << e;
+                }
+            }
+            made
+        })
+        .collect();
+    // Where each leaf's vertices start.
+    let mut start = Vec::with_capacity(leaves.len());
+    let mut n = 0u32;
+    for m in &makes {
+        start.push(n);
+        n += m.count_ones();
+    }
+    let vertices: Vec<DVec3> = leaves
+        .par_iter()
+        .zip(makes.par_iter().zip(start.par_iter()))
+        .with_min_len(1024)
+        .flat_map_iter(|(l, (&made, &first))| {
+            // The vertices in order of first use in the leaf's triangles.
+            let mut order = [0u8; 12];
+            let (mut k, mut left) = (0, made);
+            for t in table.triangles(l.case) {
+                for &e in t {
+                    if left & 1 << e != 0 {
+                        left &= !(1 << e);
+                        order[k] = e;
+                        entry[key(l, e as usize)].store(first + k as u32, Relaxed);
+                        k += 1;
+                    }
+                }
+            }
+            (0..k).map(move |j| {
+                let [ka, kb] = EDGES[order[j] as usize].map(|k| k as usize);
+                let (fa, fb) = (
+                    values[l.corners[ka] as usize],
+                    values[l.corners[kb] as usize],
+                );
+                edge_crossing(
+                    lattice.point(corner(l.origin, ka)),
+                    lattice.point(corner(l.origin, kb)),
+                    fa,
+                    fb,
+                )
+            })
+        })
+        .collect();
+    let triangles: Vec<[u32; 3]> = leaves
+        .par_iter()
+        .with_min_len(1024)
+        .flat_map_iter(|l| {
+            table
+                .triangles(l.case)
+                .iter()
+                .map(move |t| t.map(|e| entry[key(l, e as usize)].load(Relaxed)))
+        })
+        .collect();
+    Mesh {
+        vertices,
+        triangles,
+        ..Default::default()
+    }
+}
+
 /// Polygonizes `field` over `lattice` with hierarchical rejection; leaves are single cells.
 pub fn polygonize<F: Field + ?Sized>(
     field: &F,
@@ -1215,43 +1379,57 @@ pub fn polygonize<F: Field + ?Sized>(
             .unwrap_or(levels)
     });
     let mut blocks: Vec<[u32; 3]> = vec![[0, 0, 0]];
+    // Per block: the values known at its corners, and (once tested) at its centre.
+    let mut known = vec![KnownCorners::NONE];
+    let mut centre_values: Vec<f64> = Vec::new();
     for level in 0..levels {
         let s = 1u32 << (levels - level);
         if level >= start_level {
             let t = Instant::now();
             if octree.corner_test && level > start_level {
-                // Blocks that the balls of their known corners (kept centres of coarser
-                // levels) already cover need no centre of their own.
+                // Blocks that the balls of their known corners already cover need no centre of
+                // their own. A coarser centre lies inside its block, so the only ones on a
+                // block's corners are those of its ancestors, carried down with it (see
+                // `KnownCorners`): no lookups.
                 let size = lattice.cell * s as f64;
-                let store = &store;
                 // Per block: kept (None), or covered, with whether its known corners are all
                 // negative (its sign) or all positive (Some(None) where they differ, which the
                 // premise rules out).
                 let free: Vec<Option<Option<bool>>> = blocks
                     .par_iter()
-                    .with_min_len(256)
-                    .map(|o| {
-                        let known: [f64; 8] = std::array::from_fn(|k| {
-                            store
-                                .known(corner_scaled(*o, k, s), cells)
-                                .unwrap_or(f64::NAN)
-                        });
-                        let radius = known.map(|v| v.abs() / octree.safety);
+                    .zip(&known)
+                    .with_min_len(1024)
+                    .map(|(o, k)| {
+                        debug_assert!((0..8).all(|j| store
+                            .known(corner_scaled(*o, j, s), cells)
+                            .is_none_or(|v| v == k.at(j))));
+                        let (a, b) = (k.values[0], k.values[1]);
+                        if a.is_nan() && b.is_nan() {
+                            return None;
+                        }
+                        let mut radius = [f64::NAN; 8];
+                        radius[k.corner as usize] = a.abs() / octree.safety;
+                        radius[7 - k.corner as usize] = b.abs() / octree.safety;
                         covered(&radius, size).then(|| {
-                            let neg = known.iter().all(|&v| v.is_nan() || v < 0.0);
-                            let pos = known.iter().all(|&v| v.is_nan() || v >= 0.0);
+                            let neg = [a, b].iter().all(|&v| v.is_nan() || v < 0.0);
+                            let pos = [a, b].iter().all(|&v| v.is_nan() || v >= 0.0);
                             (neg != pos).then_some(neg)
                         })
                     })
                     .collect();
-                let mut i = 0;
-                blocks.retain(|o| {
-                    i += 1;
-                    if let Some(Some(negative)) = free[i - 1] {
-                        decided.mark(*o, s, negative);
+                let mut kept = 0;
+                for (i, f) in free.iter().enumerate() {
+                    if let Some(Some(negative)) = f {
+                        decided.mark(blocks[i], s, *negative);
                     }
-                    free[i - 1].is_none()
-                });
+                    if f.is_none() {
+                        blocks[kept] = blocks[i];
+                        known[kept] = known[i];
+                        kept += 1;
+                    }
+                }
+                blocks.truncate(kept);
+                known.truncate(kept);
             }
             // Centres are never shared: those of one level are distinct, and those of different
             // levels are odd multiples of different powers of two.
@@ -1263,6 +1441,8 @@ pub fn polygonize<F: Field + ?Sized>(
             );
             let base = store.values.len();
             store.evaluate(field, &points, settings, &mut stats)?;
+            centre_values.clear();
+            centre_values.resize(blocks.len(), f64::NAN);
             let r = octree.safety * lattice.block_radius(s);
             let mut kept = 0;
             for i in 0..blocks.len() {
@@ -1285,10 +1465,14 @@ pub fn polygonize<F: Field + ?Sized>(
                         store.at[slot] = store.values[base + i];
                     }
                     blocks[kept] = o;
+                    known[kept] = known[i];
+                    centre_values[kept] = v;
                     kept += 1;
                 }
             }
             blocks.truncate(kept);
+            known.truncate(kept);
+            centre_values.truncate(kept);
             stats.add_time("sample", t);
         }
         stats.cells_per_level.push(blocks.len() as u64);
@@ -1298,16 +1482,21 @@ pub fn polygonize<F: Field + ?Sized>(
         }
         let h = s / 2;
         let mut next = Vec::with_capacity(blocks.len() * 8);
-        for o in &blocks {
-            for k in 0..8 {
-                let d = corner_offset(k);
-                let c = [o[0] + d[0] * h, o[1] + d[1] * h, o[2] + d[2] * h];
-                if inside(c) {
-                    next.push(c);
+        let mut next_known = Vec::with_capacity(blocks.len() * 8);
+        centre_values.resize(blocks.len(), f64::NAN);
+        for ((o, k), &c) in blocks.iter().zip(&known).zip(&centre_values) {
+            for d in 0..8 {
+                let off = corner_offset(d);
+                let child = [o[0] + off[0] * h, o[1] + off[1] * h, o[2] + off[2] * h];
+                if inside(child) {
+                    next.push(child);
+                    next_known.push(k.child(d, c));
                 }
             }
         }
         blocks = next;
+        known = next_known;
+        centre_values.clear();
     }
     // `blocks` now holds the blocks of 2 × 2 × 2 cells that hold the leaves (or, for a lattice
     // of one cell, the root, whose only child inside is that cell): each with the mask of its
@@ -1391,37 +1580,37 @@ pub fn polygonize<F: Field + ?Sized>(
         )?;
         masks = crossed;
     }
-    // The leaves, with the indices of their corners' values.
-    let (leaves, corners): (Vec<[u32; 3]>, Vec<[u32; 8]>) = if octree.corner_test && levels > 0 {
+    // The crossed leaves, with the indices of their corners' values, in leaf order.
+    let values = &store.values;
+    let crossed_leaf = move |o: [u32; 3], d: usize, idx: &[u32; 27]| {
+        let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
+        let case = case_index(&corners.map(|i| corner_value(values, i)));
+        (case != 0 && case != 255).then_some(CrossedLeaf {
+            origin: corner(o, d),
+            corners,
+            case,
+        })
+    };
+    let leaves: Vec<CrossedLeaf> = if octree.corner_test && levels > 0 {
         // Settled: every corner of a crossed leaf has a value or a sign, read in parallel.
         let store = &store;
-        let indices: Vec<[u32; 27]> = blocks
+        blocks
             .par_iter()
             .zip(masks.par_iter().zip(centres.par_iter()))
             .with_min_len(256)
-            .map(|(&o, (&m, &c))| {
+            .flat_map_iter(|(&o, (&m, &c))| {
                 let mut idx = store.block_indices(o, Store::stored(LEAF_POINTS[m as usize], c));
                 if c != NONE && m != 0 {
                     idx[CENTRE] = c;
                 }
-                idx
+                bits(m).filter_map(move |d| crossed_leaf(o, d, &idx))
             })
-            .collect();
-        let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
-        let (mut leaves, mut corners) = (Vec::with_capacity(n), Vec::with_capacity(n));
-        for ((&o, &m), idx) in blocks.iter().zip(&masks).zip(&indices) {
-            for d in bits(m) {
-                leaves.push(corner(o, d));
-                corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
-            }
-        }
-        (leaves, corners)
+            .collect()
     } else {
         // All their corners not yet known evaluated in one batch; the leaves of a block claim
         // its points at once.
         let n: usize = masks.iter().map(|m| m.count_ones() as usize).sum();
-        let mut leaves = Vec::with_capacity(n);
-        let mut corners = Vec::with_capacity(n);
+        let mut indices = Vec::with_capacity(blocks.len());
         points.clear();
         points.reserve(2 * n);
         for ((&o, &m), &c) in blocks.iter().zip(&masks).zip(&centres) {
@@ -1433,62 +1622,37 @@ pub fn polygonize<F: Field + ?Sized>(
             if c != NONE {
                 idx[CENTRE] = c;
             }
-            for d in bits(m) {
-                leaves.push(corner(o, d));
-                corners.push(LEAF_CORNERS[d].map(|p| idx[p as usize]));
-            }
+            indices.push((o, m, idx));
         }
         store.evaluate(field, &points, settings, &mut stats)?;
-        (leaves, corners)
+        let values = &store.values;
+        let crossed_leaf = move |o: [u32; 3], d: usize, idx: &[u32; 27]| {
+            let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
+            let case = case_index(&corners.map(|i| values[i as usize]));
+            (case != 0 && case != 255).then_some(CrossedLeaf {
+                origin: corner(o, d),
+                corners,
+                case,
+            })
+        };
+        indices
+            .par_iter()
+            .with_min_len(256)
+            .flat_map_iter(|(o, m, idx)| bits(*m).filter_map(move |d| crossed_leaf(*o, d, idx)))
+            .collect()
     };
-    drop((blocks, masks, points));
+    drop((blocks, masks, points, centres));
     stats.cells_per_level.push(tested);
     stats.cells_visited = tested;
+    stats.cells_crossed = leaves.len() as u64;
     stats.add_time("sample", t);
 
     let t = Instant::now();
-    // From here on, values are found through the leaves' corner indices only.
     let values = std::mem::take(&mut store.values);
     drop(store);
-    let mut mesh = Mesh::default();
-    // The vertices on the three edges that start at each point evaluated, by value index.
-    let mut edges: Vec<[u32; 3]> = vec![[NONE; 3]; values.len()];
-    // The crossed leaves with their case, found in parallel (in leaf order); then their
-    // triangles, in order, each edge vertex made on first use: the vertices and triangles of
-    // the serial loop over the leaves, in the same order.
-    let crossed: Vec<(u32, u8)> = corners
-        .par_iter()
-        .enumerate()
-        .filter_map(|(i, idx)| {
-            let case = case_index(&idx.map(|i| corner_value(&values, i)));
-            (case != 0 && case != 255).then_some((i as u32, case))
-        })
-        .collect();
-    stats.cells_crossed = crossed.len() as u64;
-    mesh.vertices.reserve(crossed.len() + crossed.len() / 8);
-    mesh.triangles
-        .reserve(2 * crossed.len() + crossed.len() / 4);
-    for &(i, case) in &crossed {
-        let (o, idx) = (leaves[i as usize], &corners[i as usize]);
-        emit_triangles(
-            table,
-            case,
-            |e| {
-                let [ka, kb] = EDGES[e].map(|k| k as usize);
-                let axis = EDGE_AXIS[e] as usize;
-                let vertex = &mut edges[idx[ka] as usize][axis];
-                if *vertex == NONE {
-                    let (a, b) = (corner(o, ka), corner(o, kb));
-                    let (fa, fb) = (values[idx[ka] as usize], values[idx[kb] as usize]);
-                    mesh.vertices
-                        .push(edge_crossing(lattice.point(a), lattice.point(b), fa, fb));
-                    *vertex = (mesh.vertices.len() - 1) as u32;
-                }
-                *vertex
-            },
-            &mut mesh.triangles,
-        );
-    }
+    let mesh = triangulate(table, lattice, &values, &leaves);
+    drop((values, leaves));
+    let mut mesh = mesh;
     stats.add_time("triangulate", t);
     compute_normals(field, lattice, &mut mesh, settings, &mut stats)?;
     Ok((mesh, stats))
