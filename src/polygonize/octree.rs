@@ -778,34 +778,63 @@ fn covered_piece(balls: &[(DVec3, f64)], mask: u32, lo: DVec3, hi: DVec3, depth:
 /// The values known at a block's corners during the levels: at most two, at opposite corners.
 /// A centre lies inside its block, so the coarser centres on a block's corners are those of its
 /// ancestors: its parent's centre, at the corner opposite to the one it shares with its parent,
-/// and whatever the parent knew at that shared corner. NaN: not known.
+/// and whatever the parent knew at that shared corner.
 #[derive(Clone, Copy)]
 struct KnownCorners {
     /// The corner (case-bit order) shared with the parent.
     corner: u8,
-    /// The values at `corner` and at the opposite corner, `7 - corner`.
-    values: [f64; 2],
+    /// The indices of the values at `corner` and at the opposite corner, `7 - corner`
+    /// (`NONE`: not known).
+    values: [u32; 2],
 }
 
 impl KnownCorners {
     const NONE: Self = KnownCorners {
         corner: 0,
-        values: [f64::NAN; 2],
+        values: [NONE; 2],
     };
 
-    /// The value at corner `k` (NaN when unknown).
-    #[cfg_attr(not(debug_assertions), allow(dead_code))]
-    fn at(&self, k: usize) -> f64 {
+    /// The index of the value at corner `k` (`NONE` when unknown).
+    fn at(&self, k: usize) -> u32 {
         match k {
             _ if k == self.corner as usize => self.values[0],
             _ if k == 7 - self.corner as usize => self.values[1],
-            _ => f64::NAN,
+            _ => NONE,
         }
     }
 
-    /// Those of child `d` (octant, case-bit order) of a block with these and centre value
-    /// `centre`: the child's corner `d` is the block's, its opposite corner the block's centre.
-    fn child(&self, d: usize, centre: f64) -> Self {
+    /// The values at `corner` and at the opposite corner (NaN when unknown).
+    fn get(&self, values: &[f64]) -> [f64; 2] {
+        self.values.map(|i| {
+            if i == NONE {
+                f64::NAN
+            } else {
+                values[i as usize]
+            }
+        })
+    }
+
+    /// The values known at the 27 points of a block of 2 × 2 × 2 cells with these corners
+    /// (NaN elsewhere), its centre's in `values` at index `centre` (`NONE`: not evaluated).
+    fn block_values(&self, values: &[f64], centre: u32) -> [f64; 27] {
+        let mut v = [f64::NAN; 27];
+        if centre != NONE {
+            v[CENTRE] = values[centre as usize];
+        }
+        for (k, x) in [self.corner as usize, 7 - self.corner as usize]
+            .into_iter()
+            .zip(self.get(values))
+        {
+            let d = corner_offset(k);
+            v[block_point(2 * d[0] as usize, 2 * d[1] as usize, 2 * d[2] as usize)] = x;
+        }
+        v
+    }
+
+    /// Those of child `d` (octant, case-bit order) of a block with these and whose centre's
+    /// value has index `centre`: the child's corner `d` is the block's, its opposite corner the
+    /// block's centre.
+    fn child(&self, d: usize, centre: u32) -> Self {
         KnownCorners {
             corner: d as u8,
             values: [self.at(d), centre],
@@ -1000,15 +1029,32 @@ fn ball_masks(v: &[f64; 27], reach: &[[Reach; 27]; 27]) -> (u32, u32) {
 /// (bits of block points; `v` the block's values, see [`sign_masks`]).
 #[inline]
 fn unknown_edge_ends(v: &[f64; 27], d: usize) -> u32 {
-    let mut need = 0;
-    for [ka, kb] in EDGES {
-        let [a, b] = [ka, kb].map(|k| LEAF_CORNERS[d][k as usize] as usize);
-        if (v[a] < 0.0) != (v[b] < 0.0) {
-            need |= (v[a].is_infinite() as u32) << a | (v[b].is_infinite() as u32) << b;
-        }
+    let (mut negative, mut inferred) = (0, 0);
+    for (k, &p) in LEAF_CORNERS[d].iter().enumerate() {
+        negative |= ((v[p as usize] < 0.0) as usize) << k;
+        inferred |= (v[p as usize].is_infinite() as u8) << k;
     }
-    need
+    bits(CROSSED_EDGE_ENDS[negative] & inferred).fold(0, |need, k| need | 1 << LEAF_CORNERS[d][k])
 }
+
+/// `CROSSED_EDGE_ENDS[c]`: the corners of a cell with case `c` (bit k set: corner k negative)
+/// that end a crossed edge (one whose ends differ in sign).
+const CROSSED_EDGE_ENDS: [u8; 256] = {
+    let mut t = [0; 256];
+    let mut c = 0;
+    while c < 256 {
+        let mut e = 0;
+        while e < 12 {
+            let [a, b] = EDGES[e];
+            if (c >> a) & 1 != (c >> b) & 1 {
+                t[c] |= 1 << a | 1 << b;
+            }
+            e += 1;
+        }
+        c += 1;
+    }
+    t
+};
 
 /// The ends of crossed edges to evaluate, as (block, block points), and whether two blocks
 /// inferred different signs for a point (the premise failing; the first sign is kept, so the
@@ -1034,7 +1080,7 @@ fn settle_leaves(
     open: &mut [u32],
     reach: &[[Reach; 27]; 27],
     cells: [u32; 3],
-    decided: Option<&DecidedBlocks>,
+    first: Option<(&DecidedBlocks, &[KnownCorners])>,
     ends: &mut Ends,
 ) {
     // Per block: the signs inferred (negative, positive) and the crossed edges' ends wanted.
@@ -1050,13 +1096,24 @@ fn settle_leaves(
                 if *m == 0 {
                     return None;
                 }
-                let mut v = store.leaf_block_known(o, centres[i], cells);
+                let mut v = match first {
+                    // Before any leaf is settled, the store holds only the levels' values.
+                    Some((_, known)) => {
+                        let v = known[i].block_values(&store.values, centres[i]);
+                        debug_assert!(v
+                            .iter()
+                            .zip(store.leaf_block_known(o, centres[i], cells))
+                            .all(|(a, b)| a.to_bits() == b.to_bits() || b.is_nan()));
+                        v
+                    }
+                    None => store.leaf_block_known(o, centres[i], cells),
+                };
                 let (mut neg, mut pos) = sign_masks(&v);
                 let unknown = LEAF_POINTS[*m as usize] & !(neg | pos);
                 let (mut n, mut p) = (0, 0);
                 if unknown != 0 {
                     let (mut bn, mut bp) = ball_masks(&v, reach);
-                    if let Some(decided) = decided {
+                    if let Some((decided, _)) = first {
                         let (dn, dp) = decided.masks(o);
                         (bn, bp) = (bn | dn, bp | dp);
                     }
@@ -1381,7 +1438,8 @@ pub fn polygonize<F: Field + ?Sized>(
     let mut blocks: Vec<[u32; 3]> = vec![[0, 0, 0]];
     // Per block: the values known at its corners, and (once tested) at its centre.
     let mut known = vec![KnownCorners::NONE];
-    let mut centre_values: Vec<f64> = Vec::new();
+    // The indices of the values of the kept blocks' centres, once tested.
+    let mut centre_values: Vec<u32> = Vec::new();
     for level in 0..levels {
         let s = 1u32 << (levels - level);
         if level >= start_level {
@@ -1402,8 +1460,10 @@ pub fn polygonize<F: Field + ?Sized>(
                     .map(|(o, k)| {
                         debug_assert!((0..8).all(|j| store
                             .known(corner_scaled(*o, j, s), cells)
-                            .is_none_or(|v| v == k.at(j))));
-                        let (a, b) = (k.values[0], k.values[1]);
+                            .is_none_or(
+                                |v| k.at(j) != NONE && v == store.values[k.at(j) as usize]
+                            )));
+                        let [a, b] = k.get(&store.values);
                         if a.is_nan() && b.is_nan() {
                             return None;
                         }
@@ -1442,7 +1502,7 @@ pub fn polygonize<F: Field + ?Sized>(
             let base = store.values.len();
             store.evaluate(field, &points, settings, &mut stats)?;
             centre_values.clear();
-            centre_values.resize(blocks.len(), f64::NAN);
+            centre_values.resize(blocks.len(), NONE);
             let r = octree.safety * lattice.block_radius(s);
             let mut kept = 0;
             for i in 0..blocks.len() {
@@ -1466,7 +1526,7 @@ pub fn polygonize<F: Field + ?Sized>(
                     }
                     blocks[kept] = o;
                     known[kept] = known[i];
-                    centre_values[kept] = v;
+                    centre_values[kept] = (base + i) as u32;
                     kept += 1;
                 }
             }
@@ -1483,7 +1543,7 @@ pub fn polygonize<F: Field + ?Sized>(
         let h = s / 2;
         let mut next = Vec::with_capacity(blocks.len() * 8);
         let mut next_known = Vec::with_capacity(blocks.len() * 8);
-        centre_values.resize(blocks.len(), f64::NAN);
+        centre_values.resize(blocks.len(), NONE);
         for ((o, k), &c) in blocks.iter().zip(&known).zip(&centre_values) {
             for d in 0..8 {
                 let off = corner_offset(d);
@@ -1532,23 +1592,24 @@ pub fn polygonize<F: Field + ?Sized>(
                 store.give_block_bricks(o, cells);
             }
         }
-        let mut settle = |store: &mut Store,
-                          masks: &mut [u8],
-                          crossed: &mut [u8],
-                          open: &mut [u32],
-                          decided: Option<&DecidedBlocks>| {
-            settle_leaves(
-                store,
-                (&blocks, &centres),
-                masks,
-                crossed,
-                open,
-                reach,
-                cells,
-                decided,
-                &mut ends,
-            )
-        };
+        let mut settle =
+            |store: &mut Store,
+             masks: &mut [u8],
+             crossed: &mut [u8],
+             open: &mut [u32],
+             first: Option<(&DecidedBlocks, &[KnownCorners])>| {
+                settle_leaves(
+                    store,
+                    (&blocks, &centres),
+                    masks,
+                    crossed,
+                    open,
+                    reach,
+                    cells,
+                    first,
+                    &mut ends,
+                )
+            };
         // First with the signs of the blocks the levels decided, on the faces, edges and
         // corners the blocks share with them (only needed then: the leaves' corners without a
         // sign are never more than before).
@@ -1557,9 +1618,9 @@ pub fn polygonize<F: Field + ?Sized>(
             &mut masks,
             &mut crossed,
             &mut open,
-            Some(&decided),
+            Some((&decided, &known)),
         );
-        drop(decided);
+        drop((decided, known));
         // Then every corner still without a sign, in one batch. (Rounds — the blocks' corners
         // first, then the rest; or edge midpoints between them — saved 0.1–1.4 % of the
         // evaluations at 128³ but cost more in settling than they saved: 2–5 % of the time.)
@@ -1915,6 +1976,31 @@ mod tests {
         let mut none = DecidedBlocks::new(&lattice, false);
         none.mark([0, 0, 0], 8, true);
         assert_eq!(none.masks([2, 2, 2]), (0, 0));
+    }
+
+    /// The ends of crossed edges with only a sign are those that an edge-by-edge search finds,
+    /// for every leaf of a block and mixes of values, signs and unknown points.
+    #[test]
+    fn unknown_edge_ends_are_those_of_crossed_edges() {
+        let mut next = uniform(5);
+        for _ in 0..2000 {
+            let v: [f64; 27] = std::array::from_fn(|_| match (4.0 * next()) as u32 {
+                0 => f64::NEG_INFINITY,
+                1 => f64::INFINITY,
+                2 => f64::NAN,
+                _ => next() - 0.5,
+            });
+            for d in 0..8 {
+                let mut want = 0;
+                for [ka, kb] in EDGES {
+                    let [a, b] = [ka, kb].map(|k| LEAF_CORNERS[d][k as usize] as usize);
+                    if (v[a] < 0.0) != (v[b] < 0.0) {
+                        want |= (v[a].is_infinite() as u32) << a | (v[b].is_infinite() as u32) << b;
+                    }
+                }
+                assert_eq!(unknown_edge_ends(&v, d), want, "{v:?} {d}");
+            }
+        }
     }
 
     /// The signs inferred are exactly those of the block points inside the balls of one sign,
