@@ -468,13 +468,15 @@ impl Store {
 
     /// The indices in `values` of the points in `wanted` of the block of 2 × 2 × 2 cells with
     /// lower corner `o`, all of which must have a value or an inferred sign ([`NEGATIVE`] or
-    /// [`POSITIVE`] for those; the other points get `NONE`).
+    /// [`POSITIVE`] for those; the other points get `NONE`), and the points of `wanted` that
+    /// are negative (bit per point).
     #[inline]
-    fn block_indices(&self, o: [u32; 3], wanted: u32) -> [u32; 27] {
+    fn block_indices(&self, o: [u32; 3], wanted: u32) -> ([u32; 27], u32) {
         let mut idx = [NONE; 27];
+        let mut negative = 0;
         if wanted == 0 {
             // (The brick of `o` may have no slots.)
-            return idx;
+            return (idx, negative);
         }
         // The slots of the whole block, when it lies in the brick of `o` (as in claim_block).
         let base = o.iter().all(|&c| c & (BRICK - 1) <= BRICK - 3).then(|| {
@@ -492,14 +494,17 @@ impl Store {
                 },
                 |b| b + BLOCK_SLOTS[p],
             );
+            // A value or an inferred sign (±∞): `at` has both.
+            let below = self.at[s] < 0.0;
+            negative |= (below as u32) << p;
             idx[p] = match self.slots[s] {
-                NONE if self.at[s] < 0.0 => NEGATIVE,
+                NONE if below => NEGATIVE,
                 NONE if self.at[s] > 0.0 => POSITIVE,
                 i => i,
             };
         }
         debug_assert!((0..27).all(|p| wanted & 1 << p == 0 || idx[p] != NONE));
-        idx
+        (idx, negative)
     }
 
     /// What is known at lattice point `p`: its value, ±∞ for a sign without a value, NaN when
@@ -1643,15 +1648,6 @@ pub fn polygonize<F: Field + ?Sized>(
     }
     // The crossed leaves, with the indices of their corners' values, in leaf order.
     let values = &store.values;
-    let crossed_leaf = move |o: [u32; 3], d: usize, idx: &[u32; 27]| {
-        let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
-        let case = case_index(&corners.map(|i| corner_value(values, i)));
-        (case != 0 && case != 255).then_some(CrossedLeaf {
-            origin: corner(o, d),
-            corners,
-            case,
-        })
-    };
     let leaves: Vec<CrossedLeaf> = if octree.corner_test && levels > 0 {
         // Settled: every corner of a crossed leaf has a value or a sign, read in parallel.
         let store = &store;
@@ -1660,11 +1656,31 @@ pub fn polygonize<F: Field + ?Sized>(
             .zip(masks.par_iter().zip(centres.par_iter()))
             .with_min_len(256)
             .flat_map_iter(|(&o, (&m, &c))| {
-                let mut idx = store.block_indices(o, Store::stored(LEAF_POINTS[m as usize], c));
+                let (mut idx, mut negative) =
+                    store.block_indices(o, Store::stored(LEAF_POINTS[m as usize], c));
                 if c != NONE && m != 0 {
                     idx[CENTRE] = c;
+                    negative |= ((values[c as usize] < 0.0) as u32) << CENTRE;
                 }
-                bits(m).filter_map(move |d| crossed_leaf(o, d, &idx))
+                bits(m).filter_map(move |d| {
+                    // The case from the signs gathered (the same as from the corners' values).
+                    let case = LEAF_CORNERS[d]
+                        .iter()
+                        .enumerate()
+                        .fold(0u8, |c, (k, &p)| c | (((negative >> p) & 1) as u8) << k);
+                    (case != 0 && case != 255).then(|| {
+                        let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
+                        debug_assert_eq!(
+                            case,
+                            case_index(&corners.map(|i| corner_value(values, i)))
+                        );
+                        CrossedLeaf {
+                            origin: corner(o, d),
+                            corners,
+                            case,
+                        }
+                    })
+                })
             })
             .collect()
     } else {
