@@ -1163,11 +1163,16 @@ fn settle_leaves(
             let mut agreed = true;
             for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
                 for (s, _) in st.block_slots(o, m) {
-                    if let Err(v) =
-                        at[s].compare_exchange(UNKNOWN, sign.to_bits(), Relaxed, Relaxed)
-                    {
-                        agreed &= (f64::from_bits(v) < 0.0) == (sign < 0.0);
+                    // Most points are shared: a plain read first spares the atomic write
+                    // where a neighbour stored the sign already.
+                    let mut v = at[s].load(Relaxed);
+                    if v == UNKNOWN {
+                        match at[s].compare_exchange(UNKNOWN, sign.to_bits(), Relaxed, Relaxed) {
+                            Ok(_) => continue,
+                            Err(now) => v = now,
+                        }
                     }
+                    agreed &= (f64::from_bits(v) < 0.0) == (sign < 0.0);
                 }
             }
             agreed
