@@ -1652,10 +1652,10 @@ pub fn polygonize<F: Field + ?Sized>(
         masks = crossed;
     }
     // The crossed leaves, with the indices of their corners' values, in leaf order.
-    let values = &store.values;
     let leaves: Vec<CrossedLeaf> = if octree.corner_test && levels > 0 {
         // Settled: every corner of a crossed leaf has a value or a sign, read in parallel.
         let store = &store;
+        let values = &store.values;
         blocks
             .par_iter()
             .zip(masks.par_iter().zip(centres.par_iter()))
@@ -1732,9 +1732,8 @@ pub fn polygonize<F: Field + ?Sized>(
     let t = Instant::now();
     let values = std::mem::take(&mut store.values);
     drop(store);
-    let mesh = triangulate(table, lattice, &values, &leaves);
+    let mut mesh = triangulate(table, lattice, &values, &leaves);
     drop((values, leaves));
-    let mut mesh = mesh;
     stats.add_time("triangulate", t);
     compute_normals(field, lattice, &mut mesh, settings, &mut stats)?;
     Ok((mesh, stats))
