@@ -318,48 +318,67 @@ impl Store {
         })
     }
 
-    /// [`Store::claim_block`] for many blocks at once, in parallel: `wanted[i]` are the points
-    /// of block `blocks[i]`, whose bricks have slots (see [`Store::give_block_bricks`]). Which of two blocks claims a point they share is left to
-    /// the threads; what is claimed is not (every wanted point still unknown, once).
+    /// [`Store::claim_block`] for many blocks at once, in parallel, with nothing queued before:
+    /// `wanted[i]` are the points of block `blocks[i]`, whose bricks have slots (see
+    /// [`Store::give_block_bricks`]); returns the points claimed, to evaluate next. Which of two
+    /// blocks claims a point they share is left to the threads; what is claimed is not (every
+    /// wanted point still unknown, once).
     fn claim_blocks(
         &mut self,
         blocks: &[[u32; 3]],
         wanted: &[u32],
         lattice: &Lattice,
-        points: &mut Vec<DVec3>,
-    ) {
+    ) -> Vec<DVec3> {
+        debug_assert!(self.queued.is_empty());
         // `at` out of the store while its atomic view lives (the rest is only read).
         let mut at_owned = std::mem::take(&mut self.at);
-        let claimed: Vec<(u32, [u32; 3])> = {
+        // Per block, the points it claimed.
+        let mut claimed = Vec::new();
+        {
             let (store, at) = (&*self, atomic_f64s(&mut at_owned));
             blocks
                 .par_iter()
                 .zip(wanted.par_iter())
                 .with_min_len(512)
-                .flat_map_iter(|(&o, &w)| {
-                    store
-                        .block_slots(o, w)
-                        .filter(move |&(s, _)| {
-                            // (Most are known: a plain read first.)
-                            at[s].load(Relaxed) == UNKNOWN
-                                && at[s]
-                                    .compare_exchange(UNKNOWN, QUEUED, Relaxed, Relaxed)
-                                    .is_ok()
-                        })
-                        .map(move |(s, p)| (s as u32, block_offset(o, p)))
+                .map(|(&o, &w)| {
+                    store.block_slots(o, w).fold(0u32, |mine, (s, p)| {
+                        // (Most are known: a plain read first.)
+                        let claims = at[s].load(Relaxed) == UNKNOWN
+                            && at[s]
+                                .compare_exchange(UNKNOWN, QUEUED, Relaxed, Relaxed)
+                                .is_ok();
+                        mine | (claims as u32) << p
+                    })
                 })
-                .collect()
-        };
+                .collect_into_vec(&mut claimed);
+        }
         self.at = at_owned;
-        let start = (self.values.len() + points.len()) as u32;
+        // In block order, then block point order.
+        let counts: Vec<u32> = claimed.iter().map(|m| m.count_ones()).collect();
+        let queued = crate::memory::collect_counted(&counts, |i| {
+            self.block_slots(blocks[i], claimed[i])
+                .map(|(s, _)| s as u32)
+        });
+        let points = crate::memory::collect_counted(&counts, |i| {
+            let o = blocks[i];
+            let mut m = claimed[i];
+            std::iter::from_fn(move || {
+                (m != 0).then(|| {
+                    let p = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    lattice.point(block_offset(o, p))
+                })
+            })
+        });
+        let start = self.values.len() as u32;
         let slots = atomic_u32s(&mut self.slots);
-        claimed
+        queued
             .par_iter()
             .enumerate()
             .with_min_len(4096)
-            .for_each(|(k, &(s, _))| slots[s as usize].store(start + k as u32, Relaxed));
-        self.queued.par_extend(claimed.par_iter().map(|&(s, _)| s));
-        points.par_extend(claimed.par_iter().map(|&(_, p)| lattice.point(p)));
+            .for_each(|(k, &s)| slots[s as usize].store(start + k as u32, Relaxed));
+        self.queued = queued;
+        points
     }
 
     /// Index in `slots` of lattice point `p`, giving its brick slots on first touch.
@@ -1343,56 +1362,55 @@ fn triangulate(
             made
         })
         .collect();
-    // Where each leaf's vertices start.
+    // Where each leaf's vertices start, and how many vertices and triangles each makes.
     let mut start = Vec::with_capacity(leaves.len());
+    let mut made_count = Vec::with_capacity(leaves.len());
     let mut n = 0u32;
     for m in &makes {
         start.push(n);
+        made_count.push(m.count_ones());
         n += m.count_ones();
     }
-    let vertices: Vec<DVec3> = leaves
-        .par_iter()
-        .zip(makes.par_iter().zip(start.par_iter()))
-        .with_min_len(1024)
-        .flat_map_iter(|(l, (&made, &first))| {
-            // The vertices in order of first use in the leaf's triangles.
-            let mut order = [0u8; 12];
-            let (mut k, mut left) = (0, made);
-            for t in table.triangles(l.case) {
-                for &e in t {
-                    if left & 1 << e != 0 {
-                        left &= !(1 << e);
-                        order[k] = e;
-                        entry[key(l, e as usize)].store(first + k as u32, Relaxed);
-                        k += 1;
-                    }
+    let triangle_count: Vec<u32> = leaves
+        .iter()
+        .map(|l| table.triangles(l.case).len() as u32)
+        .collect();
+    let vertices: Vec<DVec3> = crate::memory::collect_counted(&made_count, |i| {
+        let (l, made, first) = (&leaves[i], makes[i], start[i]);
+        // The vertices in order of first use in the leaf's triangles.
+        let mut order = [0u8; 12];
+        let (mut k, mut left) = (0, made);
+        for t in table.triangles(l.case) {
+            for &e in t {
+                if left & 1 << e != 0 {
+                    left &= !(1 << e);
+                    order[k] = e;
+                    entry[key(l, e as usize)].store(first + k as u32, Relaxed);
+                    k += 1;
                 }
             }
-            (0..k).map(move |j| {
-                let [ka, kb] = EDGES[order[j] as usize].map(|k| k as usize);
-                let (fa, fb) = (
-                    values[l.corners[ka] as usize],
-                    values[l.corners[kb] as usize],
-                );
-                edge_crossing(
-                    lattice.point(corner(l.origin, ka)),
-                    lattice.point(corner(l.origin, kb)),
-                    fa,
-                    fb,
-                )
-            })
+        }
+        (0..k).map(move |j| {
+            let [ka, kb] = EDGES[order[j] as usize].map(|k| k as usize);
+            let (fa, fb) = (
+                values[l.corners[ka] as usize],
+                values[l.corners[kb] as usize],
+            );
+            edge_crossing(
+                lattice.point(corner(l.origin, ka)),
+                lattice.point(corner(l.origin, kb)),
+                fa,
+                fb,
+            )
         })
-        .collect();
-    let triangles: Vec<[u32; 3]> = leaves
-        .par_iter()
-        .with_min_len(1024)
-        .flat_map_iter(|l| {
-            table
-                .triangles(l.case)
-                .iter()
-                .map(move |t| t.map(|e| entry[key(l, e as usize)].load(Relaxed)))
-        })
-        .collect();
+    });
+    let triangles: Vec<[u32; 3]> = crate::memory::collect_counted(&triangle_count, |i| {
+        let l = &leaves[i];
+        table
+            .triangles(l.case)
+            .iter()
+            .map(move |t| t.map(|e| entry[key(l, e as usize)].load(Relaxed)))
+    });
     Mesh {
         vertices,
         triangles,
@@ -1634,8 +1652,7 @@ pub fn polygonize<F: Field + ?Sized>(
         // Then every corner still without a sign, in one batch. (Rounds — the blocks' corners
         // first, then the rest; or edge midpoints between them — saved 0.1–1.4 % of the
         // evaluations at 128³ but cost more in settling than they saved: 2–5 % of the time.)
-        points.clear();
-        store.claim_blocks(&blocks, &open, lattice, &mut points);
+        points = store.claim_blocks(&blocks, &open, lattice);
         store.evaluate(field, &points, settings, &mut stats)?;
         settle(&mut store, &mut masks, &mut crossed, &mut open, None);
         debug_assert!(masks.iter().all(|&m| m == 0));
@@ -1653,41 +1670,39 @@ pub fn polygonize<F: Field + ?Sized>(
     }
     // The crossed leaves, with the indices of their corners' values, in leaf order.
     let leaves: Vec<CrossedLeaf> = if octree.corner_test && levels > 0 {
-        // Settled: every corner of a crossed leaf has a value or a sign, read in parallel.
+        // Settled: every corner of a crossed leaf has a value or a sign, read in parallel
+        // straight into place (the blocks' masks count their crossed leaves).
         let store = &store;
         let values = &store.values;
-        blocks
-            .par_iter()
-            .zip(masks.par_iter().zip(centres.par_iter()))
-            .with_min_len(256)
-            .flat_map_iter(|(&o, (&m, &c))| {
-                let (mut idx, mut negative) =
-                    store.block_indices(o, Store::stored(LEAF_POINTS[m as usize], c));
-                if c != NONE && m != 0 {
-                    idx[CENTRE] = c;
-                    negative |= ((values[c as usize] < 0.0) as u32) << CENTRE;
+        let counts: Vec<u32> = masks.iter().map(|m| m.count_ones()).collect();
+        let mut leaves = crate::memory::collect_counted(&counts, |i| {
+            let (o, m, c) = (blocks[i], masks[i], centres[i]);
+            let (mut idx, mut negative) =
+                store.block_indices(o, Store::stored(LEAF_POINTS[m as usize], c));
+            if c != NONE && m != 0 {
+                idx[CENTRE] = c;
+                negative |= ((values[c as usize] < 0.0) as u32) << CENTRE;
+            }
+            bits(m).map(move |d| {
+                // The case from the signs gathered (the same as from the corners' values).
+                let case = LEAF_CORNERS[d]
+                    .iter()
+                    .enumerate()
+                    .fold(0u8, |c, (k, &p)| c | (((negative >> p) & 1) as u8) << k);
+                let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
+                debug_assert_eq!(case, case_index(&corners.map(|i| corner_value(values, i))));
+                CrossedLeaf {
+                    origin: corner(o, d),
+                    corners,
+                    case,
                 }
-                bits(m).filter_map(move |d| {
-                    // The case from the signs gathered (the same as from the corners' values).
-                    let case = LEAF_CORNERS[d]
-                        .iter()
-                        .enumerate()
-                        .fold(0u8, |c, (k, &p)| c | (((negative >> p) & 1) as u8) << k);
-                    (case != 0 && case != 255).then(|| {
-                        let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
-                        debug_assert_eq!(
-                            case,
-                            case_index(&corners.map(|i| corner_value(values, i)))
-                        );
-                        CrossedLeaf {
-                            origin: corner(o, d),
-                            corners,
-                            case,
-                        }
-                    })
-                })
             })
-            .collect()
+        });
+        // Where the premise failed, a value may have undone a leaf's crossing.
+        if leaves.iter().any(|l| l.case == 0 || l.case == 255) {
+            leaves.retain(|l| l.case != 0 && l.case != 255);
+        }
+        leaves
     } else {
         // All their corners not yet known evaluated in one batch; the leaves of a block claim
         // its points at once.
