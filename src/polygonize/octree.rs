@@ -281,10 +281,19 @@ impl Store {
     /// Gives slots to the bricks of the points of the block of 2 × 2 × 2 cells with lower
     /// corner `o` (those in the lattice of `cells`), so that [`Store::block_slots`] can find them.
     fn give_block_bricks(&mut self, o: [u32; 3], cells: [u32; 3]) {
-        let hi: [u32; 3] = std::array::from_fn(|a| (o[a] + 2).min(cells[a]));
-        for z in [o[2], hi[2]] {
-            for y in [o[1], hi[1]] {
-                for x in [o[0], hi[0]] {
+        // Per axis, the block's lowest coordinate, and its highest where that is in the next
+        // brick: one point per brick the block touches.
+        let ends: [([u32; 2], usize); 3] = std::array::from_fn(|a| {
+            let hi = (o[a] + 2).min(cells[a]);
+            (
+                [o[a], hi],
+                1 + (hi >> BRICK_BITS != o[a] >> BRICK_BITS) as usize,
+            )
+        });
+        let [(xs, nx), (ys, ny), (zs, nz)] = ends;
+        for &z in &zs[..nz] {
+            for &y in &ys[..ny] {
+                for &x in &xs[..nx] {
                     self.slot_mut([x, y, z]);
                 }
             }
@@ -946,6 +955,30 @@ impl DecidedBlocks {
     fn masks(&self, o: [u32; 3]) -> (u32, u32) {
         let b = o.map(|c| (c / 2) as usize);
         let (mut neg, mut pos) = (0, 0);
+        if (0..3).all(|a| b[a] >= 1 && b[a] + 1 < self.dims[a]) {
+            // All 26 neighbours in the map: three rows of three per plane, without branches.
+            let (dx, dxy) = (self.dims[0], self.dims[0] * self.dims[1]);
+            let first = (b[0] - 1) + dx * (b[1] - 1) + dxy * (b[2] - 1);
+            for z in 0..3 {
+                for y in 0..3 {
+                    let at = first + dx * y + dxy * z;
+                    let row: &[u8; 3] = self.sign[at..at + 3].try_into().unwrap();
+                    for (x, &v) in row.iter().enumerate() {
+                        let shared = SHARED[x + 3 * y + 9 * z];
+                        neg |= shared & 0u32.wrapping_sub((v == 1) as u32);
+                        pos |= shared & 0u32.wrapping_sub((v == 2) as u32);
+                    }
+                }
+            }
+            return (neg, pos);
+        }
+        self.masks_at_edge(o)
+    }
+
+    /// [`DecidedBlocks::masks`] for any block, neighbours beyond the map included (none).
+    fn masks_at_edge(&self, o: [u32; 3]) -> (u32, u32) {
+        let b = o.map(|c| (c / 2) as usize);
+        let (mut neg, mut pos) = (0, 0);
         for dz in 0..3 {
             let Some(z) = (b[2] + dz).checked_sub(1).filter(|&z| z < self.dims[2]) else {
                 continue;
@@ -1021,13 +1054,18 @@ fn sign_masks(v: &[f64; 27]) -> (u32, u32) {
     (neg, pos)
 }
 
-/// The block points inside the balls of the values known in the block: (inside a ball of a
-/// negative value, inside a ball of a positive value). No surface lies within |f(p)| / safety
-/// of a point p (the rejection test's premise), so a point in that ball has the sign of f(p).
+/// The block points inside the balls of the values known in the block (at the points of `known`,
+/// which may include points with only a sign, or none): (inside a ball of a negative value,
+/// inside a ball of a positive value). No surface lies within |f(p)| / safety of a point p (the
+/// rejection test's premise), so a point in that ball has the sign of f(p).
 #[inline]
-fn ball_masks(v: &[f64; 27], reach: &[[Reach; 27]; 27]) -> (u32, u32) {
+fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
     let (mut neg, mut pos) = (0, 0);
-    for (p, &x) in v.iter().enumerate() {
+    let mut m = known;
+    while m != 0 {
+        let p = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let x = v[p];
         // Unknown (NaN) and inferred (±∞) points have no ball.
         if !x.is_finite() {
             continue;
@@ -1136,7 +1174,7 @@ fn settle_leaves(
                 let unknown = LEAF_POINTS[*m as usize] & !(neg | pos);
                 let (mut n, mut p) = (0, 0);
                 if unknown != 0 {
-                    let (mut bn, mut bp) = ball_masks(&v, reach);
+                    let (mut bn, mut bp) = ball_masks(&v, neg | pos, reach);
                     if let Some((decided, _)) = first {
                         let (dn, dp) = decided.masks(o);
                         (bn, bp) = (bn | dn, bp | dp);
@@ -2016,6 +2054,29 @@ mod tests {
     /// The ends of crossed edges with only a sign are those that an edge-by-edge search finds,
     /// for every leaf of a block and mixes of values, signs and unknown points.
     #[test]
+    fn decided_masks_inside_the_map_are_those_at_its_edge() {
+        let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [12, 10, 14]).unwrap();
+        let mut d = DecidedBlocks::new(&lattice, true);
+        let mut next = uniform(7);
+        for v in d.sign.iter_mut() {
+            *v = (next() * 3.0) as u8;
+        }
+        let [nx, ny, nz] = d.dims.map(|n| n as u32);
+        let mut inside = 0;
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let o = [2 * x, 2 * y, 2 * z];
+                    assert_eq!(d.masks(o), d.masks_at_edge(o), "block {o:?}");
+                    inside +=
+                        (x > 0 && y > 0 && z > 0 && x + 1 < nx && y + 1 < ny && z + 1 < nz) as u32;
+                }
+            }
+        }
+        assert!(inside > 50);
+    }
+
+    #[test]
     fn unknown_edge_ends_are_those_of_crossed_edges() {
         let mut next = uniform(5);
         for _ in 0..2000 {
@@ -2056,7 +2117,7 @@ mod tests {
                         2 => f64::NEG_INFINITY,
                         _ => (next() - 0.5) * 0.8,
                     });
-                    let (neg, pos) = ball_masks(&v, &reach);
+                    let (neg, pos) = ball_masks(&v, (1 << 27) - 1, &reach);
                     for q in 0..27 {
                         let inside = |negative: bool| {
                             (0..27).any(|p| {
