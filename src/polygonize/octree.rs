@@ -935,10 +935,18 @@ impl DecidedBlocks {
 
     /// Marks the block of `s` cells per side (s ≥ 2) with lower corner `o` (clipped to the
     /// lattice) as holding points of one sign only.
+    #[inline]
     fn mark(&mut self, o: [u32; 3], s: u32, negative: bool) {
         let lo = o.map(|c| (c / 2) as usize);
-        let hi: [usize; 3] = std::array::from_fn(|a| (lo[a] + (s / 2) as usize).min(self.dims[a]));
         let v = if negative { 1 } else { 2 };
+        if s == 2 {
+            // One entry: most marks are of the last level's blocks.
+            if (0..3).all(|a| lo[a] < self.dims[a]) {
+                self.sign[lo[0] + self.dims[0] * (lo[1] + self.dims[1] * lo[2])] = v;
+            }
+            return;
+        }
+        let hi: [usize; 3] = std::array::from_fn(|a| (lo[a] + (s / 2) as usize).min(self.dims[a]));
         for z in lo[2]..hi[2] {
             for y in lo[1]..hi[1] {
                 let row = self.dims[0] * (y + self.dims[1] * z);
