@@ -370,14 +370,8 @@ impl Store {
         });
         let points = crate::memory::collect_counted(&counts, |i| {
             let o = blocks[i];
-            let mut m = claimed[i];
-            std::iter::from_fn(move || {
-                (m != 0).then(|| {
-                    let p = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    lattice.point(block_offset(o, p))
-                })
-            })
+            self.block_slots(o, claimed[i])
+                .map(move |(_, p)| lattice.point(block_offset(o, p)))
         });
         let start = self.values.len() as u32;
         let slots = atomic_u32s(&mut self.slots);
