@@ -23,11 +23,12 @@
 //!
 //! The centres of one level are evaluated in one batched field call, the leaves' corners in
 //! one more and the ends of crossed edges in a last; no point is evaluated twice (coarse
-//! centres are corners of leaf cells). The values live in a block-sparse store: a dense table of bricks of 8³ lattice
-//! points, each brick an array of indices into the values and one of the values themselves,
-//! so finding, claiming and reading a point is array indexing, and memory grows with the
-//! surface, not with the lattice (besides the brick table, 4 bytes per 512 points, and the
-//! decided blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are
+//! centres are corners of leaf cells). The values live in a block-sparse store: a dense table
+//! of bricks of 8³ lattice points, each brick an array of indices into the values and one of
+//! the points' states (a byte: unknown, queued, sign inferred, value; the sign in it), so
+//! finding, claiming and reading a point is array indexing, and memory grows with the surface,
+//! not with the lattice (besides the brick table, 4 bytes per 512 points, and the decided
+//! blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are
 //! triangulated in parallel, each edge vertex indexed through the value index of the edge's
 //! lower end and numbered as a serial sweep over the leaves would (first use).
 
@@ -40,25 +41,20 @@ use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicU32, AtomicU8, Ordering::Relaxed};
 use std::time::Instant;
 
-// The store's values and indices are written in parallel through atomic views of its vectors.
-const _: () = assert!(
-    std::mem::size_of::<AtomicU64>() == 8 && std::mem::align_of::<AtomicU64>() == 8,
-    "AtomicU64 must have f64's layout"
-);
-const _: () = assert!(std::mem::align_of::<f64>() == 8);
+// The store's states and indices are written in parallel through atomic views of its vectors.
 
 /// `v` as atomics, for writes from several threads (the exclusive borrow guarantees that no
 /// one else reads it meanwhile).
-fn atomic_f64s(v: &mut [f64]) -> &[AtomicU64] {
-    // SAFETY: AtomicU64 has f64's size and alignment (asserted above), and the exclusive
-    // borrow means every access for its lifetime goes through the atomics.
-    unsafe { &*(v as *mut [f64] as *const [AtomicU64]) }
+fn atomic_u8s(v: &mut [u8]) -> &[AtomicU8] {
+    // SAFETY: AtomicU8 has u8's size and alignment, and the exclusive borrow means every
+    // access for its lifetime goes through the atomics.
+    unsafe { &*(v as *mut [u8] as *const [AtomicU8]) }
 }
 
-/// `v` as atomics, as [`atomic_f64s`].
+/// `v` as atomics, as [`atomic_u8s`].
 fn atomic_u32s(v: &mut [u32]) -> &[AtomicU32] {
     // SAFETY: AtomicU32 has u32's size and alignment, and the exclusive borrow means every
     // access for its lifetime goes through the atomics.
@@ -177,8 +173,9 @@ const BLOCK_SLOTS: [usize; 27] = {
     t
 };
 /// Working memory per output triangle at its peak (after the leaf corners are evaluated): slots
-/// and the values in them, values, leaves with their corner indices, edge vertices, and the
-/// brick table. Measured on the shared meshes at 64³ to 256³: 125 to 160 bytes.
+/// and their states, values, leaves with their corner indices, edge vertices, and the brick
+/// table. Measured on the shared meshes at 64³ to 256³ when the slots held 8-byte copies of the
+/// values instead of a byte of state: 125 to 160 bytes (less now).
 const BYTES_PER_TRIANGLE_STORE: u64 = 192;
 /// An empty brick-table entry, slot or edge.
 const NONE: u32 = u32::MAX;
@@ -188,10 +185,67 @@ const NEGATIVE: u32 = u32::MAX - 1;
 const POSITIVE: u32 = u32::MAX - 2;
 /// Value indices stay below this (the codes above are not indices).
 const MAX_VALUES: usize = (u32::MAX - 2) as usize;
-/// What [`Store::at`] holds for a point unknown (a NaN, as `f64::NAN`)...
-const UNKNOWN: u64 = 0x7ff8_0000_0000_0000;
-/// ... and for a point claimed, not yet evaluated (another NaN).
-const QUEUED: u64 = 0x7ff8_0000_0000_0001;
+/// What [`Store::state`] holds for a point: nothing known, ...
+const UNKNOWN: u8 = 0;
+/// ... claimed, not yet evaluated, ...
+const QUEUED: u8 = 0b001;
+/// ... a sign inferred without a value (zero or positive, negative; see [`settle_leaves`]) ...
+const INFERRED_POSITIVE: u8 = 0b010;
+const INFERRED_NEGATIVE: u8 = 0b011;
+/// ... or a value, whose index the point's slot holds (zero or positive, negative). Bit 1: the
+/// sign is known, bit 0 with it: negative, bit 2: a value.
+const VALUE_POSITIVE: u8 = 0b110;
+const VALUE_NEGATIVE: u8 = 0b111;
+
+/// Whether a point in `state` has a sign, inferred or from its value.
+#[inline]
+fn has_sign(state: u8) -> bool {
+    state & 0b010 != 0
+}
+
+/// Whether a point in `state` is known to be negative.
+#[inline]
+fn is_negative(state: u8) -> bool {
+    state & 0b011 == 0b011
+}
+
+/// Whether a point in `state` is known to be zero or positive.
+#[inline]
+fn is_positive(state: u8) -> bool {
+    state & 0b011 == 0b010
+}
+
+/// Whether a point in `state` has a sign inferred, no value.
+#[inline]
+fn is_inferred(state: u8) -> bool {
+    state & 0b110 == 0b010
+}
+
+/// Whether a point in `state` has a value.
+#[inline]
+fn has_value(state: u8) -> bool {
+    state & 0b100 != 0
+}
+
+/// The state of a point with value `v`.
+#[inline]
+fn value_state(v: f64) -> u8 {
+    if v < 0.0 {
+        VALUE_NEGATIVE
+    } else {
+        VALUE_POSITIVE
+    }
+}
+
+/// The state of a point with a sign inferred.
+#[inline]
+fn inferred_state(negative: bool) -> u8 {
+    if negative {
+        INFERRED_NEGATIVE
+    } else {
+        INFERRED_POSITIVE
+    }
+}
 
 /// The value of a leaf corner from its index (see [`NEGATIVE`], [`POSITIVE`]).
 #[inline]
@@ -202,17 +256,18 @@ fn corner_value(values: &[f64], i: u32) -> f64 {
         _ => values[i as usize],
     }
 }
-/// Bricks whose slots and values [`Store::new`] reserves address space for (32³, a 256³
-/// lattice's: 20 bytes per point, 335 MB of address space, of which only the pages of the
+/// Bricks whose slots, states and values [`Store::new`] reserves address space for (32³, a
+/// 256³ lattice's: 13 bytes per point, 218 MB of address space, of which only the pages of the
 /// bricks used are touched).
 const RESERVED_BRICKS: usize = 1 << 15;
 
-/// The values of one call, in evaluation order, and where each lattice point's value is: the
+/// The values of one call, in evaluation order, and what is known at each lattice point: the
 /// lattice points are split into bricks of 8³, a dense table (one entry per brick) gives each
 /// brick touched its block of slots, and a slot holds the index of the point's value in `values`
-/// (or `NONE`). So finding, claiming or reading a point is array indexing, and memory grows with
-/// the bricks the kept blocks touch and with the evaluations, not with the lattice (the table
-/// has one `u32` per 512 lattice points).
+/// (or `NONE`) and a byte of state (unknown, queued, sign inferred, value; the sign in it). So
+/// finding, claiming or reading a point is array indexing, and memory grows with the bricks the
+/// kept blocks touch and with the evaluations, not with the lattice (the table has one `u32`
+/// per 512 lattice points). The states of a block's 27 points lie in three cache lines.
 struct Store {
     /// Bricks per axis.
     dims: [usize; 3],
@@ -220,10 +275,9 @@ struct Store {
     table: Vec<u32>,
     /// Per brick, a slot per lattice point (x fastest): the index of its value, or `NONE`.
     slots: Vec<u32>,
-    /// Per slot, the point's value (what `values` holds, where blocks of points can be read at
-    /// once), ±∞ for a sign inferred without a value (see [`settle_leaves`]), or a NaN:
-    /// [`UNKNOWN`], or [`QUEUED`] when claimed.
-    at: Vec<f64>,
+    /// Per slot, the point's state: [`UNKNOWN`], [`QUEUED`], [`INFERRED_POSITIVE`],
+    /// [`INFERRED_NEGATIVE`], [`VALUE_POSITIVE`] or [`VALUE_NEGATIVE`].
+    state: Vec<u8>,
     /// Every value evaluated, in evaluation order.
     values: Vec<f64>,
     /// The slots of the points claimed and not yet evaluated, in claiming order.
@@ -259,7 +313,7 @@ impl Store {
             dims,
             table,
             slots: crate::memory::reserve_huge(room),
-            at: crate::memory::reserve_huge(room),
+            state: crate::memory::reserve_huge(room),
             // A slot gets at most one index into `values`; besides those, only rejected
             // centres have values.
             values: crate::memory::reserve_huge(room),
@@ -339,12 +393,12 @@ impl Store {
         lattice: &Lattice,
     ) -> Vec<DVec3> {
         debug_assert!(self.queued.is_empty());
-        // `at` out of the store while its atomic view lives (the rest is only read).
-        let mut at_owned = std::mem::take(&mut self.at);
+        // `state` out of the store while its atomic view lives (the rest is only read).
+        let mut state_owned = std::mem::take(&mut self.state);
         // Per block, the points it claimed.
         let mut claimed = Vec::new();
         {
-            let (store, at) = (&*self, atomic_f64s(&mut at_owned));
+            let (store, state) = (&*self, atomic_u8s(&mut state_owned));
             blocks
                 .par_iter()
                 .zip(wanted.par_iter())
@@ -352,8 +406,8 @@ impl Store {
                 .map(|(&o, &w)| {
                     store.block_slots(o, w).fold(0u32, |mine, (s, p)| {
                         // (Most are known: a plain read first.)
-                        let claims = at[s].load(Relaxed) == UNKNOWN
-                            && at[s]
+                        let claims = state[s].load(Relaxed) == UNKNOWN
+                            && state[s]
                                 .compare_exchange(UNKNOWN, QUEUED, Relaxed, Relaxed)
                                 .is_ok();
                         mine | (claims as u32) << p
@@ -361,7 +415,7 @@ impl Store {
                 })
                 .collect_into_vec(&mut claimed);
         }
-        self.at = at_owned;
+        self.state = state_owned;
         // In block order, then block point order.
         let counts: Vec<u32> = claimed.iter().map(|m| m.count_ones()).collect();
         let queued = crate::memory::collect_counted(&counts, |i| {
@@ -393,7 +447,7 @@ impl Store {
             b = (self.slots.len() / BRICK_POINTS) as u32;
             self.table[t] = b;
             self.slots.resize(self.slots.len() + BRICK_POINTS, NONE);
-            self.at.resize(self.slots.len(), f64::from_bits(UNKNOWN));
+            self.state.resize(self.slots.len(), UNKNOWN);
         }
         b as usize * BRICK_POINTS + l
     }
@@ -404,9 +458,9 @@ impl Store {
     #[inline]
     fn claim(&mut self, p: [u32; 3], lattice: &Lattice, points: &mut Vec<DVec3>) -> u32 {
         let s = self.slot_mut(p);
-        if self.at[s].to_bits() == UNKNOWN {
+        if self.state[s] == UNKNOWN {
             self.slots[s] = (self.values.len() + points.len()) as u32;
-            self.at[s] = f64::from_bits(QUEUED);
+            self.state[s] = QUEUED;
             self.queued.push(s as u32);
             points.push(lattice.point(p));
         }
@@ -433,9 +487,9 @@ impl Store {
                 let p = m.trailing_zeros() as usize;
                 m &= m - 1;
                 let q = s + BLOCK_SLOTS[p];
-                if self.at[q].to_bits() == UNKNOWN {
+                if self.state[q] == UNKNOWN {
                     self.slots[q] = (self.values.len() + points.len()) as u32;
-                    self.at[q] = f64::from_bits(QUEUED);
+                    self.state[q] = QUEUED;
                     self.queued.push(q as u32);
                     points.push(lattice.point(block_offset(o, p)));
                 }
@@ -451,18 +505,18 @@ impl Store {
         idx
     }
 
-    /// Stores a sign inferred (±∞) in slot `s` unless it has a value or a sign already; returns
-    /// whether the slot's sign is now `sign`.
+    /// Stores a sign inferred in slot `s` unless it has a value or a sign already; returns
+    /// whether the slot's sign is now the one given (`negative` or not).
     #[inline]
-    fn set_sign(&mut self, s: usize, sign: f64) -> bool {
-        let at = &mut self.at[s];
-        if at.to_bits() == UNKNOWN {
-            *at = sign;
+    fn set_sign(&mut self, s: usize, negative: bool) -> bool {
+        let state = &mut self.state[s];
+        if *state == UNKNOWN {
+            *state = inferred_state(negative);
         }
-        (*at < 0.0) == (sign < 0.0)
+        is_negative(*state) == negative
     }
 
-    /// [`Store::set_sign`] for the points in `neg` (sign −∞) and then those in `pos` (+∞) of the
+    /// [`Store::set_sign`] for the points in `neg` (negative) and then those in `pos` of the
     /// block of 2 × 2 × 2 cells with lower corner `o` (bits as in [`block_point`]); returns
     /// whether every point's sign is now the one given.
     #[inline]
@@ -473,7 +527,7 @@ impl Store {
             .all(|&c| c & (BRICK - 1) <= BRICK - 3)
             .then(|| self.slot_mut(o));
         let mut agreed = true;
-        for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
+        for (m, negative) in [(neg, true), (pos, false)] {
             let mut m = m;
             while m != 0 {
                 let p = m.trailing_zeros() as usize;
@@ -482,7 +536,7 @@ impl Store {
                     Some(b) => b + BLOCK_SLOTS[p],
                     None => self.slot_mut(block_offset(o, p)),
                 };
-                agreed &= self.set_sign(s, sign);
+                agreed &= self.set_sign(s, negative);
             }
         }
         agreed
@@ -516,12 +570,14 @@ impl Store {
                 },
                 |b| b + BLOCK_SLOTS[p],
             );
-            // A value or an inferred sign (±∞): `at` has both.
-            let below = self.at[s] < 0.0;
+            // A value or an inferred sign.
+            let state = self.state[s];
+            debug_assert!(has_sign(state));
+            let below = is_negative(state);
             negative |= (below as u32) << p;
             idx[p] = match self.slots[s] {
                 NONE if below => NEGATIVE,
-                NONE if self.at[s] > 0.0 => POSITIVE,
+                NONE => POSITIVE,
                 i => i,
             };
         }
@@ -529,39 +585,36 @@ impl Store {
         (idx, negative)
     }
 
-    /// What is known at lattice point `p`: its value, ±∞ for a sign without a value, NaN when
-    /// unknown, only queued, or beyond the lattice.
-    #[inline]
-    fn at_point(&self, p: [u32; 3], cells: [u32; 3]) -> f64 {
-        if p[0] > cells[0] || p[1] > cells[1] || p[2] > cells[2] {
-            return f64::NAN;
-        }
-        let (t, l) = self.locate(p);
-        match self.table[t] {
-            NONE => f64::NAN,
-            b => self.at[b as usize * BRICK_POINTS + l],
-        }
-    }
-
     /// The value at lattice point `p` when it has been evaluated (None beyond the lattice, or
     /// when unknown, only queued, or only its sign is known).
     #[inline]
     fn known(&self, p: [u32; 3], cells: [u32; 3]) -> Option<f64> {
-        let v = self.at_point(p, cells);
-        v.is_finite().then_some(v)
+        if p[0] > cells[0] || p[1] > cells[1] || p[2] > cells[2] {
+            return None;
+        }
+        let (t, l) = self.locate(p);
+        let b = self.table[t];
+        let s = b as usize * BRICK_POINTS + l;
+        (b != NONE && has_value(self.state[s])).then(|| self.values[self.slots[s] as usize])
     }
 
-    /// [`Store::at_point`] for the 27 points of the block of 2 × 2 × 2 cells with lower corner `o`
-    /// (NaN where unknown).
-    #[inline]
-    fn block_known(&self, o: [u32; 3], cells: [u32; 3]) -> [f64; 27] {
+    /// `read(slot)` for the 27 points of the block of 2 × 2 × 2 cells with lower corner `o`
+    /// (`outside` for points beyond the lattice or in bricks without slots).
+    #[inline(always)]
+    fn block_map<T: Copy>(
+        &self,
+        o: [u32; 3],
+        cells: [u32; 3],
+        outside: T,
+        read: impl Fn(usize) -> T,
+    ) -> [T; 27] {
         let whole = (0..3).all(|a| o[a] & (BRICK - 1) <= BRICK - 3 && o[a] + 2 <= cells[a]);
         let (t, l) = self.locate(o);
         let b = self.table[t];
         if whole && b != NONE {
             // The whole block in the brick of `o` (as in claim_block).
             let s = b as usize * BRICK_POINTS + l;
-            return std::array::from_fn(|p| self.at[s + BLOCK_SLOTS[p]]);
+            return std::array::from_fn(|p| read(s + BLOCK_SLOTS[p]));
         }
         // Across bricks: per axis, the brick and offset of the block's three coordinates (None
         // beyond the lattice), then one table lookup per brick touched.
@@ -572,7 +625,7 @@ impl Store {
             })
         };
         let (ax, ay, az) = (axis(0), axis(1), axis(2));
-        let mut v = [f64::NAN; 27];
+        let mut v = [outside; 27];
         for (k, z) in az.iter().enumerate() {
             let Some((bz, lz)) = *z else { continue };
             for (j, y) in ay.iter().enumerate() {
@@ -583,7 +636,7 @@ impl Store {
                     let Some((bx, lx)) = *x else { continue };
                     let b = self.table[row + bx];
                     if b != NONE {
-                        v[i + 3 * j + 9 * k] = self.at[b as usize * BRICK_POINTS + (lrow | lx)];
+                        v[i + 3 * j + 9 * k] = read(b as usize * BRICK_POINTS + (lrow | lx));
                     }
                 }
             }
@@ -591,11 +644,28 @@ impl Store {
         v
     }
 
-    /// [`Store::block_known`] of a block of leaves whose centre has the value with index
-    /// `centre` (kept with the block, not in the store; `NONE` when not evaluated).
+    /// The states of the 27 points of a block of leaves (lower corner `o`; [`UNKNOWN`] beyond
+    /// the lattice) whose centre has the value with index `centre` (kept with the block, not in
+    /// the store; `NONE` when not evaluated).
     #[inline]
-    fn leaf_block_known(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [f64; 27] {
-        let mut v = self.block_known(o, cells);
+    fn leaf_block_states(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [u8; 27] {
+        let mut v = self.block_map(o, cells, UNKNOWN, |s| self.state[s]);
+        if centre != NONE {
+            v[CENTRE] = value_state(self.values[centre as usize]);
+        }
+        v
+    }
+
+    /// The values known at the 27 points of a block of leaves, as [`Store::leaf_block_states`]
+    /// (NaN where no value is known).
+    fn leaf_block_values(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [f64; 27] {
+        let mut v = self.block_map(o, cells, f64::NAN, |s| {
+            if has_value(self.state[s]) {
+                self.values[self.slots[s] as usize]
+            } else {
+                f64::NAN
+            }
+        });
         if centre != NONE {
             v[CENTRE] = self.values[centre as usize];
         }
@@ -603,7 +673,7 @@ impl Store {
     }
 
     /// The points of `wanted` of a block of leaves that the store has to give (the centre is
-    /// kept with the block when it was evaluated, see [`Store::leaf_block_known`]).
+    /// kept with the block when it was evaluated, see [`Store::leaf_block_states`]).
     #[inline]
     fn stored(wanted: u32, centre: u32) -> u32 {
         if centre != NONE {
@@ -635,7 +705,7 @@ impl Store {
         // by the caller, when kept).
         debug_assert!(self.queued.is_empty() || self.queued.len() == points.len());
         for (&s, &v) in self.queued.iter().zip(&self.values[start..]) {
-            self.at[s as usize] = v;
+            self.state[s as usize] = value_state(v);
         }
         self.queued.clear();
         stats.evaluations += points.len() as u64;
@@ -1044,20 +1114,26 @@ fn block_reach(cell: DVec3, safety: f64) -> Box<[[Reach; 27]; 27]> {
     t
 }
 
-/// The block points whose sign is known (bit per point): (negative, zero or positive). A value
-/// is a number, or ±∞ for a sign inferred without one; NaN is unknown.
+/// The block points whose sign is known (bit per point) from their states: (negative, zero or
+/// positive).
 #[inline]
-fn sign_masks(v: &[f64; 27]) -> (u32, u32) {
+fn sign_masks(states: &[u8; 27]) -> (u32, u32) {
     let (mut neg, mut pos) = (0, 0);
-    for (p, &x) in v.iter().enumerate() {
-        neg |= ((x < 0.0) as u32) << p;
-        pos |= ((x >= 0.0) as u32) << p;
+    for (p, &x) in states.iter().enumerate() {
+        neg |= (is_negative(x) as u32) << p;
+        pos |= (is_positive(x) as u32) << p;
     }
     (neg, pos)
 }
 
+/// The states of points with the values `v` (NaN: unknown).
+#[inline]
+fn value_states(v: &[f64; 27]) -> [u8; 27] {
+    v.map(|x| if x.is_nan() { UNKNOWN } else { value_state(x) })
+}
+
 /// The block points inside the balls of the values known in the block (at the points of `known`,
-/// which may include points with only a sign, or none): (inside a ball of a negative value,
+/// which may include points with only a sign, NaN in `v`, or none): (inside a ball of a negative value,
 /// inside a ball of a positive value). No surface lies within |f(p)| / safety of a point p (the
 /// rejection test's premise), so a point in that ball has the sign of f(p).
 #[inline]
@@ -1068,7 +1144,7 @@ fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32
         let p = m.trailing_zeros() as usize;
         m &= m - 1;
         let x = v[p];
-        // Unknown (NaN) and inferred (±∞) points have no ball.
+        // Points without a value (NaN) have no ball.
         if !x.is_finite() {
             continue;
         }
@@ -1090,13 +1166,13 @@ fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32
 }
 
 /// The ends of the crossed edges of leaf `d` whose values are not known, only their signs
-/// (bits of block points; `v` the block's values, see [`sign_masks`]).
+/// (bits of block points; `states` the block's).
 #[inline]
-fn unknown_edge_ends(v: &[f64; 27], d: usize) -> u32 {
+fn unknown_edge_ends(states: &[u8; 27], d: usize) -> u32 {
     let (mut negative, mut inferred) = (0, 0);
     for (k, &p) in LEAF_CORNERS[d].iter().enumerate() {
-        negative |= ((v[p as usize] < 0.0) as usize) << k;
-        inferred |= (v[p as usize].is_infinite() as u8) << k;
+        negative |= (is_negative(states[p as usize]) as usize) << k;
+        inferred |= (is_inferred(states[p as usize]) as u8) << k;
     }
     bits(CROSSED_EDGE_ENDS[negative] & inferred).fold(0, |need, k| need | 1 << LEAF_CORNERS[d][k])
 }
@@ -1132,8 +1208,8 @@ struct Ends {
 /// One settling step of the leaves: signs are inferred ([`ball_masks`]) for the corners the
 /// undecided leaves in `masks` need (a point in balls of both signs, where the premise fails,
 /// gets none), then every leaf whose corners all have a sign leaves `masks`: into `crossed` when
-/// they have both signs, nowhere when they have one. The signs inferred are stored as ±∞, and
-/// the blocks of the leaves newly crossed are added to `ends` with the ends of their crossed
+/// they have both signs, nowhere when they have one. The signs inferred are stored in the
+/// points' states, and the blocks of the leaves newly crossed are added to `ends` with the ends of their crossed
 /// edges that have a sign but no value.
 #[allow(clippy::too_many_arguments)]
 fn settle_leaves(
@@ -1160,22 +1236,26 @@ fn settle_leaves(
                 if *m == 0 {
                     return None;
                 }
-                let mut v = match first {
-                    // Before any leaf is settled, the store holds only the levels' values.
-                    Some((_, known)) => {
-                        let v = known[i].block_values(&store.values, centres[i]);
-                        debug_assert!(v
-                            .iter()
-                            .zip(store.leaf_block_known(o, centres[i], cells))
-                            .all(|(a, b)| a.to_bits() == b.to_bits() || b.is_nan()));
-                        v
-                    }
-                    None => store.leaf_block_known(o, centres[i], cells),
+                // Before any leaf is settled, the store holds only the levels' values, which the
+                // blocks carry (`known`); after, the states are read from the store.
+                let values = first.map(|(_, known)| {
+                    let v = known[i].block_values(&store.values, centres[i]);
+                    debug_assert!(v
+                        .iter()
+                        .zip(store.leaf_block_values(o, centres[i], cells))
+                        .all(|(a, b)| a.to_bits() == b.to_bits() || b.is_nan()));
+                    v
+                });
+                let mut states = match &values {
+                    Some(v) => value_states(v),
+                    None => store.leaf_block_states(o, centres[i], cells),
                 };
-                let (mut neg, mut pos) = sign_masks(&v);
+                let (mut neg, mut pos) = sign_masks(&states);
                 let unknown = LEAF_POINTS[*m as usize] & !(neg | pos);
                 let (mut n, mut p) = (0, 0);
                 if unknown != 0 {
+                    // (After the first settling, every point without a sign was evaluated.)
+                    let v = values.unwrap_or_else(|| store.leaf_block_values(o, centres[i], cells));
                     let (mut bn, mut bp) = ball_masks(&v, neg | pos, reach);
                     if let Some((decided, _)) = first {
                         let (dn, dp) = decided.masks(o);
@@ -1188,11 +1268,7 @@ fn settle_leaves(
                     while m != 0 {
                         let q = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        v[q] = if n & 1 << q != 0 {
-                            f64::NEG_INFINITY
-                        } else {
-                            f64::INFINITY
-                        };
+                        states[q] = inferred_state(n & 1 << q != 0);
                     }
                 }
                 let mut need = 0;
@@ -1202,7 +1278,7 @@ fn settle_leaves(
                         *m &= !(1 << d);
                         if corners & neg != 0 && corners & pos != 0 {
                             *x |= 1 << d;
-                            need |= unknown_edge_ends(&v, d);
+                            need |= unknown_edge_ends(&states, d);
                         }
                     }
                 }
@@ -1214,30 +1290,31 @@ fn settle_leaves(
     // Stored in parallel. Two blocks infer different signs for a point only where the premise
     // fails; then the signs are stored again one block after another, the first sign kept (as
     // it would be whatever the threads do), and the edge ends are served again.
-    let mut at_owned = std::mem::take(&mut store.at);
+    let mut state_owned = std::mem::take(&mut store.state);
     let agreed = {
-        let (st, at) = (&*store, atomic_f64s(&mut at_owned));
+        let (st, state) = (&*store, atomic_u8s(&mut state_owned));
         found.par_iter().with_min_len(256).all(|&(i, neg, pos, _)| {
             let o = blocks[i as usize];
             let mut agreed = true;
-            for (m, sign) in [(neg, f64::NEG_INFINITY), (pos, f64::INFINITY)] {
+            for (m, negative) in [(neg, true), (pos, false)] {
+                let inferred = inferred_state(negative);
                 for (s, _) in st.block_slots(o, m) {
                     // Most points are shared: a plain read first spares the atomic write
                     // where a neighbour stored the sign already.
-                    let mut v = at[s].load(Relaxed);
+                    let mut v = state[s].load(Relaxed);
                     if v == UNKNOWN {
-                        match at[s].compare_exchange(UNKNOWN, sign.to_bits(), Relaxed, Relaxed) {
+                        match state[s].compare_exchange(UNKNOWN, inferred, Relaxed, Relaxed) {
                             Ok(_) => continue,
                             Err(now) => v = now,
                         }
                     }
-                    agreed &= (f64::from_bits(v) < 0.0) == (sign < 0.0);
+                    agreed &= is_negative(v) == negative;
                 }
             }
             agreed
         })
     };
-    store.at = at_owned;
+    store.state = state_owned;
     if !agreed {
         // Every point inferred here was unknown before.
         for &(i, neg, pos, _) in &found {
@@ -1246,7 +1323,7 @@ fn settle_leaves(
                 .map(|(s, _)| s)
                 .collect();
             for s in slots {
-                store.at[s] = f64::from_bits(UNKNOWN);
+                store.state[s] = UNKNOWN;
             }
         }
         for &(i, neg, pos, _) in &found {
@@ -1288,11 +1365,11 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
                 let p = block_offset(o, m.trailing_zeros() as usize);
                 m &= m - 1;
                 let s = store.slot_mut(p);
-                // A point two blocks share is taken once (0 until evaluated below).
-                let v = store.at[s];
-                if v.is_infinite() {
-                    store.at[s] = 0.0;
-                    taken.push((s, v));
+                // A point two blocks share is taken once (queued until evaluated below).
+                let state = store.state[s];
+                if is_inferred(state) {
+                    store.state[s] = QUEUED;
+                    taken.push((s, is_negative(state)));
                     points.push(lattice.point(p));
                 }
             }
@@ -1308,9 +1385,9 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             });
         }
         let mut contradicted = false;
-        for (&(s, sign), v) in taken.iter().zip(values) {
-            contradicted |= (v < 0.0) != (sign < 0.0);
-            store.at[s] = v;
+        for (&(s, negative), v) in taken.iter().zip(values) {
+            contradicted |= (v < 0.0) != negative;
+            store.state[s] = value_state(v);
             store.slots[s] = store.values.len() as u32;
             store.values.push(v);
         }
@@ -1324,8 +1401,8 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             .zip(crossed.par_iter())
             .enumerate()
             .filter_map(|(i, (&o, &x))| {
-                let v = store.leaf_block_known(o, centres[i], cells);
-                let need = bits(x).fold(0, |n, d| n | unknown_edge_ends(&v, d));
+                let states = store.leaf_block_states(o, centres[i], cells);
+                let need = bits(x).fold(0, |n, d| n | unknown_edge_ends(&states, d));
                 (need != 0).then_some((i as u32, need))
             })
             .collect();
@@ -1590,7 +1667,7 @@ pub fn polygonize<F: Field + ?Sized>(
                     } else if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
                         let slot = store.slot_mut(c);
                         store.slots[slot] = (base + i) as u32;
-                        store.at[slot] = store.values[base + i];
+                        store.state[slot] = value_state(store.values[base + i]);
                     }
                     blocks[kept] = o;
                     known[kept] = known[i];
@@ -2082,11 +2159,18 @@ mod tests {
     fn unknown_edge_ends_are_those_of_crossed_edges() {
         let mut next = uniform(5);
         for _ in 0..2000 {
+            // Signs inferred as ±∞, values as numbers, unknown as NaN.
             let v: [f64; 27] = std::array::from_fn(|_| match (4.0 * next()) as u32 {
                 0 => f64::NEG_INFINITY,
                 1 => f64::INFINITY,
                 2 => f64::NAN,
                 _ => next() - 0.5,
+            });
+            let states = v.map(|x| match x {
+                f64::NEG_INFINITY => INFERRED_NEGATIVE,
+                f64::INFINITY => INFERRED_POSITIVE,
+                _ if x.is_nan() => UNKNOWN,
+                _ => value_state(x),
             });
             for d in 0..8 {
                 let mut want = 0;
@@ -2096,7 +2180,7 @@ mod tests {
                         want |= (v[a].is_infinite() as u32) << a | (v[b].is_infinite() as u32) << b;
                     }
                 }
-                assert_eq!(unknown_edge_ends(&v, d), want, "{v:?} {d}");
+                assert_eq!(unknown_edge_ends(&states, d), want, "{v:?} {d}");
             }
         }
     }
