@@ -713,6 +713,11 @@ impl Store {
     }
 }
 
+/// The items whose `kept` entry is 1 (the others' are 0), in order, gathered in parallel.
+fn kept_items<T: Copy + Send + Sync>(items: &[T], kept: &[u32]) -> Vec<T> {
+    crate::memory::collect_counted(kept, |i| (kept[i] != 0).then_some(items[i]))
+}
+
 /// Lattice point of corner `k` of the cell with lower corner `o`.
 #[inline]
 fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
@@ -1019,6 +1024,43 @@ impl DecidedBlocks {
                 }
             }
         }
+    }
+
+    /// Marks `blocks[i]` (blocks of `s` cells per side) as [`DecidedBlocks::mark`] does with
+    /// `negative` where `sign(i)` is `Some(negative)`; in parallel for the last level's blocks
+    /// (s = 2, one byte each, and most of the marks).
+    fn mark_blocks(
+        &mut self,
+        blocks: &[[u32; 3]],
+        s: u32,
+        sign: impl Fn(usize) -> Option<bool> + Sync,
+    ) {
+        if self.sign.is_empty() {
+            return;
+        }
+        if s != 2 {
+            for (i, &o) in blocks.iter().enumerate() {
+                if let Some(negative) = sign(i) {
+                    self.mark(o, s, negative);
+                }
+            }
+            return;
+        }
+        let dims = self.dims;
+        let map = atomic_u8s(&mut self.sign);
+        blocks
+            .par_iter()
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(i, &o)| {
+                if let Some(negative) = sign(i) {
+                    let b = o.map(|c| (c / 2) as usize);
+                    if (0..3).all(|a| b[a] < dims[a]) {
+                        let at = b[0] + dims[0] * (b[1] + dims[1] * b[2]);
+                        map[at].store(if negative { 1 } else { 2 }, Relaxed);
+                    }
+                }
+            });
     }
 
     /// The points of the block of 2 × 2 × 2 cells with lower corner `o` that lie in decided
@@ -1622,62 +1664,53 @@ pub fn polygonize<F: Field + ?Sized>(
                         })
                     })
                     .collect();
-                let mut kept = 0;
-                for (i, f) in free.iter().enumerate() {
-                    if let Some(Some(negative)) = f {
-                        decided.mark(blocks[i], s, *negative);
-                    }
-                    if f.is_none() {
-                        blocks[kept] = blocks[i];
-                        known[kept] = known[i];
-                        kept += 1;
-                    }
-                }
-                blocks.truncate(kept);
-                known.truncate(kept);
+                decided.mark_blocks(&blocks, s, |i| free[i].flatten());
+                let kept: Vec<u32> = free.iter().map(|f| f.is_none() as u32).collect();
+                blocks = kept_items(&blocks, &kept);
+                known = kept_items(&known, &kept);
             }
             // Centres are never shared: those of one level are distinct, and those of different
             // levels are odd multiples of different powers of two.
+            let h = s / 2;
             points.clear();
-            points.extend(
-                blocks
-                    .iter()
-                    .map(|o| lattice.point([o[0] + s / 2, o[1] + s / 2, o[2] + s / 2])),
-            );
+            blocks
+                .par_iter()
+                .with_min_len(4096)
+                .map(|o| lattice.point([o[0] + h, o[1] + h, o[2] + h]))
+                .collect_into_vec(&mut points);
             let base = store.values.len();
             store.evaluate(field, &points, settings, &mut stats)?;
-            centre_values.clear();
-            centre_values.resize(blocks.len(), NONE);
             let r = octree.safety * lattice.block_radius(s);
-            let mut kept = 0;
-            for i in 0..blocks.len() {
-                let o = blocks[i];
-                let v = store.values[base + i];
-                if octree.corner_test && v.abs() > r {
-                    decided.mark(o, s, v < 0.0);
-                }
-                if v.abs() <= r {
-                    // Only kept blocks hold leaves, and a centre lies inside its own block, so
-                    // only kept centres can be leaf corners (those inside the lattice). The
-                    // centre of a block of 2 × 2 × 2 cells is a corner of its own leaves only,
-                    // so it stays with the block instead of in the store.
-                    let c = [o[0] + s / 2, o[1] + s / 2, o[2] + s / 2];
-                    if s == 2 {
-                        centres.push((base + i) as u32);
-                    } else if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
+            let v = &store.values[base..];
+            if octree.corner_test {
+                decided.mark_blocks(&blocks, s, |i| (v[i].abs() > r).then_some(v[i] < 0.0));
+            }
+            let kept: Vec<u32> = v
+                .par_iter()
+                .with_min_len(4096)
+                .map(|x| (x.abs() <= r) as u32)
+                .collect();
+            blocks = kept_items(&blocks, &kept);
+            known = kept_items(&known, &kept);
+            centre_values = crate::memory::collect_counted(&kept, |i| {
+                (kept[i] != 0).then_some((base + i) as u32)
+            });
+            // Only kept blocks hold leaves, and a centre lies inside its own block, so only
+            // kept centres can be leaf corners (those inside the lattice). The centre of a
+            // block of 2 × 2 × 2 cells is a corner of its own leaves only, so it stays with the
+            // block instead of in the store.
+            if s == 2 {
+                centres = std::mem::take(&mut centre_values);
+            } else {
+                for (o, &i) in blocks.iter().zip(&centre_values) {
+                    let c = [o[0] + h, o[1] + h, o[2] + h];
+                    if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
                         let slot = store.slot_mut(c);
-                        store.slots[slot] = (base + i) as u32;
-                        store.state[slot] = value_state(store.values[base + i]);
+                        store.slots[slot] = i;
+                        store.state[slot] = value_state(store.values[i as usize]);
                     }
-                    blocks[kept] = o;
-                    known[kept] = known[i];
-                    centre_values[kept] = (base + i) as u32;
-                    kept += 1;
                 }
             }
-            blocks.truncate(kept);
-            known.truncate(kept);
-            centre_values.truncate(kept);
             stats.add_time("sample", t);
         }
         stats.cells_per_level.push(blocks.len() as u64);
@@ -1685,22 +1718,28 @@ pub fn polygonize<F: Field + ?Sized>(
             // Blocks of 2 × 2 × 2 cells: their children, the leaves, are made below.
             break;
         }
+        // The children inside the lattice, in block order, then octant order.
         let h = s / 2;
-        let mut next = Vec::with_capacity(blocks.len() * 8);
-        let mut next_known = Vec::with_capacity(blocks.len() * 8);
+        let child = |o: [u32; 3], d: usize| {
+            let off = corner_offset(d);
+            [o[0] + off[0] * h, o[1] + off[1] * h, o[2] + off[2] * h]
+        };
         centre_values.resize(blocks.len(), NONE);
-        for ((o, k), &c) in blocks.iter().zip(&known).zip(&centre_values) {
-            for d in 0..8 {
-                let off = corner_offset(d);
-                let child = [o[0] + off[0] * h, o[1] + off[1] * h, o[2] + off[2] * h];
-                if inside(child) {
-                    next.push(child);
-                    next_known.push(k.child(d, c));
-                }
-            }
-        }
+        let children: Vec<u8> = blocks
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&o| (0..8).fold(0, |m, d| m | (inside(child(o, d)) as u8) << d))
+            .collect();
+        let counts: Vec<u32> = children.iter().map(|m| m.count_ones()).collect();
+        let next = crate::memory::collect_counted(&counts, |i| {
+            let o = blocks[i];
+            bits(children[i]).map(move |d| child(o, d))
+        });
+        known = crate::memory::collect_counted(&counts, |i| {
+            let (k, c) = (known[i], centre_values[i]);
+            bits(children[i]).map(move |d| k.child(d, c))
+        });
         blocks = next;
-        known = next_known;
         centre_values.clear();
     }
     // `blocks` now holds the blocks of 2 × 2 × 2 cells that hold the leaves (or, for a lattice
@@ -1711,7 +1750,8 @@ pub fn polygonize<F: Field + ?Sized>(
         centres = vec![NONE; blocks.len()];
     }
     let mut masks: Vec<u8> = blocks
-        .iter()
+        .par_iter()
+        .with_min_len(4096)
         .map(|o| {
             (0..8)
                 .filter(|&d| inside(corner(*o, d)))
