@@ -916,21 +916,25 @@ impl KnownCorners {
         })
     }
 
-    /// The values known at the 27 points of a block of 2 × 2 × 2 cells with these corners
-    /// (NaN elsewhere), its centre's in `values` at index `centre` (`NONE`: not evaluated).
-    fn block_values(&self, values: &[f64], centre: u32) -> [f64; 27] {
-        let mut v = [f64::NAN; 27];
-        if centre != NONE {
-            v[CENTRE] = values[centre as usize];
-        }
-        for (k, x) in [self.corner as usize, 7 - self.corner as usize]
-            .into_iter()
-            .zip(self.get(values))
-        {
+    /// The points of a block of 2 × 2 × 2 cells with these corners that may have a value (its
+    /// centre and these two corners), with the value (NaN where not known); the centre's is in
+    /// `values` at index `centre` (`NONE`: not evaluated).
+    fn block_points(&self, values: &[f64], centre: u32) -> [(usize, f64); 3] {
+        let at = |k: usize| {
             let d = corner_offset(k);
-            v[block_point(2 * d[0] as usize, 2 * d[1] as usize, 2 * d[2] as usize)] = x;
-        }
-        v
+            block_point(2 * d[0] as usize, 2 * d[1] as usize, 2 * d[2] as usize)
+        };
+        let [a, b] = self.get(values);
+        let c = if centre != NONE {
+            values[centre as usize]
+        } else {
+            f64::NAN
+        };
+        [
+            (at(self.corner as usize), a),
+            (at(7 - self.corner as usize), b),
+            (CENTRE, c),
+        ]
     }
 
     /// Those of child `d` (octant, case-bit order) of a block with these and whose centre's
@@ -1157,35 +1161,45 @@ fn block_reach(cell: DVec3, safety: f64) -> Box<[[Reach; 27]; 27]> {
 }
 
 /// The block points whose sign is known (bit per point) from their states: (negative, zero or
-/// positive).
+/// positive, the signs inferred without a value).
 #[inline]
-fn sign_masks(states: &[u8; 27]) -> (u32, u32) {
-    let (mut neg, mut pos) = (0, 0);
+fn sign_masks(states: &[u8; 27]) -> (u32, u32, u32) {
+    let (mut neg, mut pos, mut inferred) = (0, 0, 0);
     for (p, &x) in states.iter().enumerate() {
         neg |= (is_negative(x) as u32) << p;
         pos |= (is_positive(x) as u32) << p;
+        inferred |= (is_inferred(x) as u32) << p;
     }
-    (neg, pos)
+    (neg, pos, inferred)
 }
 
-/// The states of points with the values `v` (NaN: unknown).
+/// The set bits of a mask of block points, in increasing order.
 #[inline]
-fn value_states(v: &[f64; 27]) -> [u8; 27] {
-    v.map(|x| if x.is_nan() { UNKNOWN } else { value_state(x) })
+fn bits27(m: u32) -> impl Iterator<Item = usize> {
+    let mut m = m;
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let p = m.trailing_zeros() as usize;
+            m &= m - 1;
+            p
+        })
+    })
 }
 
 /// The block points inside the balls of the values known in the block (at the points of `known`,
 /// which may include points with only a sign, NaN in `v`, or none): (inside a ball of a negative value,
 /// inside a ball of a positive value). No surface lies within |f(p)| / safety of a point p (the
 /// rejection test's premise), so a point in that ball has the sign of f(p).
-#[inline]
+#[cfg(test)]
 fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
+    balls(bits27(known).map(|p| (p, v[p])), reach)
+}
+
+/// [`ball_masks`] of the block points and values `known` (NaN: no value).
+#[inline]
+fn balls(known: impl Iterator<Item = (usize, f64)>, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
     let (mut neg, mut pos) = (0, 0);
-    let mut m = known;
-    while m != 0 {
-        let p = m.trailing_zeros() as usize;
-        m &= m - 1;
-        let x = v[p];
+    for (p, x) in known {
         // Points without a value (NaN) have no ball.
         if !x.is_finite() {
             continue;
@@ -1208,15 +1222,15 @@ fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32
 }
 
 /// The ends of the crossed edges of leaf `d` whose values are not known, only their signs
-/// (bits of block points; `states` the block's).
+/// (bits of block points: `neg` the negative ones, `inferred` those with a sign only).
 #[inline]
-fn unknown_edge_ends(states: &[u8; 27], d: usize) -> u32 {
-    let (mut negative, mut inferred) = (0, 0);
+fn unknown_edge_ends(neg: u32, inferred: u32, d: usize) -> u32 {
+    let (mut negative, mut only_sign) = (0, 0);
     for (k, &p) in LEAF_CORNERS[d].iter().enumerate() {
-        negative |= (is_negative(states[p as usize]) as usize) << k;
-        inferred |= (is_inferred(states[p as usize]) as u8) << k;
+        negative |= (((neg >> p) & 1) as usize) << k;
+        only_sign |= (((inferred >> p) & 1) as u8) << k;
     }
-    bits(CROSSED_EDGE_ENDS[negative] & inferred).fold(0, |need, k| need | 1 << LEAF_CORNERS[d][k])
+    bits(CROSSED_EDGE_ENDS[negative] & only_sign).fold(0, |need, k| need | 1 << LEAF_CORNERS[d][k])
 }
 
 /// `CROSSED_EDGE_ENDS[c]`: the corners of a cell with case `c` (bit k set: corner k negative)
@@ -1279,26 +1293,33 @@ fn settle_leaves(
                     return None;
                 }
                 // Before any leaf is settled, the store holds only the levels' values, which the
-                // blocks carry (`known`); after, the states are read from the store.
+                // blocks carry (`known`: the centre and two corners at most); after, the
+                // states are read from the store.
                 let values = first.map(|(_, known)| {
-                    let v = known[i].block_values(&store.values, centres[i]);
-                    debug_assert!(v
-                        .iter()
-                        .zip(store.leaf_block_values(o, centres[i], cells))
-                        .all(|(a, b)| a.to_bits() == b.to_bits() || b.is_nan()));
+                    let v = known[i].block_points(&store.values, centres[i]);
+                    debug_assert!(v.iter().all(|&(p, x)| {
+                        let y = store.leaf_block_values(o, centres[i], cells)[p];
+                        x.to_bits() == y.to_bits() || y.is_nan()
+                    }));
                     v
                 });
-                let mut states = match &values {
-                    Some(v) => value_states(v),
-                    None => store.leaf_block_states(o, centres[i], cells),
+                let (mut neg, mut pos, mut inferred) = match &values {
+                    Some(v) => v.iter().fold((0, 0, 0), |(n, p, i), &(q, x)| {
+                        (n | ((x < 0.0) as u32) << q, p | ((x >= 0.0) as u32) << q, i)
+                    }),
+                    None => sign_masks(&store.leaf_block_states(o, centres[i], cells)),
                 };
-                let (mut neg, mut pos) = sign_masks(&states);
                 let unknown = LEAF_POINTS[*m as usize] & !(neg | pos);
                 let (mut n, mut p) = (0, 0);
                 if unknown != 0 {
-                    // (After the first settling, every point without a sign was evaluated.)
-                    let v = values.unwrap_or_else(|| store.leaf_block_values(o, centres[i], cells));
-                    let (mut bn, mut bp) = ball_masks(&v, neg | pos, reach);
+                    let (mut bn, mut bp) = match &values {
+                        Some(v) => balls(v.iter().copied(), reach),
+                        // (After the first settling, every point without a sign was evaluated.)
+                        None => {
+                            let v = store.leaf_block_values(o, centres[i], cells);
+                            balls(bits27(neg | pos).map(|q| (q, v[q])), reach)
+                        }
+                    };
                     if let Some((decided, _)) = first {
                         let (dn, dp) = decided.masks(o);
                         (bn, bp) = (bn | dn, bp | dp);
@@ -1306,12 +1327,7 @@ fn settle_leaves(
                     (n, p) = (unknown & bn & !bp, unknown & bp & !bn);
                     neg |= n;
                     pos |= p;
-                    let mut m = n | p;
-                    while m != 0 {
-                        let q = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        states[q] = inferred_state(n & 1 << q != 0);
-                    }
+                    inferred |= n | p;
                 }
                 let mut need = 0;
                 for d in bits(*m) {
@@ -1320,7 +1336,7 @@ fn settle_leaves(
                         *m &= !(1 << d);
                         if corners & neg != 0 && corners & pos != 0 {
                             *x |= 1 << d;
-                            need |= unknown_edge_ends(&states, d);
+                            need |= unknown_edge_ends(neg, inferred, d);
                         }
                     }
                 }
@@ -1443,8 +1459,8 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             .zip(crossed.par_iter())
             .enumerate()
             .filter_map(|(i, (&o, &x))| {
-                let states = store.leaf_block_states(o, centres[i], cells);
-                let need = bits(x).fold(0, |n, d| n | unknown_edge_ends(&states, d));
+                let (neg, _, inferred) = sign_masks(&store.leaf_block_states(o, centres[i], cells));
+                let need = bits(x).fold(0, |n, d| n | unknown_edge_ends(neg, inferred, d));
                 (need != 0).then_some((i as u32, need))
             })
             .collect();
@@ -2220,7 +2236,8 @@ mod tests {
                         want |= (v[a].is_infinite() as u32) << a | (v[b].is_infinite() as u32) << b;
                     }
                 }
-                assert_eq!(unknown_edge_ends(&states, d), want, "{v:?} {d}");
+                let (neg, _, inferred) = sign_masks(&states);
+                assert_eq!(unknown_edge_ends(neg, inferred, d), want, "{v:?} {d}");
             }
         }
     }
