@@ -86,7 +86,8 @@ pub struct Settings {
     ///   without evaluation (a map of one byte per block of 2 × 2 × 2 cells records them);
     /// - leaf cells are settled by the signs of their corners: a corner in the ball of a known
     ///   value has its sign, so only the corners still without a sign after the levels are
-    ///   evaluated, a leaf whose corners all have one sign needs no more, and of a crossed leaf only the ends of its crossed edges need values.
+    ///   evaluated, a leaf whose corners all have one sign needs no more, and of a crossed leaf
+    ///   only the ends of its crossed edges need values.
     ///
     /// The mesh is the same. On the shared meshes at 128³ over [-1, 1]³ this evaluates about
     /// half the points the paper's test alone does (torus2 2.41 % of the lattice instead of
@@ -1186,16 +1187,17 @@ fn bits27(m: u32) -> impl Iterator<Item = usize> {
     })
 }
 
-/// The block points inside the balls of the values known in the block (at the points of `known`,
-/// which may include points with only a sign, NaN in `v`, or none): (inside a ball of a negative value,
-/// inside a ball of a positive value). No surface lies within |f(p)| / safety of a point p (the
-/// rejection test's premise), so a point in that ball has the sign of f(p).
+/// [`balls`] of the points of `known` with the values `v` (bits and indices as in
+/// [`block_point`]).
 #[cfg(test)]
 fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
     balls(bits27(known).map(|p| (p, v[p])), reach)
 }
 
-/// [`ball_masks`] of the block points and values `known` (NaN: no value).
+/// The block points inside the balls of the values known in the block, `known` as (block
+/// point, value; NaN where there is none): (inside a ball of a negative value, inside a ball of
+/// a positive value). No surface lies within |f(p)| / safety of a point p (the rejection test's
+/// premise), so a point in that ball has the sign of f(p).
 #[inline]
 fn balls(known: impl Iterator<Item = (usize, f64)>, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
     let (mut neg, mut pos) = (0, 0);
@@ -1261,12 +1263,12 @@ struct Ends {
     disagreed: bool,
 }
 
-/// One settling step of the leaves: signs are inferred ([`ball_masks`]) for the corners the
-/// undecided leaves in `masks` need (a point in balls of both signs, where the premise fails,
-/// gets none), then every leaf whose corners all have a sign leaves `masks`: into `crossed` when
-/// they have both signs, nowhere when they have one. The signs inferred are stored in the
-/// points' states, and the blocks of the leaves newly crossed are added to `ends` with the ends of their crossed
-/// edges that have a sign but no value.
+/// One settling step of the leaves: signs are inferred ([`balls`]) for the corners the undecided
+/// leaves in `masks` need (a point in balls of both signs, where the premise fails, gets none),
+/// then every leaf whose corners all have a sign leaves `masks`: into `crossed` when they have
+/// both signs, nowhere when they have one. The signs inferred are stored in the points' states,
+/// and the blocks of the leaves newly crossed are added to `ends` with the ends of their
+/// crossed edges that have a sign but no value.
 #[allow(clippy::too_many_arguments)]
 fn settle_leaves(
     store: &mut Store,
@@ -1777,10 +1779,10 @@ pub fn polygonize<F: Field + ?Sized>(
     let tested: u64 = masks.iter().map(|m| m.count_ones() as u64).sum();
     if octree.corner_test && levels > 0 {
         // Marching cubes needs the signs of the leaves' corners, and values only at the ends of
-        // crossed edges. Leaves are settled before and after evaluating the corners
-        // still without a sign: signs are inferred from the balls of the values known (no surface within
-        // |f| / safety), and leaves whose corners all have a sign are decided (one sign: no
-        // triangle; both: crossed).
+        // crossed edges. Leaves are settled before and after evaluating the corners still
+        // without a sign: signs are inferred from the balls of the values known (no surface
+        // within |f| / safety), and leaves whose corners all have a sign are decided (one sign:
+        // no triangle; both: crossed).
         let mut crossed = vec![0u8; blocks.len()];
         let reach = block_reach(lattice.cell, octree.safety);
         let reach = &*reach;
