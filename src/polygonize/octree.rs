@@ -733,10 +733,17 @@ fn corner_scaled(o: [u32; 3], k: usize, s: u32) -> [u32; 3] {
     [o[0] + d[0] * s, o[1] + d[1] * s, o[2] + d[2] * s]
 }
 
-/// The set bits of a child mask, in increasing order.
+/// The set bits of a mask (of children, or of block points), in increasing order.
 #[inline]
-fn bits(m: u8) -> impl Iterator<Item = usize> {
-    (0..8).filter(move |d| m & (1 << d) != 0)
+fn bits(m: impl Into<u32>) -> impl Iterator<Item = usize> {
+    let mut m = m.into();
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let p = m.trailing_zeros() as usize;
+            m &= m - 1;
+            p
+        })
+    })
 }
 
 /// Lattice point of block point `p` (see [`block_point`]) of the block with lower corner `o`.
@@ -1174,24 +1181,11 @@ fn sign_masks(states: &[u8; 27]) -> (u32, u32, u32) {
     (neg, pos, inferred)
 }
 
-/// The set bits of a mask of block points, in increasing order.
-#[inline]
-fn bits27(m: u32) -> impl Iterator<Item = usize> {
-    let mut m = m;
-    std::iter::from_fn(move || {
-        (m != 0).then(|| {
-            let p = m.trailing_zeros() as usize;
-            m &= m - 1;
-            p
-        })
-    })
-}
-
 /// [`balls`] of the points of `known` with the values `v` (bits and indices as in
 /// [`block_point`]).
 #[cfg(test)]
 fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
-    balls(bits27(known).map(|p| (p, v[p])), reach)
+    balls(bits(known).map(|p| (p, v[p])), reach)
 }
 
 /// The block points inside the balls of the values known in the block, `known` as (block
@@ -1319,7 +1313,7 @@ fn settle_leaves(
                         // (After the first settling, every point without a sign was evaluated.)
                         None => {
                             let v = store.leaf_block_values(o, centres[i], cells);
-                            balls(bits27(neg | pos).map(|q| (q, v[q])), reach)
+                            balls(bits(neg | pos).map(|q| (q, v[q])), reach)
                         }
                     };
                     if let Some((decided, _)) = first {
