@@ -66,6 +66,9 @@ pub struct Stats {
     pub cells_visited: u64,
     /// Cells that produced triangles.
     pub cells_crossed: u64,
+    /// Octree: cells visited again or added where the rejection's premise failed (a dropped
+    /// block held surface, or a sign inferred was wrong); 0 when it held.
+    pub cells_repaired: u64,
     /// Per level of a hierarchy (octree), cells kept; empty for flat polygonizers.
     pub cells_per_level: Vec<u64>,
     /// Seconds per phase, in order.

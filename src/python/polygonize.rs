@@ -108,6 +108,7 @@ pub fn stats_to_py<'py>(
     d.set_item("evaluation_percent", s.evaluation_percent())?;
     d.set_item("cells_visited", s.cells_visited)?;
     d.set_item("cells_crossed", s.cells_crossed)?;
+    d.set_item("cells_repaired", s.cells_repaired)?;
     d.set_item("cells_per_level", s.cells_per_level.clone())?;
     let secs = PyDict::new(py);
     for (k, v) in &s.seconds {

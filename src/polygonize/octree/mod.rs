@@ -32,6 +32,8 @@
 //! triangulated in parallel, each edge vertex indexed through the value index of the edge's
 //! lower end and numbered as a serial sweep over the leaves would (first use).
 
+mod repair;
+
 use super::cell::{case_index, corner_offset};
 use super::table::{EDGES, EDGE_AXIS};
 use super::{check_memory, compute_normals, estimate_triangles, evaluate, CaseTable, Stats};
@@ -989,7 +991,9 @@ const SHARED: [u32; 27] = {
 /// circumradius, holds the whole block) or covered by its corners' balls, at any level. Every
 /// lattice point of such a block has the sign decided, so the leaves' corners on the faces,
 /// edges and corners they share with decided neighbours need no evaluation. One byte per block
-/// (a 128³ lattice: 262 kB): 0 undecided, 1 negative, 2 positive.
+/// (a 128³ lattice: 262 kB): 0 kept, 1 negative, 2 positive, 3 dropped without a sign (its
+/// known corners disagreed, which the premise rules out). The repair reads which blocks were
+/// dropped ([`DecidedBlocks::dropped`]).
 struct DecidedBlocks {
     dims: [usize; 3],
     sign: Vec<u8>,
@@ -1004,22 +1008,38 @@ impl DecidedBlocks {
         Self::dims(lattice).iter().map(|&d| d as u64).product()
     }
 
-    /// The map of `lattice`, all undecided; empty (nothing decided, nothing stored) when not
-    /// `wanted`.
-    fn new(lattice: &Lattice, wanted: bool) -> Self {
-        let dims = if wanted { Self::dims(lattice) } else { [0; 3] };
+    /// The map of `lattice`, all kept.
+    fn new(lattice: &Lattice) -> Self {
+        let dims = Self::dims(lattice);
         DecidedBlocks {
             dims,
             sign: vec![0; dims.iter().product()],
         }
     }
 
-    /// Marks the block of `s` cells per side (s ≥ 2) with lower corner `o` (clipped to the
-    /// lattice) as holding points of one sign only.
+    /// The byte of a block dropped with sign `sign` (`None`: unknown).
     #[inline]
-    fn mark(&mut self, o: [u32; 3], s: u32, negative: bool) {
+    fn code(sign: Option<bool>) -> u8 {
+        match sign {
+            Some(true) => 1,
+            Some(false) => 2,
+            None => 3,
+        }
+    }
+
+    /// Whether cell `o` of the lattice lies in a block the levels dropped.
+    #[inline]
+    fn dropped(&self, o: [u32; 3]) -> bool {
+        let b = o.map(|c| (c / 2) as usize);
+        self.sign[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])] != 0
+    }
+
+    /// Marks the block of `s` cells per side (s ≥ 2) with lower corner `o` (clipped to the
+    /// lattice) as dropped, holding points of sign `negative` only (`None`: unknown).
+    #[inline]
+    fn mark(&mut self, o: [u32; 3], s: u32, negative: Option<bool>) {
         let lo = o.map(|c| (c / 2) as usize);
-        let v = if negative { 1 } else { 2 };
+        let v = Self::code(negative);
         if s == 2 {
             // One entry: most marks are of the last level's blocks.
             if (0..3).all(|a| lo[a] < self.dims[a]) {
@@ -1039,17 +1059,14 @@ impl DecidedBlocks {
     }
 
     /// Marks `blocks[i]` (blocks of `s` cells per side) as [`DecidedBlocks::mark`] does with
-    /// `negative` where `sign(i)` is `Some(negative)`; in parallel for the last level's blocks
-    /// (s = 2, one byte each, and most of the marks).
+    /// `negative` where `sign(i)` is `Some(negative)` (the block dropped); in parallel for the
+    /// last level's blocks (s = 2, one byte each, and most of the marks).
     fn mark_blocks(
         &mut self,
         blocks: &[[u32; 3]],
         s: u32,
-        sign: impl Fn(usize) -> Option<bool> + Sync,
+        sign: impl Fn(usize) -> Option<Option<bool>> + Sync,
     ) {
-        if self.sign.is_empty() {
-            return;
-        }
         if s != 2 {
             for (i, &o) in blocks.iter().enumerate() {
                 if let Some(negative) = sign(i) {
@@ -1069,7 +1086,7 @@ impl DecidedBlocks {
                     let b = o.map(|c| (c / 2) as usize);
                     if (0..3).all(|a| b[a] < dims[a]) {
                         let at = b[0] + dims[0] * (b[1] + dims[1] * b[2]);
-                        map[at].store(if negative { 1 } else { 2 }, Relaxed);
+                        map[at].store(Self::code(negative), Relaxed);
                     }
                 }
             });
@@ -1255,6 +1272,8 @@ const CROSSED_EDGE_ENDS: [u8; 256] = {
 struct Ends {
     blocks: Vec<(u32, u32)>,
     disagreed: bool,
+    /// Where the premise failed, for the repair.
+    suspects: repair::Suspects,
 }
 
 /// One settling step of the leaves: signs are inferred ([`balls`]) for the corners the undecided
@@ -1381,7 +1400,11 @@ fn settle_leaves(
             }
         }
         for &(i, neg, pos, _) in &found {
-            ends.disagreed |= !store.set_block_signs(blocks[i as usize], neg, pos);
+            let o = blocks[i as usize];
+            if !store.set_block_signs(o, neg, pos) {
+                ends.disagreed = true;
+                ends.suspects.blocks.push(o);
+            }
         }
     }
     ends.blocks.extend(
@@ -1406,9 +1429,9 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
     ends: Ends,
     settings: &super::Settings,
     stats: &mut Stats,
-) -> Result<()> {
+) -> Result<repair::Suspects> {
     let (cells, (blocks, centres, crossed)) = (lattice.cells, leaves);
-    let (mut ends, mut disagreed) = (ends.blocks, ends.disagreed);
+    let (mut ends, mut disagreed, mut suspects) = (ends.blocks, ends.disagreed, ends.suspects);
     while !ends.is_empty() || disagreed {
         let mut taken = Vec::new();
         let mut points = Vec::new();
@@ -1423,7 +1446,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
                 let state = store.state[s];
                 if is_inferred(state) {
                     store.state[s] = QUEUED;
-                    taken.push((s, is_negative(state)));
+                    taken.push((s, is_negative(state), p));
                     points.push(lattice.point(p));
                 }
             }
@@ -1439,8 +1462,11 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             });
         }
         let mut contradicted = false;
-        for (&(s, negative), v) in taken.iter().zip(values) {
-            contradicted |= (v < 0.0) != negative;
+        for (&(s, negative, p), v) in taken.iter().zip(values) {
+            if (v < 0.0) != negative {
+                contradicted = true;
+                suspects.points.push(p);
+            }
             store.state[s] = value_state(v);
             store.slots[s] = store.values.len() as u32;
             store.values.push(v);
@@ -1461,7 +1487,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
             })
             .collect();
     }
-    Ok(())
+    Ok(suspects)
 }
 
 /// A leaf cell the surface crosses: its lowest lattice point, the value indices of its corners
@@ -1622,7 +1648,7 @@ pub fn polygonize<F: Field + ?Sized>(
     let levels = levels(lattice);
     let mut store = Store::new(lattice);
     let mut points: Vec<DVec3> = Vec::new();
-    let mut decided = DecidedBlocks::new(lattice, octree.corner_test);
+    let mut decided = DecidedBlocks::new(lattice);
     // The value indices of the kept blocks' centres at the last level (blocks of 2 × 2 × 2
     // cells), when that level was tested.
     let mut centres: Vec<u32> = Vec::new();
@@ -1676,7 +1702,7 @@ pub fn polygonize<F: Field + ?Sized>(
                         })
                     })
                     .collect();
-                decided.mark_blocks(&blocks, s, |i| free[i].flatten());
+                decided.mark_blocks(&blocks, s, |i| free[i]);
                 let kept: Vec<u32> = free.iter().map(|f| f.is_none() as u32).collect();
                 blocks = kept_items(&blocks, &kept);
                 known = kept_items(&known, &kept);
@@ -1694,9 +1720,7 @@ pub fn polygonize<F: Field + ?Sized>(
             store.evaluate(field, &points, settings, &mut stats)?;
             let r = octree.safety * lattice.block_radius(s);
             let v = &store.values[base..];
-            if octree.corner_test {
-                decided.mark_blocks(&blocks, s, |i| (v[i].abs() > r).then_some(v[i] < 0.0));
-            }
+            decided.mark_blocks(&blocks, s, |i| (v[i].abs() > r).then_some(Some(v[i] < 0.0)));
             let kept: Vec<u32> = v
                 .par_iter()
                 .with_min_len(4096)
@@ -1771,6 +1795,7 @@ pub fn polygonize<F: Field + ?Sized>(
         })
         .collect();
     let tested: u64 = masks.iter().map(|m| m.count_ones() as u64).sum();
+    let mut suspects = repair::Suspects::default();
     if octree.corner_test && levels > 0 {
         // Marching cubes needs the signs of the leaves' corners, and values only at the ends of
         // crossed edges. Leaves are settled before and after evaluating the corners still
@@ -1817,7 +1842,7 @@ pub fn polygonize<F: Field + ?Sized>(
             &mut open,
             Some((&decided, &known)),
         );
-        drop((decided, known));
+        drop(known);
         // Then every corner still without a sign, in one batch. (Rounds — the blocks' corners
         // first, then the rest; or edge midpoints between them — saved 0.1–1.4 % of the
         // evaluations at 128³ but cost more in settling than they saved: 2–5 % of the time.)
@@ -1826,7 +1851,7 @@ pub fn polygonize<F: Field + ?Sized>(
         settle(&mut store, &mut masks, &mut crossed, &mut open, None);
         debug_assert!(masks.iter().all(|&m| m == 0));
         // The crossed edges need values at both ends, not only signs.
-        evaluate_crossed_edge_ends(
+        suspects = evaluate_crossed_edge_ends(
             field,
             lattice,
             &mut store,
@@ -1838,7 +1863,7 @@ pub fn polygonize<F: Field + ?Sized>(
         masks = crossed;
     }
     // The crossed leaves, with the indices of their corners' values, in leaf order.
-    let leaves: Vec<CrossedLeaf> = if octree.corner_test && levels > 0 {
+    let mut leaves: Vec<CrossedLeaf> = if octree.corner_test && levels > 0 {
         // Settled: every corner of a crossed leaf has a value or a sign, read in parallel
         // straight into place (the blocks' masks count their crossed leaves).
         let store = &store;
@@ -1907,9 +1932,25 @@ pub fn polygonize<F: Field + ?Sized>(
             .flat_map_iter(|(o, m, idx)| bits(*m).filter_map(move |d| crossed_leaf(*o, d, idx)))
             .collect()
     };
-    drop((blocks, masks, points, centres));
+    drop((masks, points));
     stats.cells_per_level.push(tested);
-    stats.cells_visited = tested;
+    // Where the premise failed, the leaves are completed (see `repair`).
+    let beyond = repair::cells_beyond_crossed_faces(table, &decided, &leaves, cells);
+    stats.cells_repaired = repair::close(
+        field,
+        lattice,
+        table,
+        &mut store,
+        &decided,
+        (&blocks, &centres),
+        beyond,
+        suspects,
+        &mut leaves,
+        settings,
+        &mut stats,
+    )?;
+    drop((blocks, centres, decided));
+    stats.cells_visited = tested + stats.cells_repaired;
     stats.cells_crossed = leaves.len() as u64;
     stats.add_time("sample", t);
 
@@ -2017,9 +2058,11 @@ mod tests {
     }
 
     #[test]
-    fn wrong_rejection_makes_holes() {
+    fn wrong_rejections_are_repaired() {
         // A field that over-estimates distance (3 × the signed distance) breaks the premise:
-        // rejection then loses cells, and the comparison finds the holes.
+        // the levels drop blocks the surface crosses and balls infer wrong signs. The repair
+        // walks on from the crossed leaves into those blocks, and the mesh is the dense mesh,
+        // with the paper's test alone and with the corner test.
         struct Over(Sphere);
         impl Field for Over {
             fn value(&self, p: DVec3) -> f64 {
@@ -2033,23 +2076,21 @@ mod tests {
         });
         let s = crate::polygonize::Settings::default();
         let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
-        let (o, _) = polygonize(&f, &l, &s, &Settings::default()).unwrap();
-        assert!(d.compare(&o).missing > 0);
-        // Signs inferred wrongly (the balls are three times too large) are caught where a value
-        // is evaluated after all, at the ends of crossed edges: every vertex still lies on a
-        // crossed lattice edge, between values of both signs.
-        assert!(o.vertices.iter().all(|v| v.is_finite()));
-        let n = o.vertices.len() as u32;
-        assert!(o.triangles.iter().flatten().all(|&i| i < n));
-        assert!(o.vertices.iter().all(|&v| {
-            let p = (v - l.origin) / l.cell;
-            let axes = (0..3)
-                .filter(|&a| (p[a] - p[a].round()).abs() > 1e-9)
-                .count();
-            axes <= 1
-        }));
-        // A large enough safety factor restores the dense mesh.
-        let (o, _) = polygonize(
+        for corner_test in [true, false] {
+            let octree = Settings {
+                corner_test,
+                ..Default::default()
+            };
+            let (o, stats) = polygonize(&f, &l, &s, &octree).unwrap();
+            assert!(stats.cells_repaired > 0, "corner test {corner_test}");
+            let c = d.compare(&o);
+            assert_eq!((c.missing, c.extra), (0, 0), "corner test {corner_test}");
+            // One vertex per crossed edge, shared across the seams: closed like the dense mesh.
+            assert_eq!(o.vertices.len(), d.vertices.len(), "corner test {corner_test}");
+            assert!(o.is_closed_oriented(), "corner test {corner_test}");
+        }
+        // With a safety factor that restores the premise, nothing needs repair.
+        let (o, stats) = polygonize(
             &f,
             &l,
             &s,
@@ -2059,6 +2100,7 @@ mod tests {
             },
         )
         .unwrap();
+        assert_eq!(stats.cells_repaired, 0);
         assert_eq!(d.compare(&o).missing, 0);
     }
 
@@ -2151,11 +2193,12 @@ mod tests {
             assert_eq!(SHARED[k], want, "neighbour {d:?}");
         }
         let lattice = Lattice::new(DVec3::ZERO, DVec3::ONE, [12, 12, 9]).unwrap();
-        let mut map = DecidedBlocks::new(&lattice, true);
+        let mut map = DecidedBlocks::new(&lattice);
         assert_eq!(map.dims, [6, 6, 5]);
         // Lattice points 4..=8 per axis negative; 8..=12 (x), 0..=4 (y), 8..=9 (z) positive.
-        map.mark([4, 4, 4], 4, true);
-        map.mark([8, 0, 8], 4, false);
+        map.mark([4, 4, 4], 4, Some(true));
+        map.mark([8, 0, 8], 4, Some(false));
+        map.mark([0, 0, 0], 2, None);
         let face = (0..27).filter(|p| p % 3 == 2).fold(0u32, |m, p| m | 1 << p);
         // The block at x 2..=4 touches the negative region with its face x = 4.
         assert_eq!(map.masks([2, 4, 4]), (face, 0));
@@ -2176,10 +2219,18 @@ mod tests {
         // Inside an undecided region and at the lattice's far corner: nothing.
         assert_eq!(map.masks([0, 8, 0]), (0, 0));
         assert_eq!(map.masks([10, 10, 8]), (0, 0));
-        // Without the corner test, the map is empty and decides nothing.
-        let mut none = DecidedBlocks::new(&lattice, false);
-        none.mark([0, 0, 0], 8, true);
-        assert_eq!(none.masks([2, 2, 2]), (0, 0));
+        // A block dropped without a sign gives none, and every dropped block reads as dropped.
+        assert_eq!(map.masks([2, 0, 0]), (0, 0));
+        for z in 0..9 {
+            for y in 0..12 {
+                for x in 0..12 {
+                    let dropped = (4..8).contains(&x) && (4..8).contains(&y) && (4..8).contains(&z)
+                        || x >= 8 && y < 4 && z >= 8
+                        || x < 2 && y < 2 && z < 2;
+                    assert_eq!(map.dropped([x, y, z]), dropped, "cell {:?}", [x, y, z]);
+                }
+            }
+        }
     }
 
     /// The ends of crossed edges with only a sign are those that an edge-by-edge search finds,
@@ -2187,10 +2238,10 @@ mod tests {
     #[test]
     fn decided_masks_inside_the_map_are_those_at_its_edge() {
         let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [12, 10, 14]).unwrap();
-        let mut d = DecidedBlocks::new(&lattice, true);
+        let mut d = DecidedBlocks::new(&lattice);
         let mut next = uniform(7);
         for v in d.sign.iter_mut() {
-            *v = (next() * 3.0) as u8;
+            *v = (next() * 4.0) as u8;
         }
         let [nx, ny, nz] = d.dims.map(|n| n as u32);
         let mut inside = 0;
