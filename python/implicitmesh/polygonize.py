@@ -73,12 +73,15 @@ def polygonize(
         blobs at 128³ and above.
         ``"octree"``: hierarchical sampling (Cuno et al.): a block of cells is skipped when
         ``|f(centre)| > safety × circumradius``, so only blocks near the surface are refined; the
-        leaves get the same marching cubes, so the mesh equals the dense one wherever no block is
-        rejected wrongly. Safe for fields with ``|f| ≤ distance to the surface`` near it: exact
-        signed distances, and variational surfaces with w < d (the defaults). For other fields
-        (e.g. ``3 × distance``) raise ``safety`` or check with :func:`compare`. For a
-        :class:`BlobField` the default ``safety`` is a bound on ``|∇f|``, which makes the octree
-        exact but lets it reject little: use ``"dense"`` or ``"tracking"`` for blobs.
+        leaves get the same marching cubes. The test assumes ``|f| ≤ distance to the surface``,
+        which fitted fields can break near thin parts; where it fails, the octree walks on from
+        its crossed leaves into the blocks it dropped wrongly (and around signs it inferred
+        wrongly), evaluating them, so the mesh is the dense mesh on every component it found
+        (``stats["cells_repaired"]`` counts the cells so visited, 0 when the premise held). Only
+        a component lying wholly inside dropped blocks can be missed; raise ``safety`` for
+        fields far from a distance (e.g. ``3 × distance``). For a :class:`BlobField` the default
+        ``safety`` is a bound on ``|∇f|``, which makes the octree exact but lets it reject
+        little: use ``"sparse"`` for blobs.
         ``"tracking"``: surface tracking (Triquet et al.): from seed cells, visit only the cells
         the surface crosses; the mesh equals the dense mesh on every component that holds a seed.
         Seeds are found by walking along +x from ``seeds`` (default: the primitives' centres
