@@ -56,7 +56,7 @@ def bench(a: argparse.Namespace) -> str:
     res = 64 if quick else 128
     runs_fast = 2 if quick else 5
     runs_med = 1 if quick else 3
-    meshes_dir = ROOT.parent / "shared" / "data" / "meshes"
+    meshes_dir = ROOT / "tests" / "data" / "meshes"
     names = MESHES[:2] if quick else MESHES
     bounds = np.array([[-1.0] * 3, [1.0] * 3])
     settings, fparams = bench_rbf.ferreus_configs()

@@ -64,7 +64,7 @@ def bench(a: argparse.Namespace) -> str:
     runs = 2 if quick else 7
     top = 2 if quick else 3
     names = MESHES[:1] if quick else MESHES
-    meshes_dir = ROOT.parent / "shared" / "data" / "meshes"
+    meshes_dir = ROOT / "tests" / "data" / "meshes"
     started = _dt.datetime.now().astimezone()
     load_before = loadavg()
     snap = cpu_snapshot()

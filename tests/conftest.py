@@ -1,8 +1,8 @@
 """Shared fixtures and helpers for the implicitmesh test suite.
 
-The shared development meshes live beside the repository (``../shared/data/meshes`` relative to
-the repository root). Tests that need them are skipped, with a clear reason, only when that folder
-is absent. Every shared mesh is fitted once and polygonized once per session.
+The development meshes come with the repository, in ``tests/data/meshes`` (``SOURCES.md`` there
+says where each came from and its licence). Every mesh is fitted once and polygonized once per
+session.
 """
 
 from __future__ import annotations
@@ -12,16 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-MESH_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "meshes"
+MESH_DIR = Path(__file__).resolve().parent / "data" / "meshes"
 
-#: The ``_800`` meshes documented in shared/data/meshes/SOURCES.md (used when the folder is absent,
-#: so that the parametrized tests show up as skipped rather than vanish).
-_KNOWN_800 = ("fandisk", "icosahedron", "knot", "spot", "star", "torus2")
-
-if MESH_DIR.is_dir():
-    MESH_NAMES = tuple(sorted(p.name[: -len("_800.ply")] for p in MESH_DIR.glob("*_800.ply"))) or _KNOWN_800
-else:
-    MESH_NAMES = _KNOWN_800
+#: The ``_800`` meshes documented in tests/data/meshes/SOURCES.md.
+MESH_NAMES = ("fandisk", "icosahedron", "knot", "spot", "star", "torus2")
 
 #: Offset of the normal constraints used for every shared mesh (the papers' value for [-1, 1]³).
 D = 0.015
@@ -30,8 +24,9 @@ KERNELS = ("triharmonic", "biharmonic", "thin_plate")
 
 
 def require_mesh_dir() -> Path:
-    if not MESH_DIR.is_dir():
-        pytest.skip(f"shared test meshes not found: {MESH_DIR} is absent (expected ../shared beside the repo)")
+    """The development meshes' folder; a missing file is an error, not a skip."""
+    missing = [n for n in MESH_NAMES if not (MESH_DIR / f"{n}_800.ply").is_file()]
+    assert not missing, f"development meshes missing from {MESH_DIR}: {missing}"
     return MESH_DIR
 
 
@@ -151,8 +146,6 @@ class SharedMeshes:
             import trimesh
 
             path = self.folder / f"{name}_800.ply"
-            if not path.is_file():
-                pytest.skip(f"shared test mesh {path} is absent")
             self._meshes[name] = trimesh.load(path, process=False)
         return self._meshes[name]
 

@@ -3,8 +3,7 @@
 A notebook fails the test when any of its cells raises. The kernel is this interpreter (the one running
 pytest, so the package under test), whatever "python3" kernels are installed elsewhere: the test writes a
 kernelspec for ``sys.executable`` into a temporary folder and hands nbclient a kernel manager that only
-looks there. Skipped, with the reason, only when ipykernel, nbclient or nbformat is missing or the shared
-meshes are absent; pictures need an off-screen OpenGL for pyvista (see README), and without one the
+looks there. Skipped, with the reason, only when ipykernel, nbclient or nbformat is missing; pictures need an off-screen OpenGL for pyvista (see README), and without one the
 notebooks fail rather than skip.
 """
 
@@ -61,7 +60,7 @@ def test_notebook_runs(path, kernel_dir):
     from jupyter_client.kernelspec import KernelSpecManager
     from jupyter_client.manager import KernelManager
 
-    require_mesh_dir()  # the notebooks read ../shared/data/meshes
+    require_mesh_dir()  # the notebooks read tests/data/meshes
     specs = KernelSpecManager(kernel_dirs=[str(kernel_dir)], ensure_native_kernel=False)
     assert specs.get_kernel_spec("python3").argv[0] == sys.executable
     km = KernelManager(kernel_name="python3", kernel_spec_manager=specs)

@@ -66,8 +66,6 @@ def fitted(request, mesh_dir):
     import trimesh
 
     path = mesh_dir / f"{request.param}_800.ply"
-    if not path.is_file():
-        pytest.skip(f"shared test mesh {path} is absent")
     m = trimesh.load(path, process=False)
     v, f = np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
     return request.param, VariationalSurface.from_mesh(v, f, d=D)
@@ -115,8 +113,6 @@ def test_evaluations_below_the_papers_share(name, mesh_dir):
     import trimesh
 
     path = mesh_dir / f"{name}_800.ply"
-    if not path.is_file():
-        pytest.skip(f"shared test mesh {path} is absent")
     m = trimesh.load(path, process=False)
     surface = VariationalSurface.from_mesh(np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64), d=D)
     octree = polygonize(surface, bounds=BOX, resolution=128, method="octree", normals=False)
@@ -157,8 +153,6 @@ def over_steep(mesh_dir):
     import trimesh
 
     path = mesh_dir / f"{HOLE_MESH}_800.ply"
-    if not path.is_file():
-        pytest.skip(f"shared test mesh {path} is absent")
     m = trimesh.load(path, process=False)
     surface = VariationalSurface.from_mesh(np.asarray(m.vertices), np.asarray(m.faces), d=D, w=D * 5 / 6)
     dense = polygonize(surface, bounds=BOX, resolution=128, method="dense", normals=False)
@@ -196,8 +190,6 @@ def test_default_start_level_avoids_the_holes_of_a_coarse_start(mesh_dir):
     import trimesh
 
     path = mesh_dir / "knot_800.ply"
-    if not path.is_file():
-        pytest.skip(f"shared test mesh {path} is absent")
     m = trimesh.load(path, process=False)
     surface = VariationalSurface.from_mesh(np.asarray(m.vertices), np.asarray(m.faces), d=D)
     kwargs = dict(bounds=surface.bounds, resolution=80, normals=False)
