@@ -80,3 +80,20 @@ def test_sample_vertices_estimators(table_mesh):
         im.shapes.sample_vertices(v, f, 10, normals="bogus")
     with pytest.raises(ValueError, match="count"):
         im.shapes.sample_vertices(v, f, len(v) + 1)
+
+
+@pytest.mark.parametrize("name", ["knot", "spot", "star", "fandisk", "torus2", "icosahedron"])
+def test_octree_equals_dense_on_random_samplings_of_the_development_meshes(name):
+    import trimesh
+
+    from conftest import MESH_DIR
+
+    m = trimesh.load(MESH_DIR / f"{name}_hires.ply", process=False)
+    v, f = np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+    for seed, (normals, noise) in enumerate((("area", 0.0), ("angle", 0.0), ("area", 4.0))):
+        p, n = im.shapes.sample_vertices(v, f, 800, normals=normals, noise_degrees=noise, seed=seed)
+        surface = im.VariationalSurface.fit(p, n)
+        dense = im.polygonize(surface, bounds=BOX, resolution=64, method="dense", normals=False)
+        octree = im.polygonize(surface, bounds=BOX, resolution=64, method="octree", normals=False)
+        c = im.compare(dense, octree)
+        assert (c["missing"], c["extra"]) == (0, 0), (name, normals, noise, c)
