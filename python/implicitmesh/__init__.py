@@ -7,9 +7,12 @@ Fields (negative inside, positive outside):
 - any Python callable taking (N, 3) float64 points and returning (N,) values.
 
 Polygonizers: :func:`polygonize` with ``method="dense"`` (plain marching cubes, the reference),
-``"octree"`` (Cuno et al.) or ``"tracking"`` (Triquet et al.); :class:`Tessellator` keeps the
-tracking caches between calls for animation.
-Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are.
+``"sparse"`` (blob fields: blocks the field's bounds cannot rule out), ``"octree"`` (Cuno et al.)
+or ``"tracking"`` (Triquet et al.); :class:`Tessellator` keeps the tracking caches between calls
+for animation. Mesh refinement: :func:`subdivide` (1-to-4 with Newton projection onto the
+field, Jin et al.), :func:`butterfly` and :func:`blend`.
+Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are;
+:func:`compare` counts the triangles two meshes do not share.
 """
 
 from ._core import BlobField, VariationalSurface, __version__
