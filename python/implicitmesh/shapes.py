@@ -116,22 +116,25 @@ class Table:
 
 @dataclass(frozen=True)
 class Plates:
-    """Two parallel plates ``gap`` apart, each ``thickness`` thick, joined along one end, as a
-    callable field (a distance bound): genus 0, inside [-0.8, 0.8]³. A hard case for fits: the
+    """Two parallel plates ``gap`` apart, each ``thickness`` thick and 2 × ``size`` wide, joined
+    along one end, as a callable field (a distance bound): genus 0, inside [-0.8, 0.8]³. A hard case for fits: the
     outside between the plates is thinner than the default normal offsets reach.
     """
 
     gap: float = 0.02
     thickness: float = 0.05
+    #: Half the plates' extent along x and y.
+    size: tuple[float, float] = (0.7, 0.6)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         """points : (N, 3) float64 -> (N,) float64 (negative inside)."""
         p = np.asarray(points, dtype=float)
         z = (self.gap + self.thickness) / 2
-        half = (0.7, 0.6, self.thickness / 2)
+        sx, sy = self.size
+        half = (sx, sy, self.thickness / 2)
         a = _box(p, (0.0, 0.0, z), half)
         b = _box(p, (0.0, 0.0, -z), half)
-        joint = _box(p, (0.68, 0.0, 0.0), (0.05, 0.6, z + self.thickness / 2))
+        joint = _box(p, (sx - 0.02, 0.0, 0.0), (0.05, sy, z + self.thickness / 2))
         return np.minimum(np.minimum(a, b), joint)
 
     bounds = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
