@@ -93,7 +93,7 @@ def _capsule(points: np.ndarray, a, b, radius: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Table:
-    """A thin-legged body, as a callable field (a distance bound: exact outside, |f| ≤ distance
+    """A thin-legged body, as a callable field (a distance bound: exact outside, ``|f|`` ≤ distance
     inside): a slab 1.4 × 1.0 × ``top`` on four legs of radius ``leg``, genus 0, inside
     [-0.8, 0.8]³. A hard case for fits: the legs are a few normal offsets thick.
     """

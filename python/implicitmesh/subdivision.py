@@ -51,7 +51,7 @@ def subdivide(
 
     Each level splits every triangle into four at its edge midpoints (one new vertex per edge,
     shared by its faces) and projects the new vertices onto the zero set of the field by
-    Newton's iteration r ← r − f ∇f / |∇f|² (Jin et al. eq. 10), level after level. Vertices of a
+    Newton's iteration r ← r − f ∇f / ‖∇f‖² (Jin et al. eq. 10), level after level. Vertices of a
     level keep their index and exact coordinates in every finer level; the new ones are appended.
     Where Newton fails (vanishing gradient, too many steps, wandering off), a sign change is
     searched along the gradient line through the midpoint and bisected.
@@ -95,8 +95,8 @@ def subdivide(
         (F_k, 3) int64, ``normals`` (V_k, 3) float64 unit gradients, and ``stats``: ``level``,
         ``projected`` (new vertices), ``iterations_mean`` / ``iterations_max`` (Newton
         evaluations per new vertex), ``fallbacks``, ``not_converged`` and
-        ``not_converged_max_abs_value``, ``max_abs_value`` (largest |f| at the new vertices —
-        for vertices accepted by prediction, the predicted |f| after the last step; at level 0,
+        ``not_converged_max_abs_value``, ``max_abs_value`` (largest ``|f|`` at the new vertices —
+        for vertices accepted by prediction, the predicted ``|f|`` after the last step; at level 0,
         measured at the control vertices), ``evaluations`` (field values computed, 7 per point
         for a callable's value and gradient), ``batches``, ``seconds``.
 

@@ -12,7 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
 
-/// A variational implicit surface f(x) = Σ λ_j φ(|x − c_j|) + a + b·x fitted to constraints;
+/// A variational implicit surface f(x) = Σ λ_j φ(‖x − c_j‖) + a + b·x fitted to constraints;
 /// negative inside, positive outside.
 ///
 /// Create one with :meth:`fit` (points with normals), :meth:`from_mesh` (a triangle mesh) or
@@ -118,7 +118,7 @@ impl PyVariationalSurface {
     /// counter-clockwise seen from outside). Vertices at identical positions are merged first.
     /// At sharp creases the normal constraint value is lowered to
     /// ``w_i = d_i · min(w/d, 0.9 cos θ_i)``, θ_i the largest angle between the vertex normal and
-    /// an adjacent face's normal, so that |f| stays below the distance to the surface (needed by
+    /// an adjacent face's normal, so that ``|f|`` stays below the distance to the surface (needed by
     /// the octree polygonizer); on smooth meshes this changes nothing.
     ///
     /// Parameters
@@ -263,7 +263,7 @@ impl PyVariationalSurface {
         self.inner.kernel().name()
     }
 
-    /// float: largest |f(c_i) − v_i| over the constraints after the fit.
+    /// float: largest ``|f(c_i) − v_i|`` over the constraints after the fit.
     #[getter]
     fn residual(&self) -> f64 {
         self.inner.residual()
