@@ -21,6 +21,11 @@ pub struct Lattice {
     pub cells: [u32; 3],
 }
 
+/// A point as Python writes a list of floats: `[1.0, -0.5, 2.0]`.
+fn python_list(p: DVec3) -> String {
+    format!("[{:?}, {:?}, {:?}]", p.x, p.y, p.z)
+}
+
 impl Lattice {
     /// A lattice over the box `min..max` with `cells` cells per axis.
     ///
@@ -32,7 +37,11 @@ impl Lattice {
         if !(max.cmpgt(min).all()) {
             return Err(Error::invalid(
                 "bounds",
-                format!("max {max:?} must exceed min {min:?} on every axis"),
+                format!(
+                    "the second row (max) must exceed the first (min) on every axis, got [{}, {}]",
+                    python_list(min),
+                    python_list(max)
+                ),
             ));
         }
         for &c in &cells {

@@ -514,3 +514,36 @@ def test_polygonize_accepts_lists_float32_and_numpy_ints():
     np.testing.assert_array_equal(m.faces, c.faces)
     m32 = polygonize(lambda p: SPHERE(p).astype(np.float32), bounds=BOX, resolution=12)
     assert m32.to_trimesh().is_watertight
+
+
+RUST_WORDS = ("DVec3", "Vec<", "usize", "f64", "u32", "i64", "Some(", "Err(", "Ok(", "::", "panicked")
+
+
+def test_error_messages_are_in_python_terms(data, mesh):
+    """Messages name arguments and values as Python users write them: no Rust types leak."""
+    p, n = data
+    v, f = mesh
+    blobs_centres = np.zeros((3, 3))
+    calls = [
+        lambda: polygonize(SPHERE, bounds=[[1, 1, 1], [-1, -1, -1]], resolution=8),
+        lambda: polygonize(SPHERE, bounds=[[0, 0, 0], [0, 1, 1]], resolution=8),
+        lambda: polygonize(SPHERE, bounds=BOX, resolution=0),
+        lambda: polygonize(SPHERE, bounds=BOX, resolution=[8, 8]),
+        lambda: polygonize(SPHERE, bounds=BOX, resolution=10**7),
+        lambda: polygonize(SPHERE, bounds=BOX, resolution=8, method="octree", safety=-1.0),
+        lambda: polygonize(lambda q: np.zeros(len(q) + 1), bounds=BOX, resolution=8),
+        lambda: VariationalSurface.fit(p[:3], n[:3]),
+        lambda: VariationalSurface.fit(p, n[:-1]),
+        lambda: VariationalSurface.fit(with_entry(p, (0, 0), np.nan), n),
+        lambda: VariationalSurface.fit(p, np.zeros_like(n)),
+        lambda: VariationalSurface.fit(p, n, kernel="gaussian"),
+        lambda: VariationalSurface.from_mesh(v, np.array([[0, 0, 1]])),
+        lambda: VariationalSurface.from_mesh(v, f + len(v)),
+        lambda: __import__("implicitmesh").BlobField(blobs_centres, -1.0),
+        lambda: __import__("implicitmesh").BlobField(blobs_centres, [1.0, 2.0]),
+    ]
+    for i, call in enumerate(calls):
+        with pytest.raises(ValueError) as info:
+            call()
+        message = str(info.value)
+        assert not any(w in message for w in RUST_WORDS), (i, message)
