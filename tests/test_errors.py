@@ -547,3 +547,11 @@ def test_error_messages_are_in_python_terms(data, mesh):
             call()
         message = str(info.value)
         assert not any(w in message for w in RUST_WORDS), (i, message)
+
+
+def test_complex_input_is_refused_not_truncated(data):
+    p, n = data
+    with pytest.raises(ValueError, match="points.*complex"):
+        VariationalSurface.fit(p.astype(complex), n)
+    with pytest.raises(ValueError, match="shape \\(5, 2\\)"):
+        VariationalSurface.fit(np.zeros((5, 2)), np.zeros((5, 2)))

@@ -8,12 +8,36 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+/// `numpy.asarray(obj, dtype=dtype)`, refusing complex input (whose imaginary part the cast
+/// would drop).
 fn asarray<'py>(obj: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<'py, PyAny>> {
     let py = obj.py();
     let np = py.import("numpy")?;
+    let raw = np.call_method1("asarray", (obj,))?;
+    let kind: String = raw.getattr("dtype")?.getattr("kind")?.extract()?;
+    if kind == "c" {
+        return Err(pyo3::exceptions::PyTypeError::new_err(
+            "complex values are not supported",
+        ));
+    }
     let kwargs = PyDict::new(py);
     kwargs.set_item("dtype", dtype)?;
-    np.call_method("asarray", (obj,), Some(&kwargs))
+    np.call_method("asarray", (raw,), Some(&kwargs))
+}
+
+/// A shape as Python prints it: `(5, 2)`, `(7,)`.
+pub fn python_shape(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
 }
 
 /// An (N, 3) array of points, as float64.
@@ -24,7 +48,10 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>
     if shape.len() != 2 || shape[1] != 3 {
         return Err(value_error(
             name,
-            format!("expected an array of shape (N, 3), got shape {shape:?}"),
+            format!(
+                "expected an array of shape (N, 3), got shape {}",
+                python_shape(&shape)
+            ),
         ));
     }
     let a: PyReadonlyArray2<f64> = arr.extract()?;
@@ -44,7 +71,10 @@ pub fn values(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<f64>> 
     if shape.len() != 1 {
         return Err(value_error(
             name,
-            format!("expected an array of shape (N,), got shape {shape:?}"),
+            format!(
+                "expected an array of shape (N,), got shape {}",
+                python_shape(&shape)
+            ),
         ));
     }
     let a: PyReadonlyArray1<f64> = arr.extract()?;
@@ -83,7 +113,10 @@ pub fn triangles(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[u3
     if shape.len() != 2 || shape[1] != 3 {
         return Err(value_error(
             name,
-            format!("expected an array of shape (F, 3), got shape {shape:?}"),
+            format!(
+                "expected an array of shape (F, 3), got shape {}",
+                python_shape(&shape)
+            ),
         ));
     }
     let a: PyReadonlyArray2<i64> = arr.extract()?;

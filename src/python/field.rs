@@ -47,7 +47,8 @@ impl CallableField {
             || (shape.len() == 2 && shape[0] == n && shape[1] == 1);
         if !ok {
             return Err(PyValueError::new_err(format!(
-                "field: the callable must return one value per point, shape ({n},); got shape {shape:?} for {n} points"
+                "field: the callable must return one value per point, shape ({n},); got shape {} for {n} points",
+                super::convert::python_shape(&shape)
             )));
         }
         let r = r.call_method1("reshape", (n,))?;

@@ -2086,7 +2086,11 @@ mod tests {
             let c = d.compare(&o);
             assert_eq!((c.missing, c.extra), (0, 0), "corner test {corner_test}");
             // One vertex per crossed edge, shared across the seams: closed like the dense mesh.
-            assert_eq!(o.vertices.len(), d.vertices.len(), "corner test {corner_test}");
+            assert_eq!(
+                o.vertices.len(),
+                d.vertices.len(),
+                "corner test {corner_test}"
+            );
             assert!(o.is_closed_oriented(), "corner test {corner_test}");
         }
         // With a safety factor that restores the premise, nothing needs repair.

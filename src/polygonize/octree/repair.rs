@@ -113,7 +113,11 @@ pub(super) fn close<F: Field + ?Sized>(
         wave.extend(cells_around(p, cells));
     }
     for &o in &suspects.blocks {
-        wave.extend((0..8).map(|d| corner(o, d)).filter(|c| (0..3).all(|a| c[a] < cells[a])));
+        wave.extend(
+            (0..8)
+                .map(|d| corner(o, d))
+                .filter(|c| (0..3).all(|a| c[a] < cells[a])),
+        );
     }
     if wave.is_empty() {
         return Ok(0);
