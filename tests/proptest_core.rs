@@ -1,0 +1,112 @@
+//! Property tests of the core's entry points with arbitrary input: every call returns `Ok` or an
+//! `Err`, never panics; where it returns `Ok`, the result keeps its promises (interpolation, mesh
+//! equality between polygonizers, indices in range).
+
+use glam::DVec3;
+use implicitmesh::field::analytic::Sphere;
+use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+use implicitmesh::field::rbf::{Settings as FitSettings, VariationalSurface};
+use implicitmesh::field::{constraints, Field};
+use implicitmesh::lattice::Lattice;
+use implicitmesh::mesh::Mesh;
+use implicitmesh::polygonize::{dense, octree, sparse, subdivision, Settings};
+use proptest::prelude::*;
+
+/// Any float, the special values often.
+fn any_f64() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        4 => -2.0..2.0f64,
+        1 => Just(f64::NAN),
+        1 => Just(f64::INFINITY),
+        1 => Just(f64::NEG_INFINITY),
+        1 => Just(0.0),
+        1 => Just(1e300),
+        1 => Just(1e-300),
+    ]
+}
+
+fn point() -> impl Strategy<Value = DVec3> {
+    (any_f64(), any_f64(), any_f64()).prop_map(|(x, y, z)| DVec3::new(x, y, z))
+}
+
+/// Points that are mostly sane (finite, in the box), with a special one now and then.
+fn points(max: usize) -> impl Strategy<Value = Vec<DVec3>> {
+    prop::collection::vec(
+        prop_oneof![9 => (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z)), 1 => point()],
+        0..max,
+    )
+}
+
+fn small_lattice() -> impl Strategy<Value = Lattice> {
+    (1u32..14, 1u32..14, 1u32..14).prop_map(|(a, b, c)| {
+        Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [a, b, c]).unwrap()
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+
+    #[test]
+    fn lattices_refuse_or_hold(min in point(), max in point(), a in 0u32..40, b in 0u32..40, c in 0u32..40, n in 0u32..40) {
+        if let Ok(l) = Lattice::new(min, max, [a, b, c]) {
+            prop_assert_eq!(l.cells, [a, b, c]);
+            prop_assert!(l.cell.is_finite() && l.cell.min_element() > 0.0);
+        }
+        if let Ok(l) = Lattice::cubic(min, max, n) {
+            prop_assert!(l.cells.iter().all(|&k| k >= 1));
+        }
+    }
+
+    #[test]
+    fn fits_refuse_or_interpolate(p in points(24), n in points(24)) {
+        let k = p.len().min(n.len());
+        let fit = VariationalSurface::fit(&p[..k], &n[..k], &constraints::Settings::default(), &FitSettings::default());
+        if let Ok(s) = fit {
+            let c = s.constraints();
+            let scale = c.values.iter().fold(1e-300f64, |m, v| m.max(v.abs()));
+            for (q, v) in c.points.iter().zip(&c.values) {
+                prop_assert!((s.value(*q) - v).abs() <= 1e-4 * scale);
+            }
+        }
+    }
+
+    #[test]
+    fn blob_polygonizers_agree(c in points(12), r in 0.05..0.6f64, t in prop_oneof![Just(0.5), any_f64()], l in small_lattice()) {
+        let Ok(blobs) = BlobField::new(&c, PerPrimitive::All(r), PerPrimitive::All(1.0), t, BlobSettings::default()) else {
+            return Ok(());
+        };
+        let s = Settings::default();
+        let (d, _) = dense::polygonize(&blobs, &l, &s).unwrap();
+        let (m, _) = sparse::polygonize(&blobs, &l, &s).unwrap();
+        let cmp = d.compare(&m);
+        prop_assert_eq!((cmp.missing, cmp.extra), (0, 0));
+        prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.vertices.len()));
+    }
+
+    #[test]
+    fn octree_settings_refuse_or_equal_dense(safety in any_f64(), start in prop::option::of(0u32..12), corner_test: bool, l in small_lattice(), r in 0.1..0.9f64) {
+        let sphere = Sphere { center: DVec3::new(0.01, -0.02, 0.03), radius: r };
+        let s = Settings::default();
+        let o = octree::Settings { safety, start_level: start, corner_test };
+        if let Ok((m, _)) = octree::polygonize(&sphere, &l, &s, &o) {
+            let (d, _) = dense::polygonize(&sphere, &l, &s).unwrap();
+            let cmp = d.compare(&m);
+            prop_assert_eq!((cmp.missing, cmp.extra), (0, 0));
+        } else {
+            prop_assert!(!(safety.is_finite() && safety > 0.0));
+        }
+    }
+
+    #[test]
+    fn butterfly_refuses_or_refines(v in points(10), f in prop::collection::vec((0u32..12, 0u32..12, 0u32..12), 0..14), w in any_f64()) {
+        let control = Mesh {
+            vertices: v,
+            triangles: f.into_iter().map(|(a, b, c)| [a, b, c]).collect(),
+            normals: vec![],
+        };
+        if let Ok(levels) = subdivision::butterfly(&control, 1, w) {
+            let fine = levels.last().unwrap();
+            prop_assert!(fine.triangles.iter().flatten().all(|&i| (i as usize) < fine.vertices.len()));
+        }
+    }
+}
