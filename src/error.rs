@@ -34,6 +34,9 @@ pub enum Error {
     /// A field returned NaN or infinity at a point the polygonizer needed.
     #[error("field: returned a non-finite value at point ({x}, {y}, {z})")]
     FieldNotFinite { x: f64, y: f64, z: f64 },
+    /// The call was told to stop (see [`crate::cancel`]).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// Result with the core's [`Error`].

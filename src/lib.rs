@@ -40,6 +40,7 @@
 //! assert_eq!(stats.evaluations, 33 * 33 * 33);
 //! ```
 
+pub mod cancel;
 pub mod error;
 pub mod field;
 pub mod lattice;

@@ -111,6 +111,7 @@ class Tessellator:
         batch_size: int = 262144,
         memory_limit: int | None = None,
         blocks: bool = True,
+        progress: Callable[[int], object] | None = None,
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...
     @property
     def capacity_bytes(self) -> int: ...
@@ -129,6 +130,7 @@ def polygonize(
     safety: float | None = None,
     corner_test: bool | None = None,
     seeds: ArrayLike | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...
 
 def subdivide(field: VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike], vertices: ArrayLike, faces: ArrayLike, levels: int, *, tolerance: float | None = None, max_steps: int | None = None, step: float | None = None) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]]: ...

@@ -8,6 +8,7 @@ from typing import Any, Callable, Sequence, Union
 import numpy as np
 
 from . import _core
+from ._progress import reporter
 from .mesh import Mesh
 
 __all__ = ["Ambiguity", "polygonize", "Tessellator", "METHODS"]
@@ -46,6 +47,7 @@ def polygonize(
     safety: float | None = None,
     corner_test: bool | None = None,
     seeds: Any = None,
+    progress: Any = False,
 ) -> Mesh:
     """Triangulates the zero set of a field (negative inside, positive outside).
 
@@ -118,6 +120,10 @@ def polygonize(
         §4.3.
     seeds : (K, 3) array_like, optional
         Tracking only: points inside or on each component of the surface to start from.
+    progress : bool or callable
+        ``True``: show the field evaluations done so far while the call runs (a tqdm bar when
+        tqdm is installed, else a line on standard error); a callable is called with that count
+        (an int) about every 50 ms from the calling thread. Default ``False``.
 
     Returns
     -------
@@ -132,6 +138,9 @@ def polygonize(
         unknown method or ambiguity, or a field returning NaN/inf or the wrong shape.
     TypeError
         When ``field`` is neither a field of this package nor callable.
+
+    KeyboardInterrupt
+        On Ctrl-C (or Jupyter's interrupt) while the call runs: the work stops at its next batch.
 
     Notes
     -----
@@ -149,20 +158,25 @@ def polygonize(
         raise ValueError(f"safety: must be a positive number, got {safety!r}")
     if corner_test is not None and not isinstance(corner_test, (bool, np.bool_)):
         raise ValueError(f"corner_test: must be True or False, got {corner_test!r}")
-    v, f, n, stats = _core.polygonize(
-        field,
-        bounds,
-        resolution,
-        method=method,
-        ambiguity=ambiguity,
-        normals=normals,
-        batch_size=batch_size,
-        memory_limit=memory_limit,
-        start_level=start_level,
-        safety=safety,
-        corner_test=corner_test,
-        seeds=seeds,
-    )
+    report, end = reporter(progress, f"polygonize ({method})")
+    try:
+        v, f, n, stats = _core.polygonize(
+            field,
+            bounds,
+            resolution,
+            method=method,
+            ambiguity=ambiguity,
+            normals=normals,
+            batch_size=batch_size,
+            memory_limit=memory_limit,
+            start_level=start_level,
+            safety=safety,
+            corner_test=corner_test,
+            seeds=seeds,
+            progress=report,
+        )
+    finally:
+        end()
     stats["triangles"] = len(f)
     stats["vertices"] = len(v)
     return Mesh(v, f, n, stats)
@@ -232,6 +246,7 @@ class Tessellator:
         batch_size: int = 262144,
         memory_limit: int | None = None,
         blocks: bool = True,
+        progress: Any = False,
     ) -> Mesh:
         """Tracks the surface of ``field``; arguments as for :func:`polygonize` with
         ``method="tracking"``.
@@ -241,6 +256,8 @@ class Tessellator:
         blocks : bool
             For a :class:`BlobField`, walk block by block (faster; more evaluations, the same
             mesh). Ignored for other fields, which are walked cell by cell.
+        progress : bool or callable
+            As for :func:`polygonize`.
 
         Returns
         -------
@@ -254,17 +271,22 @@ class Tessellator:
         bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
         if not isinstance(blocks, (bool, np.bool_)):
             raise ValueError(f"blocks: must be True or False, got {blocks!r}")
-        v, f, n, stats = self._core.polygonize(
-            field,
-            bounds,
-            resolution,
-            seeds=seeds,
-            ambiguity=ambiguity,
-            normals=normals,
-            batch_size=batch_size,
-            memory_limit=memory_limit,
-            blocks=bool(blocks),
-        )
+        report, end = reporter(progress, "track")
+        try:
+            v, f, n, stats = self._core.polygonize(
+                field,
+                bounds,
+                resolution,
+                seeds=seeds,
+                ambiguity=ambiguity,
+                normals=normals,
+                batch_size=batch_size,
+                memory_limit=memory_limit,
+                blocks=bool(blocks),
+                progress=report,
+            )
+        finally:
+            end()
         stats["triangles"] = len(f)
         stats["vertices"] = len(v)
         return Mesh(v, f, n, stats)

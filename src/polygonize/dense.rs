@@ -342,7 +342,9 @@ fn fill_planes<F: Field + ?Sized>(
     while z < z1 {
         let z2 = (z + per).min(z1);
         let chunk = &mut out[(z - z0) as usize * plane..(z2 - z0) as usize * plane];
+        crate::cancel::check()?;
         field.lattice_values(lattice, z, z2, points, chunk);
+        crate::cancel::advance(chunk.len() as u64)?;
         if let Some(i) = chunk.iter().position(|v| !v.is_finite()) {
             let (pl, r) = (i / plane, i % plane);
             let q = lattice.point([

@@ -127,7 +127,9 @@ pub fn evaluate<F: Field + ?Sized>(
         .chunks(batch.max(1))
         .zip(out.chunks_mut(batch.max(1)))
     {
+        crate::cancel::check()?;
         field.values(p, o);
+        crate::cancel::advance(p.len() as u64)?;
         if let Some(i) = o.iter().position(|v| !v.is_finite()) {
             return Err(Error::FieldNotFinite {
                 x: p[i].x,
@@ -178,13 +180,17 @@ pub fn compute_normals<F: Field + ?Sized>(
             let h = frac * lattice.cell.min_element();
             let b = (batch / 6).max(1);
             for (p, o) in mesh.vertices.chunks(b).zip(g.chunks_mut(b)) {
+                crate::cancel::check()?;
                 gradients_by_differences(field, p, h, o);
+                crate::cancel::advance(6 * p.len() as u64)?;
             }
             stats.normal_evaluations += 6 * mesh.vertices.len() as u64;
         }
         None => {
             for (p, o) in mesh.vertices.chunks(batch).zip(g.chunks_mut(batch)) {
+                crate::cancel::check()?;
                 field.gradients(p, o);
+                crate::cancel::advance(p.len() as u64)?;
             }
             stats.normal_evaluations += mesh.vertices.len() as u64;
         }

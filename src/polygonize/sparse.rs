@@ -306,11 +306,13 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
         lattice_points: lattice.num_points(),
         ..Default::default()
     };
+    crate::cancel::check()?;
     let t = Instant::now();
     let blocks = field.blocks(lattice, dims);
     stats.add_time("blocks", t);
 
     // Pass 1: values, signs, owned vertices (and normals) per block.
+    crate::cancel::check()?;
     let t = Instant::now();
     let num_blocks = dims.iter().map(|&d| d as usize).product::<usize>();
     // Up to BLOCKS_PER_TASK blocks per task, fewer on small lattices (parallel work there too).
@@ -370,12 +372,14 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     stats.add_time("evaluate", t);
 
     // Pass 2: triangles per evaluated block, each task into its own range of the final buffer.
+    crate::cancel::check()?;
     let t = Instant::now();
     let (triangles, crossed) =
         triangulate_blocks::<I, false>(cases, &ws.active, None, &ws.map, dims)?;
     stats.cells_crossed = crossed;
     stats.add_time("triangulate", t);
     if normals {
+        crate::cancel::check()?;
         let t = Instant::now();
         finish_normals(&mut mesh, &triangles, &outputs)?;
         stats.normal_evaluations = mesh.vertices.len() as u64;

@@ -310,7 +310,9 @@ struct Evaluator<'a> {
 
 impl Evaluator<'_> {
     fn both(&mut self, p: &[DVec3], v: &mut [f64], g: &mut [DVec3]) -> Result<()> {
+        crate::cancel::check()?;
         (self.values_gradients)(p, v, g);
+        crate::cancel::advance(p.len() as u64)?;
         self.evaluations += self.both_cost * p.len() as u64;
         self.batches += 1;
         match (0..p.len()).find(|&i| !(v[i].is_finite() && g[i].is_finite())) {
@@ -319,7 +321,9 @@ impl Evaluator<'_> {
         }
     }
     fn values(&mut self, p: &[DVec3], v: &mut [f64]) -> Result<()> {
+        crate::cancel::check()?;
         (self.values)(p, v);
+        crate::cancel::advance(p.len() as u64)?;
         self.evaluations += p.len() as u64;
         self.batches += 1;
         match v.iter().position(|x| !x.is_finite()) {
@@ -668,6 +672,7 @@ fn subdivide_with(
     out.push((mesh.clone(), stats));
 
     for level in 1..=levels {
+        crate::cancel::check()?;
         let t = Instant::now();
         let (ev0, b0) = (eval.evaluations, eval.batches);
         let old = mesh.vertices.len();
@@ -1103,6 +1108,7 @@ pub fn butterfly(control: &Mesh, levels: usize, w: f64) -> Result<Vec<Mesh>> {
     mesh.normals = mesh.face_normals_at_vertices();
     let mut out = vec![mesh.clone()];
     for _ in 0..levels {
+        crate::cancel::check()?;
         let rings = Rings::new(&mesh)?;
         let old = mesh.vertices.len();
         let (mut next, parents) = split(&mesh);

@@ -6,6 +6,7 @@ mod blob;
 mod convert;
 mod errors;
 mod field;
+mod interrupt;
 mod polygonize;
 mod subdivision;
 mod variational;

@@ -3,6 +3,7 @@
 use super::convert::{flat_faces, points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
+use super::interrupt::run;
 use crate::lattice::Lattice;
 use crate::polygonize::{dense, octree, sparse, tracking, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
@@ -209,7 +210,7 @@ fn unknown_method(method: &str) -> PyErr {
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
 /// stats dict)``.
 #[pyfunction]
-#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None))]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn polygonize<'py>(
     py: Python<'py>,
@@ -225,6 +226,7 @@ pub fn polygonize<'py>(
     safety: Option<f64>,
     corner_test: Option<bool>,
     seeds: Option<&Bound<'py, PyAny>>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let lattice = parse_lattice(bounds, resolution)?;
@@ -252,7 +254,7 @@ pub fn polygonize<'py>(
     }
     let f = field.as_field();
     let result = match method.as_str() {
-        "dense" => py.detach(|| dense::polygonize(f, &lattice, &settings).map(buffers)),
+        "dense" => run(py, progress, || dense::polygonize(f, &lattice, &settings).map(buffers)),
         "octree" => {
             let od = octree::Settings::default();
             let o = octree::Settings {
@@ -264,16 +266,18 @@ pub fn polygonize<'py>(
                 }),
                 corner_test: corner_test.unwrap_or(od.corner_test),
             };
-            py.detach(|| octree::polygonize(f, &lattice, &settings, &o).map(buffers))
+            run(py, progress, || octree::polygonize(f, &lattice, &settings, &o).map(buffers))
         }
         "tracking" => {
             let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
-            py.detach(|| tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers))
+            run(py, progress, || {
+                tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers)
+            })
         }
         "sparse" => match &field {
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
-                py.detach(|| {
+                run(py, progress, || {
                     sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
                         |(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats),
                     )
@@ -312,7 +316,7 @@ impl PyTessellator {
     }
 
     /// Tracks the surface; see :meth:`implicitmesh.Tessellator.polygonize`.
-    #[pyo3(signature = (field, bounds, resolution, *, seeds=None, ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, blocks=true))]
+    #[pyo3(signature = (field, bounds, resolution, *, seeds=None, ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, blocks=true, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn polygonize<'py>(
         &mut self,
@@ -326,6 +330,7 @@ impl PyTessellator {
         batch_size: usize,
         memory_limit: Option<u64>,
         blocks: bool,
+        progress: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
@@ -336,7 +341,7 @@ impl PyTessellator {
             // Blob fields evaluate whole blocks: the walk goes block by block.
             FieldArg::Blob(b) if blocks => {
                 let blobs = &b.inner;
-                py.detach(|| {
+                run(py, progress, || {
                     tess.polygonize_blocks::<_, i64>(blobs, &lattice, &starts, walk, &[], &settings)
                         .map(|(mesh, faces, stats)| {
                             (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
@@ -345,7 +350,7 @@ impl PyTessellator {
             }
             _ => {
                 let f = field.as_field();
-                py.detach(|| {
+                run(py, progress, || {
                     tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
                         .map(|(m, s)| (MeshBuffers::copied(m), s))
                 })

@@ -5,6 +5,7 @@
 use super::convert::{points, points_to_py, triangles, triangles_to_py};
 use super::errors::value_error;
 use super::field::FieldArg;
+use super::interrupt::run;
 use crate::mesh::Mesh;
 use crate::polygonize::subdivision::{self, Settings, SubdivisionStats, MAX_LEVELS};
 use pyo3::prelude::*;
@@ -108,17 +109,21 @@ pub fn subdivide<'py>(
     let result = match &field {
         FieldArg::Variational(s) => {
             let s = s.clone();
-            py.detach(move || subdivision::subdivide_surface(&s, &control, levels, &settings))
+            run(py, None, move || {
+                subdivision::subdivide_surface(&s, &control, levels, &settings)
+            })
         }
         FieldArg::Callable(_) => {
             let f = field.as_field();
-            py.detach(|| {
+            run(py, None, || {
                 subdivision::subdivide_by_differences(f, &control, levels, &settings, step)
             })
         }
         FieldArg::Blob(_) => {
             let f = field.as_field();
-            py.detach(|| subdivision::subdivide(f, &control, levels, &settings))
+            run(py, None, || {
+                subdivision::subdivide(f, &control, levels, &settings)
+            })
         }
     };
     if let Some(e) = field.take_error() {
@@ -144,7 +149,9 @@ pub fn butterfly<'py>(
 ) -> PyResult<Bound<'py, PyList>> {
     let levels = parse_levels(levels)?;
     let control = control_mesh(vertices, faces)?;
-    let result = py.detach(move || subdivision::butterfly(&control, levels, w))?;
+    let result = run(py, None, move || {
+        subdivision::butterfly(&control, levels, w)
+    })?;
     let out = PyList::empty(py);
     for m in result {
         out.append(mesh_tuple(py, m, None)?)?;

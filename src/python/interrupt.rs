@@ -1,0 +1,68 @@
+//! Long calls that stop on Ctrl-C and report progress.
+//!
+//! The core's work runs on a scoped thread under a [`Token`]; the calling thread releases the
+//! GIL and wakes every [`POLL`] to look at Python's signals (Ctrl-C, Jupyter's interrupt) and to
+//! report progress. On a signal it tells the work to stop, waits for it (the core checks its
+//! token between batches), and raises the signal's exception. A Python callable used as a field
+//! is called from the work's thread, which takes the GIL for each batch.
+
+use crate::cancel::{self, Token};
+use pyo3::prelude::*;
+use std::time::Duration;
+
+/// How often the calling thread looks at Python's signals and reports progress.
+const POLL: Duration = Duration::from_millis(50);
+
+/// Runs `work` so that Ctrl-C stops it; `progress`, when given, is called with the count of
+/// field evaluations done so far at every poll.
+pub fn run<T: Send>(
+    py: Python<'_>,
+    progress: Option<&Bound<'_, PyAny>>,
+    work: impl FnOnce() -> crate::Result<T> + Send,
+) -> PyResult<T> {
+    let token = Token::new();
+    let caller = std::thread::current();
+    std::thread::scope(|s| {
+        let t = token.clone();
+        let handle = s.spawn(move || {
+            let r = cancel::run_under(t, work);
+            caller.unpark();
+            r
+        });
+        let mut raised: Option<PyErr> = None;
+        let mut reported = 0;
+        while !handle.is_finished() {
+            py.detach(|| std::thread::park_timeout(POLL));
+            if handle.is_finished() {
+                break;
+            }
+            if raised.is_none() {
+                if let Err(e) = py.check_signals() {
+                    token.stop();
+                    raised = Some(e);
+                }
+            }
+            if let (Some(p), None) = (progress, &raised) {
+                let done = token.done();
+                if done != reported {
+                    reported = done;
+                    if let Err(e) = p.call1((done,)) {
+                        token.stop();
+                        raised = Some(e);
+                    }
+                }
+            }
+        }
+        let result = match handle.join() {
+            Ok(r) => r,
+            Err(panic) => std::panic::resume_unwind(panic),
+        };
+        if let (Some(p), None, Ok(_)) = (progress, &raised, &result) {
+            p.call1((token.done(),))?;
+        }
+        match raised {
+            Some(e) => Err(e),
+            None => result.map_err(PyErr::from),
+        }
+    })
+}

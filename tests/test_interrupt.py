@@ -1,0 +1,94 @@
+"""Long calls stop on Ctrl-C (KeyboardInterrupt) and report progress."""
+
+from __future__ import annotations
+
+import _thread
+import threading
+
+import numpy as np
+import pytest
+
+import implicitmesh as im
+
+BOX = [[-1, -1, -1], [1, 1, 1]]
+
+
+def interrupt_after(seconds: float) -> threading.Timer:
+    """Delivers a SIGINT to the main thread after `seconds`, as Ctrl-C does."""
+    t = threading.Timer(seconds, _thread.interrupt_main)
+    t.start()
+    return t
+
+
+@pytest.fixture(scope="module")
+def surface():
+    return im.VariationalSurface.fit(*im.shapes.fibonacci_sphere(1500))
+
+
+@pytest.mark.parametrize("method", ["dense", "octree"])
+def test_ctrl_c_stops_a_long_polygonization(surface, method):
+    # 600³ lattice points against 3,000 centres: minutes of work; the call must end with
+    # KeyboardInterrupt, not a mesh, and the next call must work normally.
+    counts: list[int] = []
+    timer = interrupt_after(1.5)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            im.polygonize(surface, bounds=BOX, resolution=600, method=method, progress=counts.append)
+    finally:
+        timer.cancel()
+    assert counts, "no progress was reported before the interrupt"
+    assert counts[-1] < 601**3
+    mesh = im.polygonize(surface, bounds=BOX, resolution=24, method=method)
+    assert mesh.to_trimesh().is_watertight
+
+
+def test_ctrl_c_stops_a_python_callable_field():
+    def slow_sphere(p):
+        return np.linalg.norm(p, axis=1) - 0.5
+
+    timer = interrupt_after(0.3)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            im.polygonize(slow_sphere, bounds=BOX, resolution=1500, batch_size=4096)
+    finally:
+        timer.cancel()
+
+
+def test_progress_counts_the_evaluations(surface):
+    counts: list[int] = []
+    mesh = im.polygonize(surface, bounds=BOX, resolution=48, method="dense", normals=False, progress=counts.append)
+    assert counts and counts == sorted(counts)
+    assert counts[-1] == mesh.stats["evaluations"] == 49**3
+    counts.clear()
+    mesh = im.polygonize(surface, bounds=BOX, resolution=48, method="octree", progress=counts.append)
+    assert counts[-1] == mesh.stats["evaluations"] + mesh.stats["normal_evaluations"]
+
+
+def test_progress_true_writes_a_line_or_a_bar(surface, capsys):
+    im.polygonize(surface, bounds=BOX, resolution=16, progress=True)
+    err = capsys.readouterr().err
+    assert "polygonize" in err
+
+
+def test_progress_must_be_a_bool_or_callable(surface):
+    with pytest.raises(ValueError, match="progress"):
+        im.polygonize(surface, bounds=BOX, resolution=8, progress="yes")
+
+
+def test_an_exception_from_the_progress_callback_stops_the_call(surface):
+    def boom(done):
+        raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        im.polygonize(surface, bounds=BOX, resolution=600, progress=boom)
+
+
+def test_ctrl_c_stops_subdivision():
+    v, f = im.shapes.load_model("knot")
+    timer = interrupt_after(1.0)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            # Level 6 has 6.5 million triangles: tens of seconds of Newton steps.
+            im.subdivide(v, f, levels=6, surface=im.shapes.Torus(major=0.5, minor=0.2))
+    finally:
+        timer.cancel()
