@@ -4,6 +4,7 @@ use super::convert::{flat_faces, points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
 use crate::lattice::Lattice;
+use crate::polygonize::tracking::Components;
 use crate::polygonize::{dense, octree, sparse, tracking, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
@@ -268,7 +269,19 @@ pub fn polygonize<'py>(
         }
         "tracking" => {
             let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
-            py.detach(|| tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers))
+            match &field {
+                // A blob field bounds its values over blocks: every component is found.
+                FieldArg::Blob(b) => {
+                    let blobs = &b.inner;
+                    py.detach(|| {
+                        tracking::polygonize_all(blobs, &lattice, &starts, walk, &settings)
+                            .map(buffers)
+                    })
+                }
+                _ => py.detach(|| {
+                    tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers)
+                }),
+            }
         }
         "sparse" => match &field {
             FieldArg::Blob(b) => {
@@ -332,15 +345,32 @@ impl PyTessellator {
         let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
         let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
         let tess = &mut self.inner;
+        // Blob fields bound their values over blocks: every component is found.
         let result = match &field {
             // Blob fields evaluate whole blocks: the walk goes block by block.
             FieldArg::Blob(b) if blocks => {
                 let blobs = &b.inner;
                 py.detach(|| {
-                    tess.polygonize_blocks::<_, i64>(blobs, &lattice, &starts, walk, &[], &settings)
-                        .map(|(mesh, faces, stats)| {
-                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
-                        })
+                    let all = Components::All;
+                    tess.polygonize_blocks::<_, i64>(
+                        blobs,
+                        &lattice,
+                        &starts,
+                        walk,
+                        &[],
+                        &settings,
+                        all,
+                    )
+                    .map(|(mesh, faces, stats)| {
+                        (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
+                    })
+                })
+            }
+            FieldArg::Blob(b) => {
+                let blobs = &b.inner;
+                py.detach(|| {
+                    tess.polygonize_all(blobs, &lattice, &starts, walk, &[], &settings)
+                        .map(|(m, s)| (MeshBuffers::copied(m), s))
                 })
             }
             _ => {
