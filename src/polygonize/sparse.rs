@@ -190,6 +190,15 @@ pub(super) fn block_at(lattice: &Lattice, b: [u32; 3]) -> Block {
     Block { index: b, lo, n }
 }
 
+/// The coordinates of the block with index `i` (x fastest) on a lattice of `dims` blocks.
+pub(super) fn block_coords(i: u32, dims: [u32; 3]) -> [u32; 3] {
+    [
+        i % dims[0],
+        (i / dims[0]) % dims[1],
+        i / (dims[0] * dims[1]),
+    ]
+}
+
 /// Whether a block's sign words (`n` points per axis, bits beyond them clear) have one sign.
 fn one_sign(signs: &[u64; 8], n: [u32; 3]) -> bool {
     let all = plane_mask(n[0], n[1]);
@@ -215,13 +224,8 @@ pub(super) fn blocks_not_ruled_out<F: BlockField + ?Sized>(
         .into_par_iter()
         .with_min_len(BLOCKS_PER_TASK)
         .map(|i| {
-            let b = [
-                i % dims[0],
-                (i / dims[0]) % dims[1],
-                i / (dims[0] * dims[1]),
-            ];
-            consider(i)
-                && field.block_sign(blocks, lattice, &block_at(lattice, b)) == BlockSign::Mixed
+            let block = block_at(lattice, block_coords(i, dims));
+            consider(i) && field.block_sign(blocks, lattice, &block) == BlockSign::Mixed
         })
         .collect_into_vec(marks);
     out.clear();

@@ -379,6 +379,21 @@ impl Tessellator {
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<()> {
+        self.evaluate_blocks_not_ruled_out(field, lattice, stats);
+        let t = Instant::now();
+        self.queue_crossed_cells(lattice);
+        stats.add_time("track", t);
+        self.walk_waves(field, lattice, settings, stats)
+    }
+
+    /// Finds the blocks that `field`'s bounds cannot rule out (into `candidates`) and evaluates
+    /// them in parallel (their signs into `signs`).
+    fn evaluate_blocks_not_ruled_out<F: BlockField + ?Sized>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        stats: &mut Stats,
+    ) {
         let t = Instant::now();
         let dims = sparse::block_dims(lattice);
         let blocks = field.blocks(lattice, dims);
@@ -387,20 +402,12 @@ impl Tessellator {
         stats.add_time("classify", t);
 
         let t = Instant::now();
-        let block_of = |i: u32| {
-            [
-                i % dims[0],
-                (i / dims[0]) % dims[1],
-                i / (dims[0] * dims[1]),
-            ]
-        };
         self.candidates
             .par_iter()
             .map_init(
                 || [0.0f64; 512],
                 |values, &i| {
-                    let mut evaluations = 0;
-                    let b = block_of(i);
+                    let (b, mut evaluations) = (sparse::block_coords(i, dims), 0);
                     let signs =
                         sparse::block_signs(field, &blocks, lattice, b, values, &mut evaluations);
                     (signs, evaluations)
@@ -409,12 +416,16 @@ impl Tessellator {
             .collect_into_vec(&mut self.signs);
         stats.evaluations += self.signs.iter().map(|s| s.1).sum::<u64>();
         stats.add_time("evaluate", t);
+    }
 
-        let t = Instant::now();
+    /// Queues the crossed cells of the blocks in `signs` that are not yet queued, as the next
+    /// wave.
+    fn queue_crossed_cells(&mut self, lattice: &Lattice) {
+        let dims = sparse::block_dims(lattice);
         self.wave.clear();
         for (&i, &(signs, _)) in self.candidates.iter().zip(&self.signs) {
             let Some((signs, n)) = signs else { continue };
-            let lo = block_of(i).map(|v| v * STEP);
+            let lo = sparse::block_coords(i, dims).map(|v| v * STEP);
             let (cache, wave) = (&mut self.cache, &mut self.wave);
             sparse::crossed_cells(&signs, n, &ALL_CELLS, |cell, _| {
                 let c = [
@@ -427,8 +438,6 @@ impl Tessellator {
                 }
             });
         }
-        stats.add_time("track", t);
-        self.walk_waves(field, lattice, settings, stats)
     }
 
     /// One polygonization: seeds walked from `starts` (e.g. blob centres or data points), then
@@ -635,7 +644,7 @@ mod tests {
     }
 
     #[test]
-    fn every_component_holds_the_cavity_no_seed_reaches() {
+    fn all_components_include_the_cavity_no_seed_reaches() {
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 48).unwrap();
         let s = Settings::default();
         let (d, dense_stats) = dense::polygonize(&shell(), &l, &s).unwrap();
