@@ -4,6 +4,7 @@
 use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
 use implicitmesh::lattice::Lattice;
+use implicitmesh::polygonize::tracking::Components;
 use implicitmesh::polygonize::{dense, sparse, tracking, Settings};
 use std::time::Instant;
 
@@ -55,13 +56,21 @@ fn main() {
         let (tris, stats) = match method {
             "tracking" => {
                 let (m, s) = tess
-                    .polygonize(&field, &lattice, &centers, res, &[], &settings)
+                    .polygonize_all(&field, &lattice, &centers, res, &[], &settings)
                     .unwrap();
                 (m.triangles.len(), s)
             }
             "blocks" => {
                 let (_, t, s) = tess
-                    .polygonize_blocks::<_, u32>(&field, &lattice, &centers, res, &[], &settings)
+                    .polygonize_blocks::<_, u32>(
+                        &field,
+                        &lattice,
+                        &centers,
+                        res,
+                        &[],
+                        &settings,
+                        Components::All,
+                    )
                     .unwrap();
                 (t.len(), s)
             }

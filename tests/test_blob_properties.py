@@ -4,15 +4,18 @@ Random blob sets — overlapping clusters, disjoint blobs, tiny blobs (radius be
 touching or crossing the bounds, weak blobs (strength below the threshold) — at 8 to 48 cells per
 side, with both ambiguity choices. The dense mesh is the reference. What is asserted:
 
-- Tracking never invents a triangle (tracking ⊆ dense), and what it misses are whole connected
-  components of the dense mesh.
-- Every component found is exactly predicted: the seed cells are recomputed here independently
-  (from the cell holding each blob centre, walk along +x to the first cell whose corners change
-  sign, other directions when the walk meets the box, as the docstring of ``polygonize`` says); every dense component with a triangle in a seed
-  cell is in the tracking mesh, and nothing else is, except components that share a cell with
-  one (tracking triangulates whole cells).
+- Tracking a blob field finds every component: its mesh is the dense mesh, triangle for triangle.
+- The walk from seeds alone — tracking the same field as a Python callable (no block bounds), from
+  the blob centres as ``seeds`` — never invents a triangle (tracking ⊆ dense), and what it misses
+  are whole connected components of the dense mesh.
+- Every component that walk finds is exactly predicted: the seed cells are recomputed here
+  independently (from the cell holding each seed, walk along +x to the first cell whose corners
+  change sign, other directions when the walk meets the box, as the docstring of ``polygonize``
+  says); every dense component with a triangle in a seed cell is in the walk's mesh, and nothing
+  else is, except components that share a cell with one (tracking triangulates whole cells).
 - Where no cavity and no seedless component can exist — disjoint blobs inside the bounds, each
-  stronger than the threshold — the tracking mesh equals the dense mesh triangle for triangle.
+  stronger than the threshold — the walk from the seeds alone gives the dense mesh triangle for
+  triangle.
 - Both meshes: no triangle repeats a vertex, no triangle appears twice, every triangle lies in one
   lattice cell, orientation is consistent (each directed edge once); closed with positive volume
   when no lattice point on the box is inside, and otherwise open only along the box.
@@ -22,6 +25,8 @@ side, with both ambiguity choices. The dense mesh is the reference. What is asse
   removes the holes: with safety ≥ a Lipschitz bound of the field, octree == dense.
 - A reused :class:`Tessellator` gives the one-shot tracking mesh whatever it did before, walking
   cell by cell or block by block; the walk block by block equals the walk cell by cell bit for bit.
+
+Clusters of many blobs, whose cavities no seed walk reaches, are in ``test_tracking_components.py``.
 
 Hypothesis runs derandomized with no example database, so CI sees the same examples every run.
 """
@@ -200,15 +205,16 @@ def crossed_cells(values):
     return anyin & ~allin
 
 
-def walk_seeds(centers, radii, values, n):
-    """Seed cells as documented: from the cell holding each centre (centres outside the lattice
-    start from the nearest cell), walk along +x to the first crossed cell; a walk that reaches
-    the side of the lattice first starts again from the same cell along -x, then +y, -y, +z, -z;
-    a walk that runs out of steps inside the lattice ends. For a blob field the walk takes at
-    most ceil(max radius / cell) + 2 steps (``default_starts`` in the binding)."""
+def walk_seeds(centers, values, n):
+    """Seed cells as documented: from the cell holding each seed point (points outside the
+    lattice start from the nearest cell), walk along +x to the first crossed cell; a walk that
+    reaches the side of the lattice first starts again from the same cell along -x, then +y, -y,
+    +z, -z; a walk that runs out of steps inside the lattice ends. From given ``seeds`` a walk
+    takes at most the lattice's largest number of cells per axis (``tracking_starts`` in the
+    binding)."""
     lo, cell = lattice(n)
     crossed = crossed_cells(values)
-    max_steps = int(np.ceil(radii.max() / cell.min())) + 2
+    max_steps = n
     seeds = set()
     for p in centers:
         o = np.clip(np.floor((p - lo) / cell), 0, n - 1).astype(np.int64)
@@ -320,20 +326,25 @@ def check_mesh(mesh, values, n, name, holes_allowed=False):
 
 
 class Analysis:
-    """Dense, tracking and the independent predictions for one configuration."""
+    """Dense, tracking, the walk from the seeds alone and the independent predictions for one
+    configuration."""
 
     def __init__(self, cfg, **field_kw):
         self.cfg = cfg
         self.field = cfg.field(**field_kw)
         amb = cfg.ambiguity
-        self.dense = im.polygonize(self.field, bounds=BOX, resolution=cfg.n, method="dense", ambiguity=amb, normals=False)
-        self.track = im.polygonize(self.field, bounds=BOX, resolution=cfg.n, method="tracking", ambiguity=amb, normals=False)
+        kw = dict(bounds=BOX, resolution=cfg.n, ambiguity=amb, normals=False)
+        self.dense = im.polygonize(self.field, method="dense", **kw)
+        self.track = im.polygonize(self.field, method="tracking", **kw)
+        # The same values through a callable (no block bounds): tracking finds the components
+        # that the walks from the blob centres reach, and only those.
+        self.walk = im.polygonize(self.field.evaluate, method="tracking", seeds=cfg.centers, **kw)
         self.values = lattice_values(self.field, cfg.n)
-        self.kd, self.kt = triangle_keys([self.dense, self.track])
+        self.kd, self.kw = triangle_keys([self.dense, self.walk])
 
-    def in_tracking(self):
-        """(F_dense,) bool: dense triangles present in the tracking mesh."""
-        return np.isin(self.kd, self.kt)
+    def in_walk(self):
+        """(F_dense,) bool: dense triangles present in the mesh of the walk from the seeds."""
+        return np.isin(self.kd, self.kw)
 
 
 # --------------------------------------------------------------------------------------------
@@ -343,10 +354,14 @@ class Analysis:
 
 @settings(max_examples=200, **SETTINGS)
 @given(cfg=configs())
-def test_tracking_finds_exactly_the_seeded_components(cfg):
+def test_tracking_finds_every_component_and_the_walk_exactly_the_seeded_ones(cfg):
     a = Analysis(cfg)
     n = cfg.n
-    dense, track = a.dense, a.track
+    dense, track = a.dense, a.walk
+
+    # Tracking a blob field: the dense mesh.
+    assert im.compare(dense, a.track) == {"missing": 0, "extra": 0, "common": len(dense.faces)}
+    assert a.track.stats["cells_crossed"] == dense.stats["cells_crossed"]
 
     closed_d = check_mesh(dense, a.values, n, "dense")
     closed_t = check_mesh(track, a.values, n, "tracking")
@@ -355,13 +370,13 @@ def test_tracking_finds_exactly_the_seeded_components(cfg):
     assert track.stats["evaluations"] <= track.stats["lattice_points"] == (n + 1) ** 3
     assert track.stats["cells_crossed"] <= dense.stats["cells_crossed"]
 
-    # Tracking never invents a triangle.
-    assert np.isin(a.kt, a.kd).all(), "tracking has triangles the dense mesh has not"
-    assert len(np.unique(a.kt)) == len(a.kt)
-    found = a.in_tracking()
+    # The walk from the seeds never invents a triangle.
+    assert np.isin(a.kw, a.kd).all(), "tracking has triangles the dense mesh has not"
+    assert len(np.unique(a.kw)) == len(a.kw)
+    found = a.in_walk()
     assert found.sum() == len(track.faces)
 
-    # What tracking misses are whole components of the dense mesh.
+    # What the walk misses are whole components of the dense mesh.
     label, k = components(dense)
     if k == 0:
         assert len(track.faces) == 0
@@ -373,7 +388,7 @@ def test_tracking_finds_exactly_the_seeded_components(cfg):
 
     # Which components: those with a triangle in a seed cell (lower bound), and at most those
     # joined to them through cells they share (tracking triangulates whole cells).
-    seeds = walk_seeds(cfg.centers, cfg.radii, a.values, n)
+    seeds = walk_seeds(cfg.centers, a.values, n)
     for s in seeds:
         assert crossed[s]
     c_lo, c_hi = triangle_cells(dense, n)
@@ -420,20 +435,21 @@ def test_tracking_finds_exactly_the_seeded_components(cfg):
 
 @settings(max_examples=80, **SETTINGS)
 @given(cfg=configs(kinds=("disjoint",)))
-def test_disjoint_blobs_inside_the_bounds_tracking_equals_dense(cfg):
+def test_disjoint_blobs_inside_the_bounds_the_walk_equals_dense(cfg):
     """No cavity and no seedless component can exist: each blob's inside lattice points are
     6-connected, contain the corner of the centre's cell nearest to the centre (when there are
-    any), and their outside is connected to the box; so every component holds a seed."""
+    any), and their outside is connected to the box; so every component holds a seed, and the
+    walk from the centres alone finds them all."""
     a = Analysis(cfg)
-    assert im.compare(a.dense, a.track) == {"missing": 0, "extra": 0, "common": len(a.dense.faces)}
-    assert check_mesh(a.track, a.values, cfg.n, "tracking")
+    assert im.compare(a.dense, a.walk) == {"missing": 0, "extra": 0, "common": len(a.dense.faces)}
+    assert check_mesh(a.walk, a.values, cfg.n, "tracking")
     # Any lattice point inside gives triangles (the box's own lattice points are all outside).
-    assert (len(a.track.faces) > 0) == bool((a.values < 0).any())
+    assert (len(a.walk.faces) > 0) == bool((a.values < 0).any())
 
 
 @settings(max_examples=80, **SETTINGS)
 @given(cfg=configs(kinds=("few",), max_parts=1))
-def test_few_strong_blobs_inside_the_bounds_tracking_equals_dense(cfg):
+def test_few_strong_blobs_inside_the_bounds_the_walk_equals_dense(cfg):
     """Two to four overlapping blobs, each stronger than the threshold, inside the bounds: every
     centre is inside, and so few blobs leave no cavity, so the walks from the centres reach every
     component (Triquet §4.4: starting from every primitive inside the surface "always works").
@@ -441,9 +457,9 @@ def test_few_strong_blobs_inside_the_bounds_tracking_equals_dense(cfg):
     cases of 2 to 6 such blobs at 8 to 48 cells; a cavity needs many blobs."""
     a = Analysis(cfg)
     assert np.all(cfg.field().evaluate(cfg.centers) < 0)
-    assert im.compare(a.dense, a.track) == {"missing": 0, "extra": 0, "common": len(a.dense.faces)}
-    assert check_mesh(a.track, a.values, cfg.n, "tracking")
-    assert (len(a.track.faces) > 0) == bool((a.values < 0).any())
+    assert im.compare(a.dense, a.walk) == {"missing": 0, "extra": 0, "common": len(a.dense.faces)}
+    assert check_mesh(a.walk, a.values, cfg.n, "tracking")
+    assert (len(a.walk.faces) > 0) == bool((a.values < 0).any())
 
 
 def lipschitz_bound(cfg):
@@ -505,9 +521,9 @@ def test_reused_tessellator_equals_one_shot_tracking(cfgs):
 @given(cfg=configs(kinds=tuple(KINDS), min_cells=4, max_cells=48))
 def test_tracking_block_by_block_equals_cell_by_cell_bit_for_bit(cfg):
     """The Tessellator walks a blob field block by block (bit-set floods within blocks of 7³
-    cells): it must reach exactly the cells the walk cell by cell reaches, from the same seeds —
-    the same triangles, vertices and normals, bit for bit, and no vertex left unused (cells of
-    other components in the blocks entered are crossed but not reached)."""
+    cells): it must reach exactly the cells the walk cell by cell reaches — every crossed cell,
+    those of components no seed reaches too — the same triangles, vertices and normals, bit for
+    bit, and no vertex left unused."""
     field = cfg.field()
     kw = dict(bounds=BOX, resolution=cfg.n, ambiguity=cfg.ambiguity)
     cells = im.polygonize(field, method="tracking", **kw)

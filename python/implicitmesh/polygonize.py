@@ -90,8 +90,12 @@ def polygonize(
         of a :class:`BlobField`, the data points of a :class:`VariationalSurface`; required for
         callables) to the first cell the surface crosses; a walk that meets the side of the box
         first starts again along -x, then ±y, ±z, and seeds outside the box start from the
-        nearest cell. A component no walk reaches (a cavity inside a cluster of blobs; a surface
-        made only by blobs each weaker than the threshold) is not found.
+        nearest cell. For a :class:`BlobField` every component is found, also those no walk
+        reaches (a cavity inside a cluster of blobs; a surface made only by blobs each weaker
+        than the threshold): when the walk ends, the blocks of 7³ cells that the bounds of
+        ``"sparse"`` cannot rule out are evaluated and the walk goes on from their crossed cells
+        it did not reach, so the mesh is the dense mesh. For other fields a component no walk
+        reaches is not found.
     ambiguity : Ambiguity or {"separate", "join"}
         How ambiguous cube faces are split. Default ``SEPARATE``.
     normals : bool
@@ -119,7 +123,9 @@ def polygonize(
         on the shared meshes, the same mesh. Default True; False samples exactly as Cuno et al.
         §4.3.
     seeds : (K, 3) array_like, optional
-        Tracking only: points inside or on each component of the surface to start from.
+        Tracking only: points inside or on each component of the surface to start from. (A
+        :class:`BlobField`'s components are all found whatever the seeds; they only choose where
+        the walk starts.)
     progress : bool or callable
         ``True``: show the field evaluations done so far while the call runs (a tqdm bar when
         tqdm is installed, else a line on standard error); a callable is called with that count
@@ -207,20 +213,27 @@ class Tessellator:
 
     Move the field (e.g. :meth:`BlobField.update`) and call :meth:`polygonize` again. The walk
     starts from the same seeds as ``polygonize(field, method="tracking")`` and finds the same
-    mesh: every component that holds a seed, triangle for triangle and bit for bit (only the
-    order of vertices and triangles may differ).
+    mesh, triangle for triangle and bit for bit (only the order of vertices and triangles may
+    differ): for a :class:`BlobField` every component (the dense mesh), for other fields every
+    component that holds a seed.
 
     For a :class:`BlobField` the walk goes block by block (``blocks=True``, the default): a
     block of 7 × 7 × 7 cells is evaluated at once (all 8³ points, vectorised) when the walk first
     enters one of its cells, and within the block the walk is a flood over bit sets, one 64-bit
-    word per plane of cells. It evaluates more points than the walk cell by cell but is several
-    times faster; the blocks the previous call used are evaluated first, as an animation's
-    surface moves little between frames. Its output is ordered block by block and does not
-    depend on earlier calls. With ``blocks=False``, and for other fields, the walk goes cell by
-    cell with time-stamped caches of corner values and edge vertices (Triquet et al. §4.1,
-    §4.4): nothing is cleared between calls, and that walk evaluates the fewest points, which
-    pays for costly fields (a Python callable, a large variational fit). In steady state neither
-    walk reallocates its buffers; each call returns new arrays.
+    word per plane of cells. When the walk ends, the crossed cells it did not reach in the blocks
+    it evaluated, and the blocks it did not enter that the bounds of ``method="sparse"`` cannot
+    rule out (evaluated then), start it again, so it finds the components no seed reaches; when
+    the seeds reach everything, that costs the bounds of the blocks not entered and the few of
+    them the bounds cannot rule out. It evaluates the points ``method="sparse"`` evaluates and is
+    several times faster than the walk cell by cell; the blocks the previous call used are
+    evaluated first, as an animation's surface moves little between frames. Its output is
+    ordered block by block and does not depend on earlier calls. With ``blocks=False``, and for
+    other fields, the walk goes cell by cell with time-stamped caches of corner values and edge
+    vertices (Triquet et al. §4.1, §4.4): nothing is cleared between calls, and for other fields
+    that walk evaluates the fewest points, which pays for costly fields (a Python callable, a
+    large variational fit). For a :class:`BlobField` it then also evaluates, block by block,
+    every block the bounds cannot rule out, and walks on from the crossed cells it did not reach.
+    In steady state neither walk reallocates its buffers; each call returns new arrays.
 
     Examples
     --------
@@ -254,8 +267,8 @@ class Tessellator:
         Parameters
         ----------
         blocks : bool
-            For a :class:`BlobField`, walk block by block (faster; more evaluations, the same
-            mesh). Ignored for other fields, which are walked cell by cell.
+            For a :class:`BlobField`, walk block by block (faster, the same mesh). Ignored for
+            other fields, which are walked cell by cell.
         progress : bool or callable
             As for :func:`polygonize`.
 
@@ -263,10 +276,11 @@ class Tessellator:
         -------
         Mesh
             A new mesh (its arrays are not shared with the caches). ``stats["evaluations"]``
-            counts, cell by cell, the points the seed walks and the tracking evaluated; block by
-            block, every point of each block evaluated (seed walks included, and the blocks the
-            previous call on the same lattice used, which are evaluated ahead: an animation's
-            surface moves little between frames).
+            counts, cell by cell, the points the seed walks and the tracking evaluated, and for a
+            :class:`BlobField` every point of the blocks evaluated to find the components no
+            walk reaches; block by block, every point of each block evaluated: every block that
+            the bounds cannot rule out, and only those (the points ``method="sparse"``
+            evaluates), whichever blocks the walk entered or the previous call evaluated ahead.
         """
         bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
         if not isinstance(blocks, (bool, np.bool_)):

@@ -1024,15 +1024,8 @@ impl BlockField for BlobField {
 
     /// Bounds F over the block from each listed primitive's nearest and farthest distance to
     /// the block's box; when the bounds leave the threshold out (by a margin of 1e-9 of the
-    /// strengths' sum, far above rounding), the block has one sign. Otherwise splats the listed
-    /// primitives row by row, with the same arithmetic and order as the dense splat.
-    fn block_values(
-        &self,
-        blocks: &BlockLists,
-        lattice: &Lattice,
-        block: &Block,
-        out: &mut [f64; 512],
-    ) -> BlockSign {
+    /// strengths' sum, far above rounding), the block has one sign.
+    fn block_sign(&self, blocks: &BlockLists, lattice: &Lattice, block: &Block) -> BlockSign {
         let Block { index: b, lo, n } = *block;
         let list = blocks.list(b);
         let (plo, phi) = block_box(lattice, b);
@@ -1068,6 +1061,24 @@ impl BlockField for BlobField {
                 return s;
             }
         }
+        BlockSign::Mixed
+    }
+
+    /// The sign of [`BlockField::block_sign`] when it is one; otherwise splats the listed
+    /// primitives row by row, with the same arithmetic and order as the dense splat.
+    fn block_values(
+        &self,
+        blocks: &BlockLists,
+        lattice: &Lattice,
+        block: &Block,
+        out: &mut [f64; 512],
+    ) -> BlockSign {
+        let sign = self.block_sign(blocks, lattice, block);
+        if sign != BlockSign::Mixed {
+            return sign;
+        }
+        let Block { index: b, lo, n } = *block;
+        let list = blocks.list(b);
         let block = BlockCoords::new(lattice, lo, n);
         self.splat_block(Isa::detect(), list, &block, out);
         BlockSign::Mixed

@@ -127,9 +127,14 @@ pub trait BlockField: Field {
     /// `7·b .. 7·b + 8` along each axis (fewer at the lattice's upper sides), `blocks` per axis.
     fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks;
 
-    /// For `block`: [`BlockSign::Outside`] or [`BlockSign::Inside`] when every point provably
-    /// has that sign, otherwise the values at point `block.lo + (i, j, k)` written to
-    /// `out[i + 8 j + 64 k]` and [`BlockSign::Mixed`].
+    /// For `block`, from bounds alone (no values): [`BlockSign::Outside`] or
+    /// [`BlockSign::Inside`] when every point provably has that sign, otherwise
+    /// [`BlockSign::Mixed`] (the surface may cross the block).
+    fn block_sign(&self, blocks: &Self::Blocks, lattice: &Lattice, block: &Block) -> BlockSign;
+
+    /// For `block`: the sign [`BlockField::block_sign`] gives when it is one, otherwise the
+    /// values at point `block.lo + (i, j, k)` written to `out[i + 8 j + 64 k]` and
+    /// [`BlockSign::Mixed`].
     fn block_values(
         &self,
         blocks: &Self::Blocks,
@@ -285,6 +290,41 @@ impl<F: Field> Field for Counting<F> {
     }
 }
 
+impl<F: BlockField> BlockField for Counting<F> {
+    type Blocks = F::Blocks;
+    fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
+        self.inner.blocks(lattice, blocks)
+    }
+    fn block_sign(&self, blocks: &Self::Blocks, lattice: &Lattice, block: &Block) -> BlockSign {
+        self.inner.block_sign(blocks, lattice, block)
+    }
+    /// Counts the block's points when their values are written.
+    fn block_values(
+        &self,
+        blocks: &Self::Blocks,
+        lattice: &Lattice,
+        block: &Block,
+        out: &mut [f64; 512],
+    ) -> BlockSign {
+        let sign = self.inner.block_values(blocks, lattice, block, out);
+        if sign == BlockSign::Mixed {
+            let points = block.n.iter().map(|&v| v as u64).product::<u64>();
+            self.count
+                .fetch_add(points, std::sync::atomic::Ordering::Relaxed);
+        }
+        sign
+    }
+    fn block_gradients(
+        &self,
+        blocks: &Self::Blocks,
+        block: &Block,
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) {
+        self.inner.block_gradients(blocks, block, points, out)
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod testing {
     use super::*;
@@ -360,6 +400,12 @@ pub(crate) mod testing {
         type Blocks = <super::blob::BlobField as BlockField>::Blocks;
         fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
             self.0.blocks(lattice, blocks)
+        }
+        fn block_sign(&self, blocks: &Self::Blocks, lattice: &Lattice, block: &Block) -> BlockSign {
+            if block.index[0] == 2 {
+                return BlockSign::Outside;
+            }
+            self.0.block_sign(blocks, lattice, block)
         }
         fn block_values(
             &self,

@@ -14,6 +14,14 @@
 //! their edges, so the mesh is the dense mesh on every component that holds a seed, triangle
 //! for triangle and bit for bit, and, like cell tracking's, it holds whole components only.
 //!
+//! With [`Components::All`] it finds every component, those no seed reaches too (the inner
+//! surface of a cavity inside a cluster of blobs): when the walk from the seeds ends, the
+//! crossed cells it did not reach in the blocks it evaluated, and every cell of the blocks it
+//! did not enter that the field's bounds cannot rule out (the blocks [`super::sparse`]
+//! evaluates, which hold every crossed cell), are entered, and the walk goes on until no cell
+//! is left. The blocks not entered are bounded once; only those the bounds cannot rule out are
+//! evaluated. The mesh is then sparse's, array for array: the dense mesh.
+//!
 //! Blocks are evaluated in waves (those newly entered), each wave in parallel; the seed walks'
 //! steps and the walk between waves are serial bit arithmetic. An animation's surface moves
 //! little from call to call, so the blocks the last call used (kept in the [`Workspace`]) are
@@ -25,6 +33,7 @@
 //! use glam::DVec3;
 //! use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
 //! use implicitmesh::lattice::Lattice;
+//! use implicitmesh::polygonize::tracking::Components;
 //! use implicitmesh::polygonize::{block_tracking, dense, Settings};
 //!
 //! // Two blobs far apart: seeding one cell of the first finds only the first.
@@ -43,9 +52,11 @@
 //! let mut ws = block_tracking::Workspace::default();
 //! let no_walks = (&[][..], 0);
 //! let settings = Settings::default();
-//! let (mesh, triangles, _) =
-//!     block_tracking::polygonize_as::<_, u32>(&blobs, &lattice, no_walks, &seed, &settings, &mut ws)
-//!         .unwrap();
+//! let seeded = Components::Seeded;
+//! let (mesh, triangles, _) = block_tracking::polygonize_as::<_, u32>(
+//!     &blobs, &lattice, no_walks, &seed, &settings, seeded, &mut ws,
+//! )
+//! .unwrap();
 //! let (both, _) = dense::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
 //! let first = both.triangles.iter().filter(|t| both.vertices[t[0] as usize].x < 0.0);
 //! assert_eq!(triangles.len(), first.count());
@@ -53,10 +64,11 @@
 //! ```
 
 use super::sparse::{
-    block_dims, bounds_error, crossed_layer_cells, evaluate_block, finish_normals, plane_mask,
-    triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex, ALL_CELLS, NONE, STEP,
+    block_dims, blocks_not_ruled_out, bounds_error, crossed_layer_cells, evaluate_block,
+    finish_normals, plane_mask, triangulate_blocks, Active, BlockCases, BlockOutput, TriangleIndex,
+    ALL_CELLS, NONE, STEP,
 };
-use super::tracking::start_walkers;
+use super::tracking::{start_walkers, Components};
 use super::{
     check_memory, estimate_triangles, gather, CaseTable, Settings, Stats, BYTES_PER_TRIANGLE,
 };
@@ -210,6 +222,10 @@ pub struct Workspace {
     active: Vec<Active>,
     reach: Vec<[u64; 8]>,
     amap: Vec<u32>,
+    /// The blocks not entered that the field's bounds cannot rule out (block index), and
+    /// scratch for finding them.
+    candidates: Vec<u32>,
+    marks: Vec<bool>,
 }
 
 impl Workspace {
@@ -229,8 +245,10 @@ impl Workspace {
                 + self.wave.capacity()
                 + self.work.capacity()
                 + self.last.capacity()
-                + self.amap.capacity())
+                + self.amap.capacity()
+                + self.candidates.capacity())
                 * 4
+            + self.marks.capacity()
             + self.order.capacity() * 8
             + self.sources.capacity() * std::mem::size_of::<(u32, usize, usize)>()
             + (self.kept.capacity() + self.kept_normals.capacity()) * 24
@@ -347,6 +365,38 @@ impl Workspace {
                 true
             }
             _ => true,
+        }
+    }
+
+    /// Enters the cells that the walk has not reached: the crossed cells of the blocks
+    /// evaluated, and (`classify`) every cell of the blocks not entered that `field`'s bounds
+    /// cannot rule out (queued for the next wave). Every crossed cell lies in such a block.
+    fn enter_the_rest<F: BlockField + ?Sized>(
+        &mut self,
+        (field, blocks): (&F, &F::Blocks),
+        lattice: &Lattice,
+        classify: bool,
+    ) {
+        let dims = block_dims(lattice);
+        if classify {
+            let map = &self.map;
+            let not_entered = |i: u32| map[i as usize] == NONE;
+            let (marks, candidates) = (&mut self.marks, &mut self.candidates);
+            blocks_not_ruled_out(field, blocks, lattice, not_entered, marks, candidates);
+            for k in 0..self.candidates.len() {
+                self.queue(self.candidates[k], &ALL_CELLS, true, dims);
+            }
+        }
+        for s in 0..self.states.len() {
+            let st = &self.states[s];
+            if st.kind != Kind::Mixed {
+                continue;
+            }
+            let rest: [u64; 8] = std::array::from_fn(|k| st.crossed[k] & !st.reach[k]);
+            if rest.iter().any(|&w| w != 0) {
+                // A block with both signs: entering it never fails.
+                self.enter(self.index[s], &rest, dims);
+            }
         }
     }
 
@@ -467,14 +517,19 @@ fn components(a: &Active, crossed: &[u64; 8], out: &mut Vec<Component>) {
 /// cells walked from `starts` as [`super::tracking::Tessellator::walk_seeds`] walks them (at most
 /// `max_walk` cells each; here read from the signs of the blocks the walks enter), and
 /// `seed_cells` (those outside the lattice and those the surface does not cross are ignored).
-/// The mesh (vertices, normals) comes with its triangles as `I` beside it; `ws` keeps the
-/// buffers for the next call.
+/// With [`Components::All`], every component: when the walk ends, the crossed cells it did not
+/// reach in the blocks evaluated, and the blocks not entered that the field's bounds cannot
+/// rule out, are entered, and the walk goes on (the mesh is then [`super::sparse`]'s, array
+/// for array). The mesh (vertices, normals) comes with its triangles as `I` beside it; `ws`
+/// keeps the buffers for the next call.
+#[allow(clippy::too_many_arguments)]
 pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
     lattice: &Lattice,
     (starts, max_walk): (&[DVec3], u32),
     seed_cells: &[[u32; 3]],
     settings: &Settings,
+    components: Components,
     ws: &mut Workspace,
 ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
     let dims = block_dims(lattice);
@@ -539,8 +594,10 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     for w in &walkers {
         ws.enter(locate(w.cell).0, &[0; 8], dims);
     }
-    // Seconds evaluating (the rest of the walk is serial).
-    let mut waves = 0.0;
+    // Seconds evaluating (the rest of the walk is serial) and bounding blocks.
+    let (mut waves, mut classify) = (0.0, 0.0);
+    // Whether the blocks not entered were bounded (once, when the walk from the seeds ends).
+    let mut classified = false;
     loop {
         if !ws.wave.is_empty() {
             let w = Instant::now();
@@ -625,15 +682,31 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
             ws.states[s as usize].pending = [0; 8];
         }
         // Walks still going wait for blocks of the next wave.
-        if ws.wave.is_empty() {
+        if !ws.wave.is_empty() {
+            continue;
+        }
+        if components == Components::Seeded {
+            break;
+        }
+        // The walk has ended: the cells it did not reach (every crossed cell is in a block
+        // evaluated or not ruled out by the bounds), until there are none.
+        let c = Instant::now();
+        ws.enter_the_rest((field, &blocks), lattice, !classified);
+        classified = true;
+        classify += c.elapsed().as_secs_f64();
+        if ws.wave.is_empty() && ws.work.is_empty() {
             break;
         }
     }
-    // The phases: the waves' evaluation, the walks and the flood.
+    // The phases: the waves' evaluation, the bounds of the blocks not entered, the walks and
+    // the flood.
     stats.seconds.push(("evaluate", waves));
+    if components == Components::All {
+        stats.seconds.push(("classify", classify));
+    }
     stats
         .seconds
-        .push(("track", t.elapsed().as_secs_f64() - waves));
+        .push(("track", t.elapsed().as_secs_f64() - waves - classify));
 
     // The blocks with reached cells, in block order (so the mesh depends neither on the order
     // of the waves nor on earlier calls: it is sparse's, less the cells not reached), their
@@ -768,6 +841,8 @@ mod tests {
     use crate::field::testing::{canonical_triangles as canonical, vertex_normal_bits, Lying};
     use glam::DVec3;
 
+    const SEEDED: Components = Components::Seeded;
+
     /// Block tracking and cell tracking, each walking its seeds from the blob centres: the same
     /// triangles, vertices and normals (bits), every vertex used.
     fn check(
@@ -786,7 +861,7 @@ mod tests {
             .polygonize(field, l, field.centers(), max_walk, &[], &s)
             .unwrap();
         let walk = (field.centers(), max_walk);
-        let (m, t, bs) = polygonize_as::<_, u32>(field, l, walk, &[], &s, ws).unwrap();
+        let (m, t, bs) = polygonize_as::<_, u32>(field, l, walk, &[], &s, SEEDED, ws).unwrap();
         assert_same((&m, &t, &bs), (cells, &st));
     }
 
@@ -849,7 +924,8 @@ mod tests {
             let c = *centre - DVec3::new(0.05, 0.0, 0.0);
             let walk = (&[c][..], 20);
             let (m, t, _) =
-                polygonize_as::<_, u32>(&f, &l, walk, &[], &Settings::default(), &mut ws).unwrap();
+                polygonize_as::<_, u32>(&f, &l, walk, &[], &Settings::default(), SEEDED, &mut ws)
+                    .unwrap();
             let near = |v: DVec3| (v.x - centre.x).abs() < 0.15;
             let own = all.triangles.iter();
             let own = own.filter(|t| near(all.vertices[t[0] as usize]));
@@ -871,7 +947,7 @@ mod tests {
         // block 2, which the bounds wrongly rule out.
         let mut ws = Workspace::default();
         let (seed, none) = ([[8, 16, 16]], (&[][..], 0));
-        let e = polygonize_as::<_, u32>(&f, &l, none, &seed, &Settings::default(), &mut ws)
+        let e = polygonize_as::<_, u32>(&f, &l, none, &seed, &Settings::default(), SEEDED, &mut ws)
             .unwrap_err();
         assert!(
             matches!(e, Error::InvalidArgument { name: "field", .. }),
@@ -879,7 +955,8 @@ mod tests {
         );
         // The true field from the same seed: the whole sphere.
         let (m, t, _) =
-            polygonize_as::<_, u32>(&f.0, &l, none, &seed, &Settings::default(), &mut ws).unwrap();
+            polygonize_as::<_, u32>(&f.0, &l, none, &seed, &Settings::default(), SEEDED, &mut ws)
+                .unwrap();
         let (d, _) = dense::polygonize(&f.0, &l, &Settings::default()).unwrap();
         assert_eq!(
             (m.vertices.len(), t.len()),
@@ -898,6 +975,7 @@ mod tests {
             (&[][..], 0),
             &[[0, 0, 0], [30, 2, 2], [u32::MAX, 0, 0]],
             &Settings::default(),
+            SEEDED,
             &mut ws,
         )
         .unwrap();
@@ -940,19 +1018,67 @@ mod tests {
             let (sp, _) = super::super::sparse::polygonize(&f, &l, &s).unwrap();
             let seeds = seeds_of(&sp, &l);
             let none = (&[][..], 0);
-            let (m, t, _) =
-                polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut Workspace::default())
-                    .unwrap();
+            let (m, t, _) = polygonize_as::<_, u32>(
+                &f,
+                &l,
+                none,
+                &seeds,
+                &s,
+                SEEDED,
+                &mut Workspace::default(),
+            )
+            .unwrap();
             assert!(!t.is_empty());
             assert_eq!(t, sp.triangles);
             assert_eq!(m.vertices, sp.vertices);
             assert_eq!(m.normals, sp.normals);
             let (again, t_again, _) =
-                polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut kept).unwrap();
+                polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, SEEDED, &mut kept).unwrap();
             assert_eq!(t_again, sp.triangles);
             assert_eq!(again.vertices, sp.vertices);
             assert_eq!(again.normals, sp.normals);
         }
+    }
+
+    #[test]
+    fn every_component_without_seeds_is_sparse_exactly() {
+        // No seed at all: every component is found, sparse's mesh array for array, from a fresh
+        // workspace and from one that polygonized other fields first; every point evaluated is
+        // counted.
+        let s = Settings::default();
+        let mut kept = Workspace::default();
+        let none = (&[][..], 0);
+        for (n, r, res, seed) in [(200, 0.25, 64, 31), (60, 0.12, 37, 32), (3, 0.5, 20, 33)] {
+            let f = crate::field::Counting::new(blobs(n, r, seed));
+            let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), res).unwrap();
+            let (sp, _) = super::super::sparse::polygonize(&f.inner, &l, &s).unwrap();
+            assert!(!sp.triangles.is_empty());
+            for ws in [&mut Workspace::default(), &mut kept] {
+                let before = f.evaluations();
+                let (m, t, st) =
+                    polygonize_as::<_, u32>(&f, &l, none, &[], &s, Components::All, ws).unwrap();
+                assert_eq!(t, sp.triangles);
+                assert_eq!((&m.vertices, &m.normals), (&sp.vertices, &sp.normals));
+                assert_eq!(st.evaluations, f.evaluations() - before);
+            }
+        }
+    }
+
+    #[test]
+    fn every_component_with_wrong_bounds_gives_an_error() {
+        // The bounds rule out blocks the sphere crosses: an error, not a panic nor a mesh with
+        // holes.
+        let f = Lying::sphere();
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
+        let none = (&[][..], 0);
+        let mut ws = Workspace::default();
+        let all = Components::All;
+        let e = polygonize_as::<_, u32>(&f, &l, none, &[], &Settings::default(), all, &mut ws)
+            .unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidArgument { name: "field", .. }),
+            "{e}"
+        );
     }
 
     #[test]
@@ -967,15 +1093,18 @@ mod tests {
         let seeds = seeds_of(&sp, &l);
         let none = (&[][..], 0);
         let mut kept = Workspace::default();
-        let (all, all_t, _) = polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut kept).unwrap();
+        let (all, all_t, _) =
+            polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, SEEDED, &mut kept).unwrap();
         let mut smaller = 0;
         for seed in seeds.iter().step_by(97) {
             let one = std::slice::from_ref(seed);
             let (m, t, st) =
-                polygonize_as::<_, u32>(&f, &l, none, one, &s, &mut Workspace::default()).unwrap();
+                polygonize_as::<_, u32>(&f, &l, none, one, &s, SEEDED, &mut Workspace::default())
+                    .unwrap();
             // Evaluated ahead: at least the blocks of the whole surface.
-            polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, &mut kept).unwrap();
-            let (k, kt, kst) = polygonize_as::<_, u32>(&f, &l, none, one, &s, &mut kept).unwrap();
+            polygonize_as::<_, u32>(&f, &l, none, &seeds, &s, SEEDED, &mut kept).unwrap();
+            let (k, kt, kst) =
+                polygonize_as::<_, u32>(&f, &l, none, one, &s, SEEDED, &mut kept).unwrap();
             assert!(kst.evaluations > st.evaluations);
             assert_eq!(
                 (kt, k.vertices, k.normals),
@@ -1024,7 +1153,7 @@ mod tests {
             let start = std::slice::from_ref(c);
             let (cells, st) = tess.polygonize(&f, &l, start, 10, &[], &s).unwrap();
             let (m, t, bs) =
-                polygonize_as::<_, u32>(&f, &l, (start, 10), &[], &s, &mut ws).unwrap();
+                polygonize_as::<_, u32>(&f, &l, (start, 10), &[], &s, SEEDED, &mut ws).unwrap();
             assert_same((&m, &t, &bs), (cells, &st));
             found += !t.is_empty() as usize;
         }

@@ -56,7 +56,8 @@ impl Default for Settings {
 /// Exact counts and timings of one polygonization.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Stats {
-    /// Field values computed at lattice points (each point at most once).
+    /// Field values computed at lattice points (a point computed twice, e.g. on the faces that
+    /// blocks share, counts twice).
     pub evaluations: u64,
     /// Points at which gradients were computed for normals (values, for difference gradients).
     pub normal_evaluations: u64,

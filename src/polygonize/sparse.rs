@@ -1,8 +1,10 @@
 //! Sparse marching cubes: the lattice is cut into blocks of 7³ cells (8³ points, the faces
 //! shared), and a block is skipped when its field proves that all its points have one sign
-//! ([`BlockField::block_values`]: for a blob field, bounds on each primitive's term over the
-//! block's box). Only the blocks the surface may cross are evaluated and triangulated, so the
-//! work grows with the surface, not with the lattice, and every component is found (no seeds).
+//! ([`BlockField::block_sign`], which [`BlockField::block_values`] applies first: for a blob
+//! field, bounds on each primitive's term over the block's box). Only the blocks the surface
+//! may cross are evaluated and triangulated, so the work grows with the surface, not with the
+//! lattice, and every component is found (no seeds). Surface tracking uses the same bounds to
+//! find the components no seed reaches ([`super::tracking::Components::All`]).
 //!
 //! The mesh is the dense polygonizer's, triangle for triangle and bit for bit: a crossed edge
 //! has ends of both signs, so every block holding it is evaluated, with the same values
@@ -152,10 +154,8 @@ pub(super) fn evaluate_block<F: BlockField + ?Sized>(
     values: &mut [f64; 512],
     out: &mut BlockOutput,
 ) -> Option<Active> {
-    let points = lattice.points_per_axis();
-    let lo = b.map(|v| v * STEP);
-    let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
-    let block = Block { index: b, lo, n };
+    let block = block_at(lattice, b);
+    let Block { lo, n, .. } = block;
     if field.block_values(blocks, lattice, &block, values) != BlockSign::Mixed {
         return None;
     }
@@ -164,9 +164,7 @@ pub(super) fn evaluate_block<F: BlockField + ?Sized>(
     let active = block_vertices(lattice, b, lo, n, dims, values, &mut out.vertices);
     // One sign on every point after all (the bounds were not tight enough): no cell or edge of
     // the block is crossed, and no neighbour needs it.
-    let all = plane_mask(n[0], n[1]);
-    let planes = &active.signs[..n[2] as usize];
-    if planes.iter().all(|&w| w == 0) || planes.iter().all(|&w| w == all) {
+    if one_sign(&active.signs, n) {
         return None;
     }
     if normals {
@@ -182,6 +180,92 @@ pub(super) fn evaluate_block<F: BlockField + ?Sized>(
         base: first as u32,
         ..active
     })
+}
+
+/// Block `b` of `lattice`: its lattice points, 8 per axis (fewer at the lattice's upper sides).
+pub(super) fn block_at(lattice: &Lattice, b: [u32; 3]) -> Block {
+    let points = lattice.points_per_axis();
+    let lo = b.map(|v| v * STEP);
+    let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
+    Block { index: b, lo, n }
+}
+
+/// The coordinates of the block with index `i` (x fastest) on a lattice of `dims` blocks.
+pub(super) fn block_coords(i: u32, dims: [u32; 3]) -> [u32; 3] {
+    [
+        i % dims[0],
+        (i / dims[0]) % dims[1],
+        i / (dims[0] * dims[1]),
+    ]
+}
+
+/// Whether a block's sign words (`n` points per axis, bits beyond them clear) have one sign.
+fn one_sign(signs: &[u64; 8], n: [u32; 3]) -> bool {
+    let all = plane_mask(n[0], n[1]);
+    let planes = &signs[..n[2] as usize];
+    planes.iter().all(|&w| w == 0) || planes.iter().all(|&w| w == all)
+}
+
+/// The blocks of `lattice` that `field`'s bounds cannot rule out ([`BlockField::block_sign`]:
+/// the blocks [`polygonize`] evaluates, and every crossed cell lies in one), among those
+/// `consider` accepts, as block indices (x fastest) in ascending order into `out`. The blocks
+/// are bounded in parallel; `marks` is scratch.
+pub(super) fn blocks_not_ruled_out<F: BlockField + ?Sized>(
+    field: &F,
+    blocks: &F::Blocks,
+    lattice: &Lattice,
+    consider: impl Fn(u32) -> bool + Sync,
+    marks: &mut Vec<bool>,
+    out: &mut Vec<u32>,
+) {
+    let dims = block_dims(lattice);
+    let num_blocks = dims.iter().map(|&d| d as usize).product::<usize>();
+    (0..num_blocks as u32)
+        .into_par_iter()
+        .with_min_len(BLOCKS_PER_TASK)
+        .map(|i| {
+            let block = block_at(lattice, block_coords(i, dims));
+            consider(i) && field.block_sign(blocks, lattice, &block) == BlockSign::Mixed
+        })
+        .collect_into_vec(marks);
+    out.clear();
+    out.extend((0..num_blocks as u32).filter(|&i| marks[i as usize]));
+}
+
+/// A block's sign words ([`Active::signs`]) and its points per axis.
+pub(super) type BlockSigns = ([u64; 8], [u8; 3]);
+
+/// The sign words of block `b` and its points per axis when its values have both signs; None
+/// when the field's bounds or its values give one sign. Adds the points evaluated to
+/// `evaluations`.
+pub(super) fn block_signs<F: BlockField + ?Sized>(
+    field: &F,
+    blocks: &F::Blocks,
+    lattice: &Lattice,
+    b: [u32; 3],
+    values: &mut [f64; 512],
+    evaluations: &mut u64,
+) -> Option<BlockSigns> {
+    let block = block_at(lattice, b);
+    let n = block.n;
+    if field.block_values(blocks, lattice, &block, values) != BlockSign::Mixed {
+        return None;
+    }
+    *evaluations += (n[0] * n[1] * n[2]) as u64;
+    let signs = sign_words(values, n);
+    (!one_sign(&signs, n)).then_some((signs, n.map(|v| v as u8)))
+}
+
+/// The sign words of a block's `values` with `n` points per axis (bit `i + 8j` of word `k` set
+/// when point (i, j, k) is inside). Points beyond the lattice hold 0.0 (outside); their bits
+/// are masked off.
+fn sign_words(values: &[f64; 512], n: [u32; 3]) -> [u64; 8] {
+    let mut signs = inside_bits(values, n[2] as usize);
+    let points = plane_mask(n[0], n[1]);
+    for s in signs.iter_mut() {
+        *s &= points;
+    }
+    signs
 }
 
 /// What one task of the first pass produces.
@@ -572,12 +656,7 @@ pub(super) fn block_vertices(
     let last: [bool; 3] = std::array::from_fn(|a| b[a] + 1 == dims[a]);
     // Owned coordinates per axis: below the upper face, or all at the lattice's upper side.
     let own: [u32; 3] = std::array::from_fn(|a| if last[a] { n[a] } else { STEP });
-    // Points beyond the lattice hold 0.0 (outside); their bits are masked off.
-    let mut signs = inside_bits(values, n[2] as usize);
-    let points = plane_mask(n[0], n[1]);
-    for s in signs.iter_mut() {
-        *s &= points;
-    }
+    let signs = sign_words(values, n);
     let mut edges = [0u64; 24];
     let x_mask = plane_mask(n[0] - 1, own[1]);
     let y_mask = plane_mask(own[0], n[1] - 1);

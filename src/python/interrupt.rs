@@ -4,7 +4,7 @@
 //! GIL and wakes every [`POLL`] to look at Python's signals (Ctrl-C, Jupyter's interrupt) and to
 //! report progress. On a signal it tells the work to stop, waits for it (the core checks its
 //! token between batches), and raises the signal's exception. A Python callable used as a field
-//! is called from the work's thread, which takes the GIL for each batch.
+//! is called from the calling thread, as documented, so that work stays there (see [`run`]).
 
 use crate::cancel::{self, Token};
 use pyo3::prelude::*;
@@ -14,13 +14,24 @@ use std::time::Duration;
 const POLL: Duration = Duration::from_millis(50);
 
 /// Runs `work` so that Ctrl-C stops it; `progress`, when given, is called with the count of
-/// field evaluations done so far at every poll.
+/// field evaluations done so far at every poll. With `on_caller` (a Python callable as the
+/// field, which users may expect on their own thread), the work runs on the calling thread
+/// instead: Python raises KeyboardInterrupt inside the callable, which stops the work as any
+/// exception of the callable does, and `progress` is called once, at the end.
 pub fn run<T: Send>(
     py: Python<'_>,
     progress: Option<&Bound<'_, PyAny>>,
+    on_caller: bool,
     work: impl FnOnce() -> crate::Result<T> + Send,
 ) -> PyResult<T> {
     let token = Token::new();
+    if on_caller {
+        let result = cancel::run_under(token.clone(), || py.detach(work));
+        if let (Some(p), Ok(_)) = (progress, &result) {
+            p.call1((token.done(),))?;
+        }
+        return result.map_err(PyErr::from);
+    }
     let caller = std::thread::current();
     std::thread::scope(|s| {
         let t = token.clone();

@@ -5,6 +5,7 @@ use super::errors::value_error;
 use super::field::FieldArg;
 use super::interrupt::run;
 use crate::lattice::Lattice;
+use crate::polygonize::tracking::Components;
 use crate::polygonize::{dense, octree, sparse, tracking, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
@@ -253,8 +254,9 @@ pub fn polygonize<'py>(
         ));
     }
     let f = field.as_field();
+    let on_caller = field.is_callable();
     let result = match method.as_str() {
-        "dense" => run(py, progress, || dense::polygonize(f, &lattice, &settings).map(buffers)),
+        "dense" => run(py, progress, on_caller, || dense::polygonize(f, &lattice, &settings).map(buffers)),
         "octree" => {
             let od = octree::Settings::default();
             let o = octree::Settings {
@@ -266,18 +268,28 @@ pub fn polygonize<'py>(
                 }),
                 corner_test: corner_test.unwrap_or(od.corner_test),
             };
-            run(py, progress, || octree::polygonize(f, &lattice, &settings, &o).map(buffers))
+            run(py, progress, on_caller, || octree::polygonize(f, &lattice, &settings, &o).map(buffers))
         }
         "tracking" => {
             let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
-            run(py, progress, || {
-                tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers)
-            })
+            match &field {
+                // A blob field bounds its values over blocks: every component is found.
+                FieldArg::Blob(b) => {
+                    let blobs = &b.inner;
+                    run(py, progress, on_caller, || {
+                        tracking::polygonize_all(blobs, &lattice, &starts, walk, &settings)
+                            .map(buffers)
+                    })
+                }
+                _ => run(py, progress, on_caller, || {
+                    tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers)
+                }),
+            }
         }
         "sparse" => match &field {
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
-                run(py, progress, || {
+                run(py, progress, on_caller, || {
                     sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
                         |(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats),
                     )
@@ -337,20 +349,38 @@ impl PyTessellator {
         let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
         let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
         let tess = &mut self.inner;
+        let on_caller = field.is_callable();
+        // Blob fields bound their values over blocks: every component is found.
         let result = match &field {
             // Blob fields evaluate whole blocks: the walk goes block by block.
             FieldArg::Blob(b) if blocks => {
                 let blobs = &b.inner;
-                run(py, progress, || {
-                    tess.polygonize_blocks::<_, i64>(blobs, &lattice, &starts, walk, &[], &settings)
-                        .map(|(mesh, faces, stats)| {
-                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
-                        })
+                run(py, progress, on_caller, || {
+                    let all = Components::All;
+                    tess.polygonize_blocks::<_, i64>(
+                        blobs,
+                        &lattice,
+                        &starts,
+                        walk,
+                        &[],
+                        &settings,
+                        all,
+                    )
+                    .map(|(mesh, faces, stats)| {
+                        (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
+                    })
+                })
+            }
+            FieldArg::Blob(b) => {
+                let blobs = &b.inner;
+                run(py, progress, on_caller, || {
+                    tess.polygonize_all(blobs, &lattice, &starts, walk, &[], &settings)
+                        .map(|(m, s)| (MeshBuffers::copied(m), s))
                 })
             }
             _ => {
                 let f = field.as_field();
-                run(py, progress, || {
+                run(py, progress, on_caller, || {
                     tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
                         .map(|(m, s)| (MeshBuffers::copied(m), s))
                 })

@@ -109,19 +109,19 @@ pub fn subdivide<'py>(
     let result = match &field {
         FieldArg::Variational(s) => {
             let s = s.clone();
-            run(py, None, move || {
+            run(py, None, false, move || {
                 subdivision::subdivide_surface(&s, &control, levels, &settings)
             })
         }
         FieldArg::Callable(_) => {
             let f = field.as_field();
-            run(py, None, || {
+            run(py, None, true, || {
                 subdivision::subdivide_by_differences(f, &control, levels, &settings, step)
             })
         }
         FieldArg::Blob(_) => {
             let f = field.as_field();
-            run(py, None, || {
+            run(py, None, false, || {
                 subdivision::subdivide(f, &control, levels, &settings)
             })
         }
@@ -149,7 +149,7 @@ pub fn butterfly<'py>(
 ) -> PyResult<Bound<'py, PyList>> {
     let levels = parse_levels(levels)?;
     let control = control_mesh(vertices, faces)?;
-    let result = run(py, None, move || {
+    let result = run(py, None, false, move || {
         subdivision::butterfly(&control, levels, w)
     })?;
     let out = PyList::empty(py);
