@@ -92,7 +92,7 @@ def _fit_and_polygonize(kind, a, b, args):
             surface = VariationalSurface.fit(a, b, d=args.d, w=args.w, kernel=args.kernel)
         fit_s = time.perf_counter() - t0
     with step(f"polygonizing at {args.resolution}³ ({args.method})"):
-        mesh = polygonize(surface, resolution=args.resolution, method=args.method)
+        mesh = polygonize(surface, resolution=args.resolution, method=args.method, progress=sys.stderr.isatty())
     return surface, fit_s, mesh
 
 
