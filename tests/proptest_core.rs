@@ -91,7 +91,15 @@ proptest! {
         if let Ok((m, _)) = octree::polygonize(&sphere, &l, &s, &o) {
             let (d, _) = dense::polygonize(&sphere, &l, &s).unwrap();
             let cmp = d.compare(&m);
-            prop_assert_eq!((cmp.missing, cmp.extra), (0, 0));
+            // Only the dense mesh's triangles, and never a hole: what the octree finds of a
+            // component, it finds whole (the repair walks on from it).
+            prop_assert_eq!(cmp.extra, 0);
+            prop_assert!(m.triangles.is_empty() || m.is_closed_oriented());
+            // With the premise (a distance, safety ≥ 1) nothing is missed; a smaller safety may
+            // drop a whole component.
+            if safety >= 1.0 {
+                prop_assert_eq!(cmp.missing, 0);
+            }
         } else {
             prop_assert!(!(safety.is_finite() && safety > 0.0));
         }
