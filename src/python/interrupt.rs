@@ -1,6 +1,6 @@
 //! Long calls that stop on Ctrl-C and report progress.
 //!
-//! The core's work runs on a scoped thread under a [`Token`]; the calling thread releases the
+//! The core's work runs as a task of rayon's pool under a [`Token`]; the calling thread releases the
 //! GIL and wakes every [`POLL`] to look at Python's signals (Ctrl-C, Jupyter's interrupt) and to
 //! report progress. On a signal it tells the work to stop, waits for it (the core checks its
 //! token between batches), and raises the signal's exception. A Python callable used as a field
@@ -33,18 +33,22 @@ pub fn run<T: Send>(
         return result.map_err(PyErr::from);
     }
     let caller = std::thread::current();
-    std::thread::scope(|s| {
+    let finished: std::sync::Mutex<Option<crate::Result<T>>> = std::sync::Mutex::new(None);
+    let mut raised: Option<PyErr> = None;
+    // The work runs as a task of rayon's pool (long-lived threads, whose allocator caches stay
+    // warm from call to call), while this thread polls.
+    rayon::in_place_scope(|s| {
         let t = token.clone();
-        let handle = s.spawn(move || {
+        let (finished, caller) = (&finished, caller.clone());
+        s.spawn(move |_| {
             let r = cancel::run_under(t, work);
+            *finished.lock().unwrap() = Some(r);
             caller.unpark();
-            r
         });
-        let mut raised: Option<PyErr> = None;
         let mut reported = 0;
-        while !handle.is_finished() {
+        while finished.lock().unwrap().is_none() {
             py.detach(|| std::thread::park_timeout(POLL));
-            if handle.is_finished() {
+            if finished.lock().unwrap().is_some() {
                 break;
             }
             if raised.is_none() {
@@ -64,16 +68,16 @@ pub fn run<T: Send>(
                 }
             }
         }
-        let result = match handle.join() {
-            Ok(r) => r,
-            Err(panic) => std::panic::resume_unwind(panic),
-        };
-        if let (Some(p), None, Ok(_)) = (progress, &raised, &result) {
-            p.call1((token.done(),))?;
-        }
-        match raised {
-            Some(e) => Err(e),
-            None => result.map_err(PyErr::from),
-        }
-    })
+    });
+    let result = finished
+        .into_inner()
+        .unwrap()
+        .expect("the scope ends after its task");
+    if let (Some(p), None, Ok(_)) = (progress, &raised, &result) {
+        p.call1((token.done(),))?;
+    }
+    match raised {
+        Some(e) => Err(e),
+        None => result.map_err(PyErr::from),
+    }
 }
