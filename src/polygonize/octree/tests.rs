@@ -1,0 +1,466 @@
+//! Unit tests of the octree: equality with dense marching cubes, repairs, thread independence
+//! and the settling's tables.
+
+use super::*;
+use crate::field::analytic::{Sphere, Torus};
+use crate::field::Counting;
+use crate::polygonize::{dense, Ambiguity};
+
+fn check_equal<F: Field>(f: &F, lattice: &Lattice, amb: Ambiguity) -> Stats {
+    let s = crate::polygonize::Settings {
+        ambiguity: amb,
+        ..Default::default()
+    };
+    let (d, _) = dense::polygonize(f, lattice, &s).unwrap();
+    let counting = Counting::new(f);
+    let (o, st) = polygonize(&counting, lattice, &s, &Settings::default()).unwrap();
+    let c = d.compare(&o);
+    assert_eq!((c.missing, c.extra), (0, 0), "octree differs from dense");
+    assert!(o.is_closed_oriented());
+    // Every point evaluated once, and the count is exact.
+    assert_eq!(counting.evaluations(), st.evaluations);
+    st
+}
+
+#[test]
+fn sphere_and_torus_equal_dense() {
+    let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [64, 64, 64]).unwrap();
+    let s = Sphere {
+        center: DVec3::new(0.03, -0.01, 0.02),
+        radius: 0.6,
+    };
+    let st = check_equal(&s, &l, Ambiguity::Separate);
+    assert!(
+        st.evaluation_percent() < 15.0,
+        "{}",
+        st.evaluation_percent()
+    );
+    let t = Torus {
+        center: DVec3::new(0.01, 0.0, -0.02),
+        major: 0.55,
+        minor: 0.2,
+    };
+    check_equal(&t, &l, Ambiguity::Join);
+}
+
+#[test]
+fn non_power_of_two_and_anisotropic_lattices() {
+    let s = Sphere {
+        center: DVec3::ZERO,
+        radius: 0.45,
+    };
+    let l = Lattice::new(
+        DVec3::new(-0.6, -0.5, -0.7),
+        DVec3::new(0.5, 0.6, 0.5),
+        [37, 50, 23],
+    )
+    .unwrap();
+    check_equal(&s, &l, Ambiguity::Separate);
+}
+
+#[test]
+fn tiny_lattices_and_brick_boundaries() {
+    // Lattices of one or a few cells, and sides just below, at and above the 8-point bricks
+    // of the value store; the surface is cut by the box, so the meshes are open.
+    let s = Sphere {
+        center: DVec3::new(0.1, -0.05, 0.02),
+        radius: 0.5,
+    };
+    for cells in [
+        [1, 1, 1],
+        [2, 1, 3],
+        [1, 7, 9],
+        [7, 8, 9],
+        [15, 16, 17],
+        [31, 1, 33],
+    ] {
+        let l = Lattice::new(DVec3::splat(-0.2), DVec3::splat(0.8), cells).unwrap();
+        let set = crate::polygonize::Settings::default();
+        let (d, _) = dense::polygonize(&s, &l, &set).unwrap();
+        assert!(!d.triangles.is_empty(), "{cells:?}");
+        for corner_test in [true, false] {
+            let counting = Counting::new(&s);
+            let o = Settings {
+                corner_test,
+                ..Default::default()
+            };
+            let (m, st) = polygonize(&counting, &l, &set, &o).unwrap();
+            let c = d.compare(&m);
+            assert_eq!((c.missing, c.extra), (0, 0), "{cells:?}");
+            assert_eq!(counting.evaluations(), st.evaluations, "{cells:?}");
+        }
+    }
+}
+
+#[test]
+fn wrong_rejections_are_repaired() {
+    // A field that over-estimates distance (3 × the signed distance) breaks the premise:
+    // the levels drop blocks the surface crosses and balls infer wrong signs. The repair
+    // walks on from the crossed leaves into those blocks, and the mesh is the dense mesh,
+    // with the paper's test alone and with the corner test.
+    struct Over(Sphere);
+    impl Field for Over {
+        fn value(&self, p: DVec3) -> f64 {
+            3.0 * self.0.value(p)
+        }
+    }
+    let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [64, 64, 64]).unwrap();
+    let f = Over(Sphere {
+        center: DVec3::new(0.01, 0.02, 0.03),
+        radius: 0.6,
+    });
+    let s = crate::polygonize::Settings::default();
+    let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
+    for corner_test in [true, false] {
+        let octree = Settings {
+            corner_test,
+            ..Default::default()
+        };
+        let (o, stats) = polygonize(&f, &l, &s, &octree).unwrap();
+        assert!(stats.cells_repaired > 0, "corner test {corner_test}");
+        let c = d.compare(&o);
+        assert_eq!((c.missing, c.extra), (0, 0), "corner test {corner_test}");
+        // One vertex per crossed edge, shared across the seams: closed like the dense mesh.
+        assert_eq!(
+            o.vertices.len(),
+            d.vertices.len(),
+            "corner test {corner_test}"
+        );
+        assert!(o.is_closed_oriented(), "corner test {corner_test}");
+    }
+    // With a safety factor that restores the premise, nothing needs repair.
+    let (o, stats) = polygonize(
+        &f,
+        &l,
+        &s,
+        &Settings {
+            safety: 3.0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(stats.cells_repaired, 0);
+    assert_eq!(d.compare(&o).missing, 0);
+}
+
+#[test]
+fn same_mesh_and_count_on_any_number_of_threads() {
+    // Signs and claims are stored in parallel; where the premise fails (a field three times
+    // the distance), blocks infer different signs for shared points, and the outcome must
+    // still not depend on the threads.
+    struct Over(Torus);
+    impl Field for Over {
+        fn value(&self, p: DVec3) -> f64 {
+            3.0 * self.0.value(p)
+        }
+    }
+    let l = Lattice::new(DVec3::splat(-1.0), DVec3::new(1.0, 0.9, 1.0), [70, 64, 61]).unwrap();
+    let t = Torus {
+        center: DVec3::new(0.01, 0.0, -0.02),
+        major: 0.55,
+        minor: 0.2,
+    };
+    let s = crate::polygonize::Settings::default();
+    let run = |threads: usize, f: &(dyn Field + Sync)| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| polygonize(f, &l, &s, &Settings::default()).unwrap())
+    };
+    for f in [&Over(t) as &(dyn Field + Sync), &t] {
+        let (one, st1) = run(1, f);
+        for threads in [2, 3, 8] {
+            let (m, st) = run(threads, f);
+            assert_eq!(m.vertices, one.vertices);
+            assert_eq!(m.triangles, one.triangles);
+            assert_eq!(st.evaluations, st1.evaluations);
+        }
+    }
+}
+
+#[test]
+fn start_level_matters_when_far_values_overshoot() {
+    // Like an RBF (Cuno's Fig. 2c): the value equals the distance near the surface but grows
+    // four times faster beyond 0.1. Testing from the coarse root octants rejects blocks that
+    // hold the surface; testing from blocks small enough for the near region does not.
+    struct Far(Sphere);
+    impl Field for Far {
+        fn value(&self, p: DVec3) -> f64 {
+            let d = self.0.value(p);
+            if d.abs() < 0.1 {
+                d
+            } else {
+                d.signum() * (0.1 + 4.0 * (d.abs() - 0.1))
+            }
+        }
+    }
+    let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [64, 64, 64]).unwrap();
+    let f = Far(Sphere {
+        center: DVec3::new(0.51, 0.02, 0.03),
+        radius: 0.3,
+    });
+    let s = crate::polygonize::Settings::default();
+    let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
+    let coarse = Settings {
+        start_level: Some(1),
+        ..Default::default()
+    };
+    let (o, _) = polygonize(&f, &l, &s, &coarse).unwrap();
+    assert!(d.compare(&o).missing > 0);
+    let deep = Settings {
+        start_level: Some(6),
+        ..Default::default()
+    };
+    let (o, _) = polygonize(&f, &l, &s, &deep).unwrap();
+    assert_eq!(d.compare(&o).missing, 0);
+}
+
+/// `SHARED` holds exactly the points a block of 2 × 2 × 2 cells has in common with each
+/// neighbour, and the decided map gives those points, clipped to the lattice, the sign of
+/// the decided region they lie in.
+#[test]
+fn decided_neighbours_give_their_shared_points() {
+    for k in 0..27 {
+        let d = [k % 3, (k / 3) % 3, k / 9].map(|c| c as i32 - 1);
+        let mine = |p: usize| [p % 3, (p / 3) % 3, p / 9].map(|c| c as i32);
+        let want = (0..27)
+            .filter(|&p| {
+                (0..3).all(|a| (mine(p)[a] - 2 * d[a]).clamp(0, 2) == mine(p)[a] - 2 * d[a])
+            })
+            .fold(0u32, |m, p| m | 1 << p);
+        assert_eq!(SHARED[k], want, "neighbour {d:?}");
+    }
+    let lattice = Lattice::new(DVec3::ZERO, DVec3::ONE, [12, 12, 9]).unwrap();
+    let mut map = DecidedBlocks::new(&lattice);
+    assert_eq!(map.dims, [6, 6, 5]);
+    // Lattice points 4..=8 per axis negative; 8..=12 (x), 0..=4 (y), 8..=9 (z) positive.
+    map.mark([4, 4, 4], 4, Some(true));
+    map.mark([8, 0, 8], 4, Some(false));
+    map.mark([0, 0, 0], 2, None);
+    let face = (0..27).filter(|p| p % 3 == 2).fold(0u32, |m, p| m | 1 << p);
+    // The block at x 2..=4 touches the negative region with its face x = 4.
+    assert_eq!(map.masks([2, 4, 4]), (face, 0));
+    // The block at 8..=10 shares its corner (8, 8, 8) with it, and its face z = 8 with the
+    // positive region only along y ≤ 4: none of its points.
+    assert_eq!(map.masks([8, 8, 8]), (1, 0));
+    // The block at (8, 4, 6): corner-edge (x = 8, y = 4..=6, z = 6..=8) with the negative
+    // region's face x = 8; z = 8, y = 4 with the positive region.
+    let (neg, pos) = map.masks([8, 4, 6]);
+    let at = |x: usize, y: usize, z: usize| 1u32 << block_point(x, y, z);
+    assert_eq!(
+        neg,
+        (0..3)
+            .flat_map(|y| (0..3).map(move |z| (y, z)))
+            .fold(0, |m, (y, z)| m | at(0, y, z))
+    );
+    assert_eq!(pos, at(0, 0, 2) | at(1, 0, 2) | at(2, 0, 2));
+    // Inside an undecided region and at the lattice's far corner: nothing.
+    assert_eq!(map.masks([0, 8, 0]), (0, 0));
+    assert_eq!(map.masks([10, 10, 8]), (0, 0));
+    // A block dropped without a sign gives none, and every dropped block reads as dropped.
+    assert_eq!(map.masks([2, 0, 0]), (0, 0));
+    for z in 0..9 {
+        for y in 0..12 {
+            for x in 0..12 {
+                let dropped = (4..8).contains(&x) && (4..8).contains(&y) && (4..8).contains(&z)
+                    || x >= 8 && y < 4 && z >= 8
+                    || x < 2 && y < 2 && z < 2;
+                assert_eq!(map.dropped([x, y, z]), dropped, "cell {:?}", [x, y, z]);
+            }
+        }
+    }
+}
+
+/// The ends of crossed edges with only a sign are those that an edge-by-edge search finds,
+/// for every leaf of a block and mixes of values, signs and unknown points.
+#[test]
+fn decided_masks_inside_the_map_are_those_at_its_edge() {
+    let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [12, 10, 14]).unwrap();
+    let mut d = DecidedBlocks::new(&lattice);
+    let mut next = uniform(7);
+    for v in d.sign.iter_mut() {
+        *v = (next() * 4.0) as u8;
+    }
+    let [nx, ny, nz] = d.dims.map(|n| n as u32);
+    let mut inside = 0;
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let o = [2 * x, 2 * y, 2 * z];
+                assert_eq!(d.masks(o), d.masks_at_edge(o), "block {o:?}");
+                inside +=
+                    (x > 0 && y > 0 && z > 0 && x + 1 < nx && y + 1 < ny && z + 1 < nz) as u32;
+            }
+        }
+    }
+    assert!(inside > 50);
+}
+
+#[test]
+fn unknown_edge_ends_are_those_of_crossed_edges() {
+    let mut next = uniform(5);
+    for _ in 0..2000 {
+        // Signs inferred as ±∞, values as numbers, unknown as NaN.
+        let v: [f64; 27] = std::array::from_fn(|_| match (4.0 * next()) as u32 {
+            0 => f64::NEG_INFINITY,
+            1 => f64::INFINITY,
+            2 => f64::NAN,
+            _ => next() - 0.5,
+        });
+        let states = v.map(|x| match x {
+            f64::NEG_INFINITY => INFERRED_NEGATIVE,
+            f64::INFINITY => INFERRED_POSITIVE,
+            _ if x.is_nan() => UNKNOWN,
+            _ => value_state(x),
+        });
+        for d in 0..8 {
+            let mut want = 0;
+            for [ka, kb] in EDGES {
+                let [a, b] = [ka, kb].map(|k| LEAF_CORNERS[d][k as usize] as usize);
+                if (v[a] < 0.0) != (v[b] < 0.0) {
+                    want |= (v[a].is_infinite() as u32) << a | (v[b].is_infinite() as u32) << b;
+                }
+            }
+            let (neg, _, inferred) = sign_masks(&states);
+            assert_eq!(unknown_edge_ends(neg, inferred, d), want, "{v:?} {d}");
+        }
+    }
+}
+
+/// The signs inferred are exactly those of the block points inside the balls of one sign,
+/// and a cubic block has 9 distances from its corner.
+#[test]
+fn ball_masks_are_the_balls() {
+    let mut next = uniform(3);
+    for cell in [DVec3::splat(0.1), DVec3::new(0.1, 0.07, 0.16)] {
+        for safety in [1.0, 1.7] {
+            let reach = block_reach(cell, safety);
+            let at =
+                |p: usize| DVec3::new((p % 3) as f64, ((p / 3) % 3) as f64, (p / 9) as f64) * cell;
+            for _ in 0..500 {
+                let v: [f64; 27] = std::array::from_fn(|_| match (next() * 5.0) as u32 {
+                    0 => f64::NAN,
+                    1 => f64::INFINITY,
+                    2 => f64::NEG_INFINITY,
+                    _ => (next() - 0.5) * 0.8,
+                });
+                let (neg, pos) = ball_masks(&v, (1 << 27) - 1, &reach);
+                for q in 0..27 {
+                    let inside = |negative: bool| {
+                        (0..27).any(|p| {
+                            p != q
+                                && v[p].is_finite()
+                                && (v[p] < 0.0) == negative
+                                && v[p] != 0.0
+                                && v[p].abs() / safety > (at(p) - at(q)).length()
+                        })
+                    };
+                    assert_eq!(neg & 1 << q != 0, inside(true), "{q} {v:?}");
+                    assert_eq!(pos & 1 << q != 0, inside(false), "{q} {v:?}");
+                }
+            }
+        }
+    }
+    let cubic = block_reach(DVec3::splat(0.1), 1.0);
+    assert_eq!(cubic[0].iter().filter(|r| r.reach.is_finite()).count(), 9);
+    assert_eq!(cubic[13].iter().filter(|r| r.reach.is_finite()).count(), 3);
+}
+
+/// Uniform numbers in [0, 1) from a seed (a linear congruential generator).
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// The exact test for two opposite balls is sound (sampled) and proves at least what the
+/// octant splitting proves.
+#[test]
+fn opposite_balls_are_decided_exactly() {
+    let mut next = uniform(5);
+    let (mut exact, mut split) = (0, 0);
+    for _ in 0..4000 {
+        let size = DVec3::new(0.5 + next(), 0.5 + next(), 0.5 + next());
+        let far = size.length();
+        let (r0, r1) = (next() * 1.1 * far, next() * 1.1 * far);
+        let yes = covered_by_opposite_balls(r0, r1, size);
+        let balls = [(DVec3::ZERO, r0 * r0), (size, r1 * r1)];
+        let by_split = covered_piece(&balls, 3, DVec3::ZERO, size, 5);
+        assert!(yes || !by_split, "{r0} {r1} {size}");
+        exact += yes as u32;
+        split += by_split as u32;
+        if yes {
+            for _ in 0..100 {
+                let p = DVec3::new(next(), next(), next()) * size;
+                assert!(
+                    p.length() < r0 || (p - size).length() < r1,
+                    "{r0} {r1} {size} {p}"
+                );
+            }
+            // The box's other corners, where the two balls are weakest.
+            for k in 1..7 {
+                let d = corner_offset(k);
+                let p = DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size;
+                assert!(p.length() < r0 || (p - size).length() < r1);
+            }
+        }
+    }
+    assert!(exact > split && split > 100, "{exact} {split}");
+}
+
+/// `covered` is sound: wherever it says a box is covered, every sample point of the box
+/// lies in a ball; and it finds the covers that are easy to see.
+#[test]
+fn cover_test_is_sound() {
+    let mut next = uniform(11);
+    let size = DVec3::new(1.0, 0.8, 1.3);
+    let corners: [DVec3; 8] = std::array::from_fn(|k| {
+        let d = corner_offset(k);
+        DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size
+    });
+    let mut yes = 0;
+    for _ in 0..3000 {
+        let radius: [f64; 8] = std::array::from_fn(|_| {
+            let r = next() * 1.8;
+            if next() < 0.3 {
+                f64::NAN
+            } else {
+                r
+            }
+        });
+        if !covered(&radius, size) {
+            continue;
+        }
+        yes += 1;
+        for _ in 0..200 {
+            let p = DVec3::new(next(), next(), next()) * size;
+            assert!(
+                corners
+                    .iter()
+                    .zip(&radius)
+                    .any(|(c, r)| (p - *c).length() < *r),
+                "{radius:?} {p}"
+            );
+        }
+    }
+    assert!(yes > 100, "{yes}");
+    // One ball reaching the far corner covers the box; two opposite balls that miss the
+    // box's centre do not; two that each reach past the centre and take in the corners
+    // nearest to them do.
+    let far = size.length();
+    let mut r = [f64::NAN; 8];
+    r[0] = far * 1.0001;
+    assert!(covered(&r, size));
+    r[0] = 0.45 * far;
+    r[7] = 0.45 * far;
+    assert!(!covered(&r, size));
+    r[0] = 0.95 * far;
+    r[7] = 0.95 * far;
+    assert!(covered(&r, size));
+    assert!(!covered(&[f64::NAN; 8], size));
+}
