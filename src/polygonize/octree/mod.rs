@@ -33,6 +33,9 @@
 //! lower end and numbered as a serial sweep over the leaves would (first use).
 
 mod repair;
+mod state;
+
+use state::{atomic_states, PointState};
 
 use super::cell::{case_index, corner_offset};
 use super::table::{EDGES, EDGE_AXIS};
@@ -188,68 +191,6 @@ const NEGATIVE: u32 = u32::MAX - 1;
 const POSITIVE: u32 = u32::MAX - 2;
 /// Value indices stay below this (the codes above are not indices).
 const MAX_VALUES: usize = (u32::MAX - 2) as usize;
-/// What [`Store::state`] holds for a point: nothing known, ...
-const UNKNOWN: u8 = 0;
-/// ... claimed, not yet evaluated, ...
-const QUEUED: u8 = 0b001;
-/// ... a sign inferred without a value (zero or positive, negative; see [`settle_leaves`]) ...
-const INFERRED_POSITIVE: u8 = 0b010;
-const INFERRED_NEGATIVE: u8 = 0b011;
-/// ... or a value, whose index the point's slot holds (zero or positive, negative). Bit 1: the
-/// sign is known, bit 0 with it: negative, bit 2: a value.
-const VALUE_POSITIVE: u8 = 0b110;
-const VALUE_NEGATIVE: u8 = 0b111;
-
-/// Whether a point in `state` has a sign, inferred or from its value.
-#[inline]
-fn has_sign(state: u8) -> bool {
-    state & 0b010 != 0
-}
-
-/// Whether a point in `state` is known to be negative.
-#[inline]
-fn is_negative(state: u8) -> bool {
-    state & 0b011 == 0b011
-}
-
-/// Whether a point in `state` is known to be zero or positive.
-#[inline]
-fn is_positive(state: u8) -> bool {
-    state & 0b011 == 0b010
-}
-
-/// Whether a point in `state` has a sign inferred, no value.
-#[inline]
-fn is_inferred(state: u8) -> bool {
-    state & 0b110 == 0b010
-}
-
-/// Whether a point in `state` has a value.
-#[inline]
-fn has_value(state: u8) -> bool {
-    state & 0b100 != 0
-}
-
-/// The state of a point with value `v`.
-#[inline]
-fn value_state(v: f64) -> u8 {
-    if v < 0.0 {
-        VALUE_NEGATIVE
-    } else {
-        VALUE_POSITIVE
-    }
-}
-
-/// The state of a point with a sign inferred.
-#[inline]
-fn inferred_state(negative: bool) -> u8 {
-    if negative {
-        INFERRED_NEGATIVE
-    } else {
-        INFERRED_POSITIVE
-    }
-}
-
 /// The value of a leaf corner from its index (see [`NEGATIVE`], [`POSITIVE`]).
 #[inline]
 fn corner_value(values: &[f64], i: u32) -> f64 {
@@ -278,9 +219,8 @@ struct Store {
     table: Vec<u32>,
     /// Per brick, a slot per lattice point (x fastest): the index of its value, or `NONE`.
     slots: Vec<u32>,
-    /// Per slot, the point's state: [`UNKNOWN`], [`QUEUED`], [`INFERRED_POSITIVE`],
-    /// [`INFERRED_NEGATIVE`], [`VALUE_POSITIVE`] or [`VALUE_NEGATIVE`].
-    state: Vec<u8>,
+    /// Per slot, the point's state.
+    state: Vec<PointState>,
     /// Every value evaluated, in evaluation order.
     values: Vec<f64>,
     /// The slots of the points claimed and not yet evaluated, in claiming order.
@@ -401,7 +341,7 @@ impl Store {
         // Per block, the points it claimed.
         let mut claimed = Vec::new();
         {
-            let (store, state) = (&*self, atomic_u8s(&mut state_owned));
+            let (store, state) = (&*self, atomic_states(&mut state_owned));
             blocks
                 .par_iter()
                 .zip(wanted.par_iter())
@@ -409,9 +349,14 @@ impl Store {
                 .map(|(&o, &w)| {
                     store.block_slots(o, w).fold(0u32, |mine, (s, p)| {
                         // (Most are known: a plain read first.)
-                        let claims = state[s].load(Relaxed) == UNKNOWN
+                        let claims = state[s].load(Relaxed) == PointState::UNKNOWN.0
                             && state[s]
-                                .compare_exchange(UNKNOWN, QUEUED, Relaxed, Relaxed)
+                                .compare_exchange(
+                                    PointState::UNKNOWN.0,
+                                    PointState::QUEUED.0,
+                                    Relaxed,
+                                    Relaxed,
+                                )
                                 .is_ok();
                         mine | (claims as u32) << p
                     })
@@ -450,7 +395,7 @@ impl Store {
             b = (self.slots.len() / BRICK_POINTS) as u32;
             self.table[t] = b;
             self.slots.resize(self.slots.len() + BRICK_POINTS, NONE);
-            self.state.resize(self.slots.len(), UNKNOWN);
+            self.state.resize(self.slots.len(), PointState::UNKNOWN);
         }
         b as usize * BRICK_POINTS + l
     }
@@ -461,9 +406,9 @@ impl Store {
     #[inline]
     fn claim(&mut self, p: [u32; 3], lattice: &Lattice, points: &mut Vec<DVec3>) -> u32 {
         let s = self.slot_mut(p);
-        if self.state[s] == UNKNOWN {
+        if self.state[s] == PointState::UNKNOWN {
             self.slots[s] = (self.values.len() + points.len()) as u32;
-            self.state[s] = QUEUED;
+            self.state[s] = PointState::QUEUED;
             self.queued.push(s as u32);
             points.push(lattice.point(p));
         }
@@ -490,9 +435,9 @@ impl Store {
                 let p = m.trailing_zeros() as usize;
                 m &= m - 1;
                 let q = s + BLOCK_SLOTS[p];
-                if self.state[q] == UNKNOWN {
+                if self.state[q] == PointState::UNKNOWN {
                     self.slots[q] = (self.values.len() + points.len()) as u32;
-                    self.state[q] = QUEUED;
+                    self.state[q] = PointState::QUEUED;
                     self.queued.push(q as u32);
                     points.push(lattice.point(block_offset(o, p)));
                 }
@@ -513,10 +458,10 @@ impl Store {
     #[inline]
     fn set_sign(&mut self, s: usize, negative: bool) -> bool {
         let state = &mut self.state[s];
-        if *state == UNKNOWN {
-            *state = inferred_state(negative);
+        if *state == PointState::UNKNOWN {
+            *state = PointState::inferred(negative);
         }
-        is_negative(*state) == negative
+        state.is_negative() == negative
     }
 
     /// [`Store::set_sign`] for the points in `neg` (negative) and then those in `pos` of the
@@ -575,8 +520,8 @@ impl Store {
             );
             // A value or an inferred sign.
             let state = self.state[s];
-            debug_assert!(has_sign(state));
-            let below = is_negative(state);
+            debug_assert!(state.has_sign());
+            let below = state.is_negative();
             negative |= (below as u32) << p;
             idx[p] = match self.slots[s] {
                 NONE if below => NEGATIVE,
@@ -598,7 +543,7 @@ impl Store {
         let (t, l) = self.locate(p);
         let b = self.table[t];
         let s = b as usize * BRICK_POINTS + l;
-        (b != NONE && has_value(self.state[s])).then(|| self.values[self.slots[s] as usize])
+        (b != NONE && self.state[s].has_value()).then(|| self.values[self.slots[s] as usize])
     }
 
     /// `read(slot)` for the 27 points of the block of 2 × 2 × 2 cells with lower corner `o`
@@ -647,14 +592,14 @@ impl Store {
         v
     }
 
-    /// The states of the 27 points of a block of leaves (lower corner `o`; [`UNKNOWN`] beyond
+    /// The states of the 27 points of a block of leaves (lower corner `o`; [`PointState::UNKNOWN`] beyond
     /// the lattice) whose centre has the value with index `centre` (kept with the block, not in
     /// the store; `NONE` when not evaluated).
     #[inline]
-    fn leaf_block_states(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [u8; 27] {
-        let mut v = self.block_map(o, cells, UNKNOWN, |s| self.state[s]);
+    fn leaf_block_states(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [PointState; 27] {
+        let mut v = self.block_map(o, cells, PointState::UNKNOWN, |s| self.state[s]);
         if centre != NONE {
-            v[CENTRE] = value_state(self.values[centre as usize]);
+            v[CENTRE] = PointState::of_value(self.values[centre as usize]);
         }
         v
     }
@@ -663,7 +608,7 @@ impl Store {
     /// (NaN where no value is known).
     fn leaf_block_values(&self, o: [u32; 3], centre: u32, cells: [u32; 3]) -> [f64; 27] {
         let mut v = self.block_map(o, cells, f64::NAN, |s| {
-            if has_value(self.state[s]) {
+            if self.state[s].has_value() {
                 self.values[self.slots[s] as usize]
             } else {
                 f64::NAN
@@ -708,7 +653,7 @@ impl Store {
         // by the caller, when kept).
         debug_assert!(self.queued.is_empty() || self.queued.len() == points.len());
         for (&s, &v) in self.queued.iter().zip(&self.values[start..]) {
-            self.state[s as usize] = value_state(v);
+            self.state[s as usize] = PointState::of_value(v);
         }
         self.queued.clear();
         stats.evaluations += points.len() as u64;
@@ -1188,12 +1133,12 @@ fn block_reach(cell: DVec3, safety: f64) -> Box<[[Reach; 27]; 27]> {
 /// The block points whose sign is known (bit per point) from their states: (negative, zero or
 /// positive, the signs inferred without a value).
 #[inline]
-fn sign_masks(states: &[u8; 27]) -> (u32, u32, u32) {
+fn sign_masks(states: &[PointState; 27]) -> (u32, u32, u32) {
     let (mut neg, mut pos, mut inferred) = (0, 0, 0);
     for (p, &x) in states.iter().enumerate() {
-        neg |= (is_negative(x) as u32) << p;
-        pos |= (is_positive(x) as u32) << p;
-        inferred |= (is_inferred(x) as u32) << p;
+        neg |= (x.is_negative() as u32) << p;
+        pos |= (x.is_positive() as u32) << p;
+        inferred |= (x.is_inferred() as u32) << p;
     }
     (neg, pos, inferred)
 }
@@ -1365,23 +1310,24 @@ fn settle_leaves(
     // it would be whatever the threads do), and the edge ends are served again.
     let mut state_owned = std::mem::take(&mut store.state);
     let agreed = {
-        let (st, state) = (&*store, atomic_u8s(&mut state_owned));
+        let (st, state) = (&*store, atomic_states(&mut state_owned));
         found.par_iter().with_min_len(256).all(|&(i, neg, pos, _)| {
             let o = blocks[i as usize];
             let mut agreed = true;
             for (m, negative) in [(neg, true), (pos, false)] {
-                let inferred = inferred_state(negative);
+                let inferred = PointState::inferred(negative).0;
+                let unknown = PointState::UNKNOWN.0;
                 for (s, _) in st.block_slots(o, m) {
                     // Most points are shared: a plain read first spares the atomic write
                     // where a neighbour stored the sign already.
                     let mut v = state[s].load(Relaxed);
-                    if v == UNKNOWN {
-                        match state[s].compare_exchange(UNKNOWN, inferred, Relaxed, Relaxed) {
+                    if v == unknown {
+                        match state[s].compare_exchange(unknown, inferred, Relaxed, Relaxed) {
                             Ok(_) => continue,
                             Err(now) => v = now,
                         }
                     }
-                    agreed &= is_negative(v) == negative;
+                    agreed &= PointState(v).is_negative() == negative;
                 }
             }
             agreed
@@ -1396,7 +1342,7 @@ fn settle_leaves(
                 .map(|(s, _)| s)
                 .collect();
             for s in slots {
-                store.state[s] = UNKNOWN;
+                store.state[s] = PointState::UNKNOWN;
             }
         }
         for &(i, neg, pos, _) in &found {
@@ -1444,9 +1390,9 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
                 let s = store.slot_mut(p);
                 // A point two blocks share is taken once (queued until evaluated below).
                 let state = store.state[s];
-                if is_inferred(state) {
-                    store.state[s] = QUEUED;
-                    taken.push((s, is_negative(state), p));
+                if state.is_inferred() {
+                    store.state[s] = PointState::QUEUED;
+                    taken.push((s, state.is_negative(), p));
                     points.push(lattice.point(p));
                 }
             }
@@ -1467,7 +1413,7 @@ fn evaluate_crossed_edge_ends<F: Field + ?Sized>(
                 contradicted = true;
                 suspects.points.push(p);
             }
-            store.state[s] = value_state(v);
+            store.state[s] = PointState::of_value(v);
             store.slots[s] = store.values.len() as u32;
             store.values.push(v);
         }
@@ -1743,7 +1689,7 @@ pub fn polygonize<F: Field + ?Sized>(
                     if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
                         let slot = store.slot_mut(c);
                         store.slots[slot] = i;
-                        store.state[slot] = value_state(store.values[i as usize]);
+                        store.state[slot] = PointState::of_value(store.values[i as usize]);
                     }
                 }
             }

@@ -18,8 +18,8 @@
 //! a contradiction touched. The leaves it visits replace those of the levels. When the premise
 //! holds, nothing is found and the only cost is the scan of the crossed leaves' faces.
 
+use super::PointState;
 use super::{corner, CrossedLeaf, DecidedBlocks, Store, NONE};
-use super::{has_value, is_inferred, is_negative, value_state, QUEUED, UNKNOWN};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
@@ -127,7 +127,7 @@ pub(super) fn close<F: Field + ?Sized>(
         if c != NONE {
             let s = store.slot_mut([o[0] + 1, o[1] + 1, o[2] + 1]);
             store.slots[s] = c;
-            store.state[s] = value_state(store.values[c as usize]);
+            store.state[s] = PointState::of_value(store.values[c as usize]);
         }
     }
     let levels_leaves = leaves.len();
@@ -146,12 +146,12 @@ pub(super) fn close<F: Field + ?Sized>(
                 let p = corner(o, k);
                 let s = store.slot_mut(p);
                 let state = store.state[s];
-                if state == UNKNOWN || is_inferred(state) {
-                    if is_inferred(state) {
-                        inferred.push((s, is_negative(state), p));
+                if state == PointState::UNKNOWN || state.is_inferred() {
+                    if state.is_inferred() {
+                        inferred.push((s, state.is_negative(), p));
                     }
                     store.slots[s] = (store.values.len() + points.len()) as u32;
-                    store.state[s] = QUEUED;
+                    store.state[s] = PointState::QUEUED;
                     store.queued.push(s as u32);
                     points.push(lattice.point(p));
                 }
@@ -161,14 +161,14 @@ pub(super) fn close<F: Field + ?Sized>(
         let mut next = Vec::new();
         // A value against its inferred sign: the cells around the point were decided wrongly.
         for &(s, negative, p) in &inferred {
-            if is_negative(store.state[s]) != negative {
+            if store.state[s].is_negative() != negative {
                 next.extend(cells_around(p, cells));
             }
         }
         for &o in &wave {
             let corners: [u32; 8] = std::array::from_fn(|k| {
                 let s = store.slot_mut(corner(o, k));
-                debug_assert!(has_value(store.state[s]));
+                debug_assert!(store.state[s].has_value());
                 store.slots[s]
             });
             let case = case_index(&corners.map(|i| store.values[i as usize]));

@@ -309,10 +309,10 @@ fn unknown_edge_ends_are_those_of_crossed_edges() {
             _ => next() - 0.5,
         });
         let states = v.map(|x| match x {
-            f64::NEG_INFINITY => INFERRED_NEGATIVE,
-            f64::INFINITY => INFERRED_POSITIVE,
-            _ if x.is_nan() => UNKNOWN,
-            _ => value_state(x),
+            f64::NEG_INFINITY => PointState::INFERRED_NEGATIVE,
+            f64::INFINITY => PointState::INFERRED_POSITIVE,
+            _ if x.is_nan() => PointState::UNKNOWN,
+            _ => PointState::of_value(x),
         });
         for d in 0..8 {
             let mut want = 0;
