@@ -5,6 +5,7 @@
 use super::convert::{points, points_to_py, triangles, triangles_to_py};
 use super::errors::value_error;
 use super::field::FieldArg;
+use super::variational::Fitted;
 use crate::mesh::Mesh;
 use crate::polygonize::subdivision::{self, Settings, SubdivisionStats, MAX_LEVELS};
 use pyo3::prelude::*;
@@ -106,19 +107,19 @@ pub fn subdivide<'py>(
         }
     }
     let result = match &field {
-        FieldArg::Variational(s) => {
+        FieldArg::Variational(Fitted::Global(s)) => {
             let s = s.clone();
             py.detach(move || subdivision::subdivide_surface(&s, &control, levels, &settings))
+        }
+        FieldArg::Variational(Fitted::Partition(_)) | FieldArg::Blob(_) => {
+            let f = field.as_field();
+            py.detach(|| subdivision::subdivide(f, &control, levels, &settings))
         }
         FieldArg::Callable(_) => {
             let f = field.as_field();
             py.detach(|| {
                 subdivision::subdivide_by_differences(f, &control, levels, &settings, step)
             })
-        }
-        FieldArg::Blob(_) => {
-            let f = field.as_field();
-            py.detach(|| subdivision::subdivide(f, &control, levels, &settings))
         }
     };
     if let Some(e) = field.take_error() {
