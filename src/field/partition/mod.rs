@@ -2,12 +2,14 @@
 //! al.'s multi-level partition of unity, with variational patches instead of quadrics).
 //!
 //! - [`octree`]: an octree over the constraints (boundary and normal constraints together),
-//!   split until each leaf holds at most [`Settings::max_per_leaf`] of them; its cube covers the
-//!   constraints and the surface's default polygonization bounds.
+//!   split until each leaf holds at most [`Settings::max_per_leaf`] of them and the ball of
+//!   its patch at most [`Settings::max_patch`]; its cube covers the constraints and the
+//!   surface's default polygonization bounds.
 //! - [`patches`]: one patch per leaf, a ball of radius [`Settings::overlap`] × the leaf's
-//!   half-diagonal around its centre (grown until it holds [`Settings::min_points`]
-//!   constraints), fitted with r³ + linear (as [`VariationalSurface`](super::rbf::VariationalSurface))
-//!   to every constraint in the ball; patches are solved in parallel.
+//!   half-diagonal around its centre (grown to the [`Settings::min_points`]-th nearest
+//!   constraint when it holds fewer), fitted with r³ + linear (as
+//!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball;
+//!   patches are solved in parallel.
 //! - [`blend`]: f = Σ w_i f_i / Σ w_i with compactly supported C² weights. Each patch whose
 //!   weight is non-zero at a constraint interpolates it, so the blend interpolates every
 //!   constraint to the patches' residual.
@@ -33,6 +35,10 @@ pub struct Settings {
     /// Support radius of a leaf's patch over the leaf's half-diagonal (> 1, so that the supports
     /// overlap and each covers its leaf).
     pub overlap: f64,
+    /// Leaves also split until the ball of their patch (before growing to `min_points`) holds
+    /// at most this many constraints: this bounds the patches of the empty leaves next to the
+    /// data.
+    pub max_patch: usize,
     /// Fewest constraints a patch interpolates: smaller supports grow until they hold this many.
     pub min_points: usize,
     pub kernel: Kernel,
@@ -48,7 +54,8 @@ impl Default for Settings {
         Settings {
             max_per_leaf: 96,
             overlap: 1.25,
-            min_points: 64,
+            max_patch: 400,
+            min_points: 256,
             kernel: Kernel::Triharmonic,
             smoothing: 0.0,
             memory_limit: 8 << 30,
@@ -68,6 +75,15 @@ impl Settings {
             return Err(Error::invalid(
                 "overlap",
                 format!("must be finite and above 1, got {}", self.overlap),
+            ));
+        }
+        if self.max_patch < self.max_per_leaf {
+            return Err(Error::invalid(
+                "max_patch",
+                format!(
+                    "must be at least max_per_leaf ({}), got {}",
+                    self.max_per_leaf, self.max_patch
+                ),
             ));
         }
         if self.min_points < 8 {
@@ -165,7 +181,17 @@ impl PartitionSurface {
             .map(|p| (*p - centre).abs().max_element())
             .fold(0.6 * (hi - lo).max_element(), f64::max);
         let half = reach * (1.0 + 1e-9);
-        let tree = Octree::new(&c.points, centre, half, settings.max_per_leaf);
+        // A first octree counts the constraints in the balls of the final one's nodes.
+        let counts = Octree::new(&c.points, centre, half, settings.max_per_leaf);
+        let tree = Octree::build(&c.points, centre, half, |n| {
+            (n.end - n.start) as usize > settings.max_per_leaf
+                || counts.more_within_than(
+                    &c.points,
+                    n.centre,
+                    settings.overlap * n.half_diagonal(),
+                    settings.max_patch,
+                )
+        });
         let supports = patches::supports(&tree, &c.points, settings);
         let sizes: Vec<usize> = supports.iter().map(|s| s.2).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())

@@ -60,6 +60,19 @@ impl Octree {
     /// Splits the cube (`centre`, `half`) until each leaf holds at most `max_per_leaf` of
     /// `points` (all inside the cube).
     pub fn new(points: &[DVec3], centre: DVec3, half: f64, max_per_leaf: usize) -> Octree {
+        Self::build(points, centre, half, |n| {
+            (n.end - n.start) as usize > max_per_leaf
+        })
+    }
+
+    /// Splits the cube (`centre`, `half`), holding `points` (all inside it), wherever `split`
+    /// says so (and the depth is below 24).
+    pub fn build(
+        points: &[DVec3],
+        centre: DVec3,
+        half: f64,
+        split: impl Fn(&Node) -> bool,
+    ) -> Octree {
         let mut nodes = vec![Node {
             centre,
             half,
@@ -74,7 +87,7 @@ impl Octree {
         while k < nodes.len() {
             let n = nodes[k];
             let count = (n.end - n.start) as usize;
-            if count > max_per_leaf && depth[k] < MAX_DEPTH {
+            if depth[k] < MAX_DEPTH && split(&n) {
                 // Stable counting sort of the node's run by octant.
                 let run = &mut order[n.start as usize..n.end as usize];
                 let mut bounds = [0usize; 9];
@@ -169,6 +182,69 @@ impl Octree {
         count
     }
 
+    /// Whether more than `limit` of `points` lie within the closed ball (`c`, `r`); stops
+    /// counting once they do.
+    pub fn more_within_than(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> bool {
+        let r2 = r * r;
+        let mut count = 0;
+        let mut stack = vec![0u32];
+        while let Some(k) = stack.pop() {
+            let n = &self.nodes[k as usize];
+            if n.distance_squared(c) > r2 {
+                continue;
+            }
+            if n.is_leaf() {
+                let run = &self.order[n.start as usize..n.end as usize];
+                count += run
+                    .iter()
+                    .filter(|&&i| (points[i as usize] - c).length_squared() <= r2)
+                    .count();
+                if count > limit {
+                    return true;
+                }
+            } else {
+                stack.extend((0..8).map(|o| n.children + o));
+            }
+        }
+        false
+    }
+
+    /// Distance from `c` to its `k`-th nearest point of `points` (`k` ≥ 1, at most the number
+    /// of points).
+    pub fn kth_nearest_distance(&self, points: &[DVec3], c: DVec3, k: usize) -> f64 {
+        use std::cmp::Reverse;
+        use std::collections::BinaryHeap;
+        // Squared distances are non-negative, so their bit patterns order like the values.
+        let mut best: BinaryHeap<u64> = BinaryHeap::with_capacity(k + 1);
+        let mut queue = BinaryHeap::new();
+        queue.push(Reverse((self.nodes[0].distance_squared(c).to_bits(), 0u32)));
+        while let Some(Reverse((d2, node))) = queue.pop() {
+            if best.len() == k && d2 >= *best.peek().unwrap() {
+                break;
+            }
+            let n = &self.nodes[node as usize];
+            if n.is_leaf() {
+                for &i in &self.order[n.start as usize..n.end as usize] {
+                    let e = (points[i as usize] - c).length_squared().to_bits();
+                    if best.len() < k {
+                        best.push(e);
+                    } else if e < *best.peek().unwrap() {
+                        best.pop();
+                        best.push(e);
+                    }
+                }
+            } else {
+                for o in 0..8 {
+                    let ch = n.children + o;
+                    let d = self.nodes[ch as usize].distance_squared(c);
+                    queue.push(Reverse((d.to_bits(), ch)));
+                }
+            }
+        }
+        best.peek()
+            .map_or(f64::INFINITY, |&b| f64::from_bits(b).sqrt())
+    }
+
     /// Calls `visit(i)` for every point `points[i]` within the closed ball (`c`, `r`).
     pub fn for_each_within(&self, points: &[DVec3], c: DVec3, r: f64, mut visit: impl FnMut(u32)) {
         let r2 = r * r;
@@ -220,6 +296,20 @@ mod tests {
                 .filter(|&i| (pts[i as usize] - c).length_squared() <= r * r)
                 .collect();
             assert_eq!(got, want);
+            assert_eq!(
+                t.more_within_than(&pts, c, r, want.len()),
+                false,
+                "{c:?} {r}"
+            );
+            assert!(want.is_empty() || t.more_within_than(&pts, c, r, want.len() - 1));
+        }
+        // k-th nearest distances agree with sorting.
+        for c in [DVec3::ZERO, DVec3::new(0.9, -0.9, 0.2), DVec3::splat(2.0)] {
+            let mut d: Vec<f64> = pts.iter().map(|p| (*p - c).length()).collect();
+            d.sort_by(f64::total_cmp);
+            for k in [1, 7, 64, 3000] {
+                assert_eq!(t.kth_nearest_distance(&pts, c, k), d[k - 1]);
+            }
         }
     }
 }

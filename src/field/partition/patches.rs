@@ -1,7 +1,7 @@
 //! The patches of a partition-of-unity fit: one per octree leaf, a ball around the leaf's centre
-//! whose radius is `overlap` × the leaf's half-diagonal (grown by 5/4 until it holds
-//! `min_points` constraints), fitted to **every** constraint inside the ball, so that every patch
-//! whose weight is non-zero at a constraint interpolates it.
+//! whose radius is `overlap` × the leaf's half-diagonal, or the distance to the centre's
+//! `min_points`-th nearest constraint when that is larger, fitted to **every** constraint inside
+//! the ball, so that every patch whose weight is non-zero at a constraint interpolates it.
 
 use super::octree::Octree;
 use super::Settings;
@@ -32,9 +32,14 @@ pub fn supports(tree: &Octree, points: &[DVec3], settings: &Settings) -> Vec<(DV
             let n = &tree.nodes[k as usize];
             let mut r = settings.overlap * n.half_diagonal();
             let mut count = tree.count_within(points, n.centre, r);
-            while count < want {
-                r *= 1.25;
+            if count < want {
+                r = r.max(tree.kth_nearest_distance(points, n.centre, want));
                 count = tree.count_within(points, n.centre, r);
+                // The square of the rounded square root may fall short of the squared distance.
+                while count < want {
+                    r = r.next_up();
+                    count = tree.count_within(points, n.centre, r);
+                }
             }
             (n.centre, r, count)
         })

@@ -70,6 +70,7 @@ fn patches_hold_every_constraint_of_their_support() {
             .count();
         assert_eq!(p.size, inside, "patch {i}");
         assert!(p.size >= s.settings().min_points);
+        assert!(p.size <= s.settings().max_patch, "patch {i}: {}", p.size);
         // Each patch's ball covers its leaf (with room: the weight is positive on the leaf).
         let leaf = &t.nodes[t.leaves[i] as usize];
         assert_eq!(leaf.centre, p.centre);
@@ -164,6 +165,7 @@ fn refuses_bad_settings_and_memory() {
         "max_per_leaf"
     );
     assert_eq!(named(Settings { min_points: 3, ..d }), "min_points");
+    assert_eq!(named(Settings { max_patch: 50, ..d }), "max_patch");
     assert!(matches!(
         fit(Settings {
             memory_limit: 1 << 16,
