@@ -80,6 +80,22 @@ def test_partition_octree_equals_dense_and_is_closed(knot_fits):
     np.testing.assert_allclose(octree.normals, g / np.linalg.norm(g, axis=1)[:, None], atol=1e-12)
 
 
+def test_tracking_and_subdivision_on_a_partition_fit(knot_fits):
+    _, _, _, s = knot_fits
+    dense = im.polygonize(s, resolution=64, method="dense")
+    tracking = im.polygonize(s, resolution=64, method="tracking")
+    c = im.compare(dense, tracking)
+    assert (c["missing"], c["extra"]) == (0, 0), c
+    with pytest.raises(ValueError, match="method"):
+        im.polygonize(s, resolution=16, method="sparse")
+    control = im.polygonize(s, resolution=16)
+    levels = im.subdivide(control.vertices, control.faces, levels=1, surface=s)
+    vertices = levels[-1].vertices
+    assert len(levels) == 2 and len(vertices) > len(control.vertices)
+    # The new vertices are on the zero set.
+    assert np.max(np.abs(s.evaluate(vertices[len(control.vertices):]))) < 1e-6
+
+
 def test_gradient_matches_differences(knot_fits):
     _, _, _, s = knot_fits
     rng = np.random.default_rng(4)
@@ -98,14 +114,14 @@ def test_patches_describe_the_partition(knot_fits):
     m = len(patches["radii"])
     assert patches["centers"].shape == (m, 3) and patches["sizes"].dtype == np.int64
     assert m > 10 and np.all(patches["radii"] > 0)
-    # Between the default min_points and max_patch constraints each.
-    assert np.all(patches["sizes"] >= 256) and np.all(patches["sizes"] <= 400), patches["sizes"].max()
-    # Every constraint within a patch's support counts towards its size.
+    # At most the default max_patch constraints each; the constraints inside first.
+    assert np.all(patches["sizes"] >= patches["inside"]) and np.all(patches["sizes"] <= 400)
+    assert np.any(patches["sizes"] > patches["inside"])
     c = s.constraints["points"]
     tree = cKDTree(c)
     for k in range(0, m, max(1, m // 25)):
         inside = tree.query_ball_point(patches["centers"][k], patches["radii"][k])
-        assert len(inside) == patches["sizes"][k]
+        assert len(inside) == patches["inside"][k]
     for name in ("weights", "polynomial"):
         with pytest.raises(ValueError, match=name):
             getattr(s, name)

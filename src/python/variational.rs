@@ -411,8 +411,11 @@ impl PyVariationalSurface {
     }
 
     /// dict describing the patches of a partition fit: ``centers`` (P, 3) float64, ``radii``
-    /// (P,) float64 (support radii: a patch's weight is zero from there on), ``sizes`` (P,)
-    /// int64 (constraints each patch interpolates). Partition fits only (ValueError otherwise).
+    /// (P,) float64 (support radii: a patch's weight is zero from there on), ``inside`` (P,)
+    /// int64 (constraints inside each support, all of which the patch interpolates) and
+    /// ``sizes`` (P,) int64 (constraints each patch interpolates: those inside, and for patches
+    /// with few inside, constraints from around the support). Partition fits only (ValueError
+    /// otherwise).
     #[getter]
     fn patches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let Fitted::Partition(s) = &self.inner else {
@@ -430,6 +433,10 @@ impl PyVariationalSurface {
         d.set_item(
             "radii",
             values_to_py(py, p.iter().map(|q| q.radius).collect()),
+        )?;
+        d.set_item(
+            "inside",
+            PyArray1::from_vec(py, p.iter().map(|q| q.inside as i64).collect()),
         )?;
         d.set_item(
             "sizes",

@@ -6,15 +6,16 @@
 //!   its patch at most [`Settings::max_patch`]; its cube covers the constraints and the
 //!   surface's default polygonization bounds.
 //! - [`patches`]: one patch per leaf, a ball of radius [`Settings::overlap`] × the leaf's
-//!   half-diagonal around its centre (grown to the [`Settings::min_points`]-th nearest
-//!   constraint when it holds fewer), fitted with r³ + linear (as
-//!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball;
-//!   patches are solved in parallel.
+//!   half-diagonal around its centre, fitted with r³ + linear (as
+//!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball
+//!   (completed, when they are fewer than [`Settings::min_points`], by constraints spread over a
+//!   larger ball, from the subsampled levels of [`coarse`]); patches are solved in parallel.
 //! - [`blend`]: f = Σ w_i f_i / Σ w_i with compactly supported C² weights. Each patch whose
 //!   weight is non-zero at a constraint interpolates it, so the blend interpolates every
 //!   constraint to the patches' residual.
 
 pub mod blend;
+pub mod coarse;
 pub mod octree;
 pub mod patches;
 
@@ -35,11 +36,11 @@ pub struct Settings {
     /// Support radius of a leaf's patch over the leaf's half-diagonal (> 1, so that the supports
     /// overlap and each covers its leaf).
     pub overlap: f64,
-    /// Leaves also split until the ball of their patch (before growing to `min_points`) holds
-    /// at most this many constraints: this bounds the patches of the empty leaves next to the
-    /// data.
+    /// Leaves also split until the ball of their patch holds at most this many constraints, and
+    /// completed systems stay within it: no patch interpolates more.
     pub max_patch: usize,
-    /// Fewest constraints a patch interpolates: smaller supports grow until they hold this many.
+    /// Patches whose support holds fewer constraints complete their system with constraints
+    /// from outside it (see [`coarse`]).
     pub min_points: usize,
     pub kernel: Kernel,
     /// Added to the diagonal of each patch's kernel block; 0 interpolates exactly.
@@ -192,13 +193,21 @@ impl PartitionSurface {
                     settings.max_patch,
                 )
         });
-        let supports = patches::supports(&tree, &c.points, settings);
-        let sizes: Vec<usize> = supports.iter().map(|s| s.2).collect();
+        let levels = coarse::levels(
+            &c.points,
+            c.boundary,
+            settings.max_patch,
+            centre,
+            half,
+            settings.max_per_leaf,
+        );
+        let supports = patches::supports(&tree, &c.points, &levels, settings);
+        let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
             + (c.points.len() * 48) as u64
             + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
         patches::check_memory(bytes, settings.memory_limit)?;
-        let fitted = patches::fit(&tree, &c, &supports, settings)?;
+        let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
         let (cover_start, cover) = patches::cover(&tree, &fitted);
         Ok(PartitionSurface {
@@ -229,7 +238,7 @@ impl PartitionSurface {
     pub fn residual(&self) -> f64 {
         self.residual
     }
-    /// The patches (centre, support radius, number of constraints, fit).
+    /// The patches (centre, support radius, numbers of constraints, fit).
     pub fn patches(&self) -> &[Patch] {
         &self.patches
     }

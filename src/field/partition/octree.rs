@@ -3,6 +3,7 @@
 //! cube (empty leaves included) and every point of the cube lies in exactly one leaf.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Depth at which leaves stop splitting whatever they hold (coincident points).
 const MAX_DEPTH: u32 = 24;
@@ -71,7 +72,7 @@ impl Octree {
         points: &[DVec3],
         centre: DVec3,
         half: f64,
-        split: impl Fn(&Node) -> bool,
+        split: impl Fn(&Node) -> bool + Sync,
     ) -> Octree {
         let mut nodes = vec![Node {
             centre,
@@ -83,11 +84,22 @@ impl Octree {
         let mut order: Vec<u32> = (0..points.len() as u32).collect();
         let mut scratch = vec![0u32; points.len()];
         let mut depth = vec![0u32];
-        let mut k = 0;
-        while k < nodes.len() {
-            let n = nodes[k];
-            let count = (n.end - n.start) as usize;
-            if depth[k] < MAX_DEPTH && split(&n) {
+        // Level by level (the nodes of one level are consecutive): the decisions in parallel,
+        // the splits in node order.
+        let mut level = 0..1;
+        while !level.is_empty() {
+            let decisions: Vec<bool> = nodes[level.clone()]
+                .par_iter()
+                .zip(&depth[level.clone()])
+                .map(|(n, &d)| d < MAX_DEPTH && split(n))
+                .collect();
+            let next = nodes.len();
+            for (k, &yes) in level.clone().zip(&decisions) {
+                if !yes {
+                    continue;
+                }
+                let n = nodes[k];
+                let count = (n.end - n.start) as usize;
                 // Stable counting sort of the node's run by octant.
                 let run = &mut order[n.start as usize..n.end as usize];
                 let mut bounds = [0usize; 9];
@@ -119,7 +131,7 @@ impl Octree {
                     depth.push(depth[k] + 1);
                 }
             }
-            k += 1;
+            level = next..nodes.len();
         }
         let mut leaves = Vec::new();
         let mut leaf_slot = vec![u32::MAX; nodes.len()];

@@ -1,8 +1,10 @@
 //! The patches of a partition-of-unity fit: one per octree leaf, a ball around the leaf's centre
-//! whose radius is `overlap` × the leaf's half-diagonal, or the distance to the centre's
-//! `min_points`-th nearest constraint when that is larger, fitted to **every** constraint inside
-//! the ball, so that every patch whose weight is non-zero at a constraint interpolates it.
+//! of radius `overlap` × the leaf's half-diagonal, fitted to **every** constraint inside the
+//! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
+//! ball holds fewer than `min_points` constraints, the system is completed with constraints
+//! outside it, spread over a larger ball (see [`super::coarse`]).
 
+use super::coarse::Level;
 use super::octree::Octree;
 use super::Settings;
 use crate::error::{Error, Result};
@@ -18,30 +20,92 @@ pub struct Patch {
     pub centre: DVec3,
     /// Support radius: the patch's weight is zero from this distance on.
     pub radius: f64,
-    /// Number of constraints it interpolates.
+    /// Number of constraints inside the support (all interpolated).
+    pub inside: usize,
+    /// Number of constraints it interpolates (`inside`, and those completing a small system).
     pub size: usize,
     pub fit: VariationalSurface,
 }
 
-/// Ball (centre, radius) and constraint count of each leaf's patch.
-pub fn supports(tree: &Octree, points: &[DVec3], settings: &Settings) -> Vec<(DVec3, f64, usize)> {
+/// Where a patch's system comes from.
+#[derive(Clone, Copy, Debug)]
+pub struct Support {
+    pub centre: DVec3,
+    pub radius: f64,
+    /// Constraints within `radius`.
+    pub inside: usize,
+    /// For small systems: the level (index into the coarse levels) and the radius of the ball
+    /// whose constraints outside `radius` complete the system, and how many they are.
+    pub extra: Option<(usize, f64, usize)>,
+}
+
+impl Support {
+    pub fn size(&self) -> usize {
+        self.inside + self.extra.map_or(0, |e| e.2)
+    }
+}
+
+/// The support of each leaf's patch.
+pub fn supports(
+    tree: &Octree,
+    points: &[DVec3],
+    levels: &[Level],
+    settings: &Settings,
+) -> Vec<Support> {
     let want = settings.min_points.min(points.len());
     tree.leaves
         .par_iter()
         .map(|&k| {
             let n = &tree.nodes[k as usize];
-            let mut r = settings.overlap * n.half_diagonal();
-            let mut count = tree.count_within(points, n.centre, r);
-            if count < want {
-                r = r.max(tree.kth_nearest_distance(points, n.centre, want));
-                count = tree.count_within(points, n.centre, r);
-                // The square of the rounded square root may fall short of the squared distance.
-                while count < want {
-                    r = r.next_up();
-                    count = tree.count_within(points, n.centre, r);
+            let r = settings.overlap * n.half_diagonal();
+            let inside = tree.count_within(points, n.centre, r);
+            let mut s = Support {
+                centre: n.centre,
+                radius: r,
+                inside,
+                extra: None,
+            };
+            if inside >= want {
+                return s;
+            }
+            // A ball reaching one support radius past the `want`-th nearest constraint.
+            let reach = tree.kth_nearest_distance(points, n.centre, want).max(r) + r;
+            let budget = settings.max_patch.saturating_sub(inside);
+            let count_outside = |pts: &[DVec3], t: &Octree| {
+                let mut m = 0;
+                t.for_each_within(pts, n.centre, reach, |i| {
+                    if (pts[i as usize] - n.centre).length_squared() > r * r {
+                        m += 1;
+                    }
+                });
+                m
+            };
+            let full = count_outside(points, tree);
+            // The finest level whose share of the ball fits the budget; a finer one when that
+            // leaves too few constraints for a fit.
+            let mut choice = (usize::MAX, full);
+            if full > budget {
+                for (l, level) in levels.iter().enumerate() {
+                    let last = l + 1 == levels.len();
+                    if !last
+                        && level
+                            .tree
+                            .more_within_than(&level.points, n.centre, reach, budget)
+                    {
+                        continue;
+                    }
+                    let m = count_outside(&level.points, &level.tree);
+                    if inside + m >= 16 {
+                        choice = (l, m);
+                    } else if l > 0 {
+                        let finer = &levels[l - 1];
+                        choice = (l - 1, count_outside(&finer.points, &finer.tree));
+                    }
+                    break;
                 }
             }
-            (n.centre, r, count)
+            s.extra = Some((choice.0, reach, choice.1));
+            s
         })
         .collect()
 }
@@ -68,7 +132,8 @@ pub fn estimate_bytes(sizes: &[usize], threads: usize) -> u64 {
 pub fn fit(
     tree: &Octree,
     c: &Constraints,
-    supports: &[(DVec3, f64, usize)],
+    levels: &[Level],
+    supports: &[Support],
     settings: &Settings,
 ) -> Result<Vec<Patch>> {
     let rbf_settings = rbf::Settings {
@@ -78,16 +143,35 @@ pub fn fit(
     };
     let fitted: Vec<Result<Patch>> = supports
         .par_iter()
-        .map(|&(centre, radius, size)| {
-            let mut idx = Vec::with_capacity(size);
+        .map(|s| {
+            let (centre, radius) = (s.centre, s.radius);
+            let mut idx = Vec::with_capacity(s.size());
             tree.for_each_within(&c.points, centre, radius, |i| idx.push(i));
+            let mut outside = Vec::new();
+            if let Some((l, reach, _)) = s.extra {
+                let (pts, t, index): (&[DVec3], &Octree, Option<&[u32]>) = if l == usize::MAX {
+                    (&c.points, tree, None)
+                } else {
+                    let lv = &levels[l];
+                    (&lv.points, &lv.tree, Some(&lv.index))
+                };
+                t.for_each_within(pts, centre, reach, |i| {
+                    if (pts[i as usize] - centre).length_squared() > radius * radius {
+                        outside.push(index.map_or(i, |x| x[i as usize]));
+                    }
+                });
+            }
             idx.sort_unstable();
+            outside.sort_unstable();
+            let inside = idx.len();
+            idx.extend_from_slice(&outside);
             let pts: Vec<DVec3> = idx.iter().map(|&i| c.points[i as usize]).collect();
             let vals: Vec<f64> = idx.iter().map(|&i| c.values[i as usize]).collect();
             let fit = VariationalSurface::fit_patch(pts, vals, &rbf_settings, Par::Seq)?;
             Ok(Patch {
                 centre,
                 radius,
+                inside,
                 size: idx.len(),
                 fit,
             })

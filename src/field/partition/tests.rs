@@ -68,9 +68,15 @@ fn patches_hold_every_constraint_of_their_support() {
             .iter()
             .filter(|q| (**q - p.centre).length_squared() <= p.radius * p.radius)
             .count();
-        assert_eq!(p.size, inside, "patch {i}");
-        assert!(p.size >= s.settings().min_points);
+        assert_eq!(p.inside, inside, "patch {i}");
+        assert!(p.size >= p.inside.max(16), "patch {i}");
         assert!(p.size <= s.settings().max_patch, "patch {i}: {}", p.size);
+        // The patch interpolates every constraint inside its support.
+        for (q, v) in c.points.iter().zip(&c.values) {
+            if (*q - p.centre).length_squared() <= p.radius * p.radius {
+                assert!((p.fit.value(*q) - v).abs() <= 1e-11, "patch {i}");
+            }
+        }
         // Each patch's ball covers its leaf (with room: the weight is positive on the leaf).
         let leaf = &t.nodes[t.leaves[i] as usize];
         assert_eq!(leaf.centre, p.centre);
