@@ -17,8 +17,8 @@ use pyo3::types::PyDict;
 use std::sync::Arc;
 
 /// Constraints (2 per data point for `fit` and `from_mesh`) from which `method="auto"` fits a
-/// partition of unity instead of one global system: about where the partition fit becomes the
-/// faster of the two (both interpolate to rounding).
+/// partition of unity instead of one global system. Below it the dense system stays small, and
+/// the global fit, the exact minimiser of the interpolation energy, is kept.
 pub const AUTO_PARTITION_CONSTRAINTS: usize = 4000;
 
 /// The fitted surface behind the Python class: one global system, or a partition of unity.
@@ -129,9 +129,12 @@ fn run(
 /// the constraints with an octree into overlapping patches of a few hundred, fits each patch
 /// the same way and blends them, f = Σ w_i f_i / Σ w_i with compactly supported C² weights
 /// w_i = (1 − |x − c_i|²/R_i²)³₊. Every patch whose weight is non-zero at a constraint
-/// interpolates it, so both fits interpolate every constraint. ``"auto"`` (default) uses the
-/// global fit below 4000 constraints (2000 points for :meth:`fit` and :meth:`from_mesh`) and
-/// the partition above.
+/// interpolates it, so both fits interpolate every constraint; away from the data the partition
+/// fit differs slightly from the global one (the global fit minimises the energy over all the
+/// data at once). ``"auto"`` (default) uses the global fit below 4000 constraints (2000 points
+/// for :meth:`fit` and :meth:`from_mesh`) and the partition from there on. Attributes that
+/// describe one global system (:attr:`weights`, :attr:`polynomial`) raise ``ValueError`` for a
+/// partition fit, which has :attr:`patches` instead.
 #[pyclass(name = "VariationalSurface", module = "implicitmesh", frozen)]
 pub struct PyVariationalSurface {
     pub inner: Fitted,

@@ -36,11 +36,11 @@ pub struct Settings {
     /// Support radius of a leaf's patch over the leaf's half-diagonal (> 1, so that the supports
     /// overlap and each covers its leaf).
     pub overlap: f64,
-    /// Leaves also split until the ball of their patch holds at most this many constraints, and
-    /// completed systems stay within it: no patch interpolates more.
+    /// Leaves also split until the ball of their patch holds at most this many constraints;
+    /// completed systems (see [`patches`]) hold at most 3/2 of it.
     pub max_patch: usize,
     /// Patches whose support holds fewer constraints complete their system with constraints
-    /// from outside it (see [`coarse`]).
+    /// from outside it (see [`patches`] and [`coarse`]).
     pub min_points: usize,
     pub kernel: Kernel,
     /// Added to the diagonal of each patch's kernel block; 0 interpolates exactly.

@@ -1,8 +1,9 @@
 //! The patches of a partition-of-unity fit: one per octree leaf, a ball around the leaf's centre
 //! of radius `overlap` × the leaf's half-diagonal, fitted to **every** constraint inside the
 //! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
-//! ball holds fewer than `min_points` constraints, the system is completed with constraints
-//! outside it, spread over a larger ball (see [`super::coarse`]).
+//! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], the
+//! system is completed with up to max(`max_patch` − inside, `max_patch` / 2) constraints outside
+//! it, spread over a larger ball (see [`super::coarse`]).
 
 use super::coarse::Level;
 use super::octree::Octree;
@@ -45,6 +46,10 @@ impl Support {
     }
 }
 
+/// Leaves holding fewer constraints than this have their patch's system completed (see
+/// [`super::coarse`]).
+pub const SPARSE_LEAF: usize = 16;
+
 /// The support of each leaf's patch.
 pub fn supports(
     tree: &Octree,
@@ -65,12 +70,18 @@ pub fn supports(
                 inside,
                 extra: None,
             };
-            if inside >= want {
+            // Leaves with (almost) no constraints of their own see the data only at the edge
+            // of their support: those are completed too, however many constraints it holds.
+            let own = (n.end - n.start) as usize;
+            if inside >= want && own >= SPARSE_LEAF {
                 return s;
             }
             // A ball reaching one support radius past the `want`-th nearest constraint.
             let reach = tree.kth_nearest_distance(points, n.centre, want).max(r) + r;
-            let budget = settings.max_patch.saturating_sub(inside);
+            let budget = settings
+                .max_patch
+                .saturating_sub(inside)
+                .max(settings.max_patch / 2);
             let count_outside = |pts: &[DVec3], t: &Octree| {
                 let mut m = 0;
                 t.for_each_within(pts, n.centre, reach, |i| {
