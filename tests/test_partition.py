@@ -158,11 +158,16 @@ def test_interpolate_and_from_mesh_partition():
 
 
 def test_auto_chooses_by_size():
-    p, n = shapes.fibonacci_sphere(300)
+    # Global below 2000 constraints: 1000 points with normals, 2000 interpolated values.
+    p, n = shapes.fibonacci_sphere(999)
     assert VariationalSurface.fit(p, n).method == "global"
-    p, n = shapes.fibonacci_sphere(2000)
+    p, n = shapes.fibonacci_sphere(1000)
     assert VariationalSurface.fit(p, n).method == "partition"
     assert VariationalSurface.fit(p, n, method="global").method == "global"
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-1, 1, size=(2000, 3))
+    assert VariationalSurface.interpolate(q[:1999], q[:1999, 0]).method == "global"
+    assert VariationalSurface.interpolate(q, q[:, 0]).method == "partition"
 
 
 def test_method_and_bad_input_errors():

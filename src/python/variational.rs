@@ -17,9 +17,10 @@ use pyo3::types::PyDict;
 use std::sync::Arc;
 
 /// Constraints (2 per data point for `fit` and `from_mesh`) from which `method="auto"` fits a
-/// partition of unity instead of one global system. Below it the dense system stays small, and
-/// the global fit, the exact minimiser of the interpolation energy, is kept.
-pub const AUTO_PARTITION_CONSTRAINTS: usize = 4000;
+/// partition of unity instead of one global system: about where the partition fit becomes the
+/// faster, at the same distance to the sampled surface (see benchmarks/bench_partition.py,
+/// `crossover`).
+pub const AUTO_PARTITION_CONSTRAINTS: usize = 2000;
 
 /// The fitted surface behind the Python class: one global system, or a partition of unity.
 #[derive(Clone)]
@@ -131,8 +132,9 @@ fn run(
 /// w_i = (1 − |x − c_i|²/R_i²)³₊. Every patch whose weight is non-zero at a constraint
 /// interpolates it, so both fits interpolate every constraint; away from the data the partition
 /// fit differs slightly from the global one (the global fit minimises the energy over all the
-/// data at once). ``"auto"`` (default) uses the global fit below 4000 constraints (2000 points
-/// for :meth:`fit` and :meth:`from_mesh`) and the partition from there on. Attributes that
+/// data at once). ``"auto"`` (default) uses the global fit below 2000 constraints (1000 points
+/// for :meth:`fit` and :meth:`from_mesh`), about where the partition fit becomes the faster,
+/// and the partition from there on. Attributes that
 /// describe one global system (:attr:`weights`, :attr:`polynomial`) raise ``ValueError`` for a
 /// partition fit, which has :attr:`patches` instead.
 #[pyclass(name = "VariationalSurface", module = "implicitmesh", frozen)]
@@ -196,7 +198,7 @@ impl PyVariationalSurface {
     ///     at once (``"partition"``) need more bytes than this (default 8 GiB).
     /// method : {"auto", "global", "partition"}
     ///     One dense system, or a partition of unity of patches (see the class docstring);
-    ///     ``"auto"`` (default): global below 2000 points, partition from 2000 on.
+    ///     ``"auto"`` (default): global below 1000 points, partition from 1000 on.
     ///
     /// Returns
     /// -------
@@ -263,7 +265,7 @@ impl PyVariationalSurface {
     /// faces : (F, 3) int
     ///     Vertex indices of each triangle.
     /// d, w, kernel, smoothing, memory_limit, method
-    ///     As for :meth:`fit` (``"auto"``: global below 2000 vertices).
+    ///     As for :meth:`fit` (``"auto"``: global below 1000 vertices).
     ///
     /// Raises
     /// ------
@@ -306,7 +308,7 @@ impl PyVariationalSurface {
     /// points : (N, 3) float64
     /// values : (N,) float64
     /// kernel, smoothing, memory_limit, method
-    ///     As for :meth:`fit` (``"auto"``: global below 4000 points).
+    ///     As for :meth:`fit` (``"auto"``: global below 2000 points).
     ///
     /// Returns
     /// -------
