@@ -408,6 +408,58 @@ mod tests {
     }
 
     #[test]
+    fn grid_search_gives_the_all_pairs_offsets_and_duplicates() {
+        use crate::field::testing::random_points;
+        // Clustered points (a dense blob inside a sparse cloud), so that many offsets shrink.
+        let mut pts = random_points(1500, -1.0, 1.0, 31);
+        pts.extend(random_points(1500, -0.05, 0.05, 32));
+        let normals = random_points(3000, -1.0, 1.0, 33);
+        let d = 0.03;
+        let c = place(
+            &pts,
+            &normals,
+            &Settings {
+                d: Some(d),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        // The rule with every pair of points.
+        let mut shrunk = 0;
+        for i in 0..pts.len() {
+            let n = normals[i].normalize();
+            let mut di = d;
+            for _ in 0..60 {
+                let p = pts[i] + n * di;
+                let ok = (0..pts.len()).all(|j| {
+                    j == i
+                        || (pts[j] - pts[i]).length_squared() > 4.0 * d * d
+                        || (pts[j] - p).length() >= di
+                });
+                if ok {
+                    break;
+                }
+                di *= 0.5;
+            }
+            assert_eq!(c.offsets[i].to_bits(), di.to_bits(), "point {i}");
+            shrunk += (di < d) as usize;
+        }
+        assert!(shrunk > 100, "{shrunk}");
+        // Duplicates: the first pair in (first, second) order, as all pairs find it.
+        let mut dup = pts.clone();
+        dup.push(pts[2000] + DVec3::splat(1e-13));
+        dup.push(pts[17]);
+        assert!(matches!(
+            check_duplicates("points", &dup, 1e-12),
+            Err(Error::DuplicatePoints {
+                first: 17,
+                second: 3001,
+                ..
+            })
+        ));
+    }
+
+    #[test]
     fn shrinks_offsets_near_other_points() {
         let mut pts = cube_points();
         let mut normals: Vec<DVec3> = pts.iter().map(|p| *p - DVec3::splat(0.5)).collect();
