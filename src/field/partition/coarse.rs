@@ -45,7 +45,7 @@ pub fn levels(
     while size > smallest && step < 1 << 60 {
         step *= 8;
         let index: Vec<u32> = (0..points.len() as u32)
-            .filter(|&i| splitmix(i as u64 % boundary) % step == 0)
+            .filter(|&i| splitmix(i as u64 % boundary).is_multiple_of(step))
             .collect();
         let pts: Vec<DVec3> = index.iter().map(|&i| points[i as usize]).collect();
         let tree = Octree::new(&pts, centre, half, max_per_leaf);
