@@ -9,6 +9,7 @@ __version__: str
 
 ArrayLike = npt.ArrayLike
 Kernel = Literal["triharmonic", "biharmonic", "thin_plate"]
+FitMethod = Literal["auto", "global", "partition"]
 
 class VariationalSurface:
     @staticmethod
@@ -21,6 +22,7 @@ class VariationalSurface:
         kernel: Kernel = "triharmonic",
         smoothing: float = 0.0,
         memory_limit: int | None = None,
+        method: FitMethod = "auto",
     ) -> VariationalSurface: ...
     @staticmethod
     def from_mesh(
@@ -32,6 +34,7 @@ class VariationalSurface:
         kernel: Kernel = "triharmonic",
         smoothing: float = 0.0,
         memory_limit: int | None = None,
+        method: FitMethod = "auto",
     ) -> VariationalSurface: ...
     @staticmethod
     def interpolate(
@@ -41,6 +44,7 @@ class VariationalSurface:
         kernel: Kernel = "triharmonic",
         smoothing: float = 0.0,
         memory_limit: int | None = None,
+        method: FitMethod = "auto",
     ) -> VariationalSurface: ...
     def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
     def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
@@ -56,6 +60,10 @@ class VariationalSurface:
     def constraints(self) -> dict[str, Any]: ...
     @property
     def kernel(self) -> str: ...
+    @property
+    def method(self) -> Literal["global", "partition"]: ...
+    @property
+    def patches(self) -> dict[str, npt.NDArray[Any]]: ...
     @property
     def residual(self) -> float: ...
     @property

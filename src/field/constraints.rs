@@ -4,6 +4,7 @@
 //! `q_i` itself. Also the checks on the data (count, finiteness, duplicates, coplanarity) and
 //! vertex normals of triangle meshes.
 
+use super::grid::Grid;
 use crate::error::{check_finite_points, Error, Result};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -103,30 +104,39 @@ pub fn check_points(name: &'static str, points: &[DVec3]) -> Result<()> {
     Ok(())
 }
 
-/// For each point, the indices of the other points within `radius` (brute force, parallel).
+/// For each point, the indices of the other points within `radius`, increasing (uniform grid,
+/// parallel over the points).
 fn neighbours_within(points: &[DVec3], radius: f64) -> Vec<Vec<u32>> {
-    let r2 = radius * radius;
+    let grid = Grid::new(points, radius);
     points
         .par_iter()
         .enumerate()
         .map(|(i, p)| {
-            points
-                .iter()
-                .enumerate()
-                .filter(|(j, q)| *j != i && (**q - *p).length_squared() <= r2)
-                .map(|(j, _)| j as u32)
-                .collect()
+            let mut near = grid.within(*p, radius);
+            near.retain(|&j| j as usize != i);
+            near
         })
         .collect()
 }
 
-/// Errors on the first pair of points closer than `tol`.
+/// Errors on the first pair of points closer than `tol`: the smallest `first`, and for it the
+/// smallest `second > first`.
 pub fn check_duplicates(name: &'static str, points: &[DVec3], tol: f64) -> Result<()> {
+    // The grid compares squared distances; a slightly larger radius keeps every pair that the
+    // exact test below accepts.
+    let reach = tol * (1.0 + 1e-9) + f64::MIN_POSITIVE;
+    let grid = Grid::new(points, reach);
     let found = points.par_iter().enumerate().find_map_first(|(i, p)| {
-        points[i + 1..]
-            .iter()
-            .position(|q| (*q - *p).length() <= tol)
-            .map(|k| (i, i + 1 + k, (points[i + 1 + k] - *p).length()))
+        let mut second: Option<u32> = None;
+        grid.for_each_within(*p, reach, |j| {
+            if j as usize > i
+                && (points[j as usize] - *p).length() <= tol
+                && second.is_none_or(|s| j < s)
+            {
+                second = Some(j);
+            }
+        });
+        second.map(|j| (i, j as usize, (points[j as usize] - *p).length()))
     });
     match found {
         Some((first, second, distance)) => Err(Error::DuplicatePoints {
@@ -392,6 +402,58 @@ mod tests {
             Err(Error::DuplicatePoints {
                 first: 3,
                 second: 8,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn grid_search_gives_the_all_pairs_offsets_and_duplicates() {
+        use crate::field::testing::random_points;
+        // Clustered points (a dense blob inside a sparse cloud), so that many offsets shrink.
+        let mut pts = random_points(1500, -1.0, 1.0, 31);
+        pts.extend(random_points(1500, -0.05, 0.05, 32));
+        let normals = random_points(3000, -1.0, 1.0, 33);
+        let d = 0.03;
+        let c = place(
+            &pts,
+            &normals,
+            &Settings {
+                d: Some(d),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        // The rule with every pair of points.
+        let mut shrunk = 0;
+        for i in 0..pts.len() {
+            let n = normals[i].normalize();
+            let mut di = d;
+            for _ in 0..60 {
+                let p = pts[i] + n * di;
+                let ok = (0..pts.len()).all(|j| {
+                    j == i
+                        || (pts[j] - pts[i]).length_squared() > 4.0 * d * d
+                        || (pts[j] - p).length() >= di
+                });
+                if ok {
+                    break;
+                }
+                di *= 0.5;
+            }
+            assert_eq!(c.offsets[i].to_bits(), di.to_bits(), "point {i}");
+            shrunk += (di < d) as usize;
+        }
+        assert!(shrunk > 100, "{shrunk}");
+        // Duplicates: the first pair in (first, second) order, as all pairs find it.
+        let mut dup = pts.clone();
+        dup.push(pts[2000] + DVec3::splat(1e-13));
+        dup.push(pts[17]);
+        assert!(matches!(
+            check_duplicates("points", &dup, 1e-12),
+            Err(Error::DuplicatePoints {
+                first: 17,
+                second: 3001,
                 ..
             })
         ));

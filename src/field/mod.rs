@@ -8,7 +8,9 @@
 pub mod analytic;
 pub mod blob;
 pub mod constraints;
+pub mod grid;
 pub mod kernel;
+pub mod partition;
 pub mod rbf;
 pub mod saddle;
 pub mod voxels;

@@ -13,6 +13,7 @@ use super::kernel::{
 use super::saddle::SaddleSolver;
 use super::Field;
 use crate::error::{check_finite_values, Error, Result};
+use faer::Par;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -99,7 +100,7 @@ impl VariationalSurface {
     ) -> Result<Self> {
         check_system_memory(2 * points.len(), settings.memory_limit)?;
         let c = constraints::place(points, normals, placement)?;
-        Self::solve(c, settings)
+        Self::solve(c, settings, faer::get_global_parallelism())
     }
 
     /// Fits a surface to the vertices of a triangle mesh, with area-weighted vertex normals
@@ -114,7 +115,7 @@ impl VariationalSurface {
         check_system_memory(2 * v.len(), settings.memory_limit)?;
         let caps = constraints::crease_caps(&v, &f, &n);
         let c = constraints::place_capped(&v, &n, placement, Some(&caps))?;
-        Self::solve(c, settings)
+        Self::solve(c, settings, faer::get_global_parallelism())
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
@@ -139,10 +140,10 @@ impl VariationalSurface {
             offsets: vec![],
             boundary: points.len(),
         };
-        Self::solve(c, settings)
+        Self::solve(c, settings, faer::get_global_parallelism())
     }
 
-    fn solve(c: Constraints, settings: &Settings) -> Result<Self> {
+    fn solve(c: Constraints, settings: &Settings, par: Par) -> Result<Self> {
         if !(settings.smoothing.is_finite() && settings.smoothing >= 0.0) {
             return Err(Error::invalid(
                 "smoothing",
@@ -163,7 +164,13 @@ impl VariationalSurface {
         // Symmetric indefinite saddle-point system: see `saddle.rs` for the factorization
         // (null-space Cholesky, falling back to Bunch–Kaufman LBLᵀ) and why.
         let smoothing = settings.smoothing * scale.powi(kernel.degree());
-        let solver = SaddleSolver::new(&np, move |r| kernel.phi(r), smoothing, kernel.cpd_sign());
+        let solver = SaddleSolver::with_parallelism(
+            &np,
+            move |r| kernel.phi(r),
+            smoothing,
+            kernel.cpd_sign(),
+            par,
+        );
         let (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
         let mut x = (lam0, a0);
 
@@ -283,29 +290,62 @@ impl VariationalSurface {
         to_norm: impl Fn(DVec3) -> DVec3 + Sync,
     ) {
         assert_eq!(points.len(), out.len());
-        let [a, bx, by, bz] = self.npoly;
         points
             .par_chunks(EVAL_CHUNK)
             .zip(out.par_chunks_mut(EVAL_CHUNK))
-            .for_each(|(p, o)| {
-                let nb = p.len().div_ceil(LANES);
-                let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
-                for (k, b) in blocks[..nb].iter_mut().enumerate() {
-                    for l in 0..LANES {
-                        let q = to_norm(p[(k * LANES + l).min(p.len() - 1)]);
-                        b.x[l] = q.x;
-                        b.y[l] = q.y;
-                        b.z[l] = q.z;
-                    }
+            .for_each(|(p, o)| self.values_chunk(p, o, &to_norm));
+    }
+
+    /// Values at up to [`EVAL_CHUNK`] points.
+    fn values_chunk(&self, p: &[DVec3], o: &mut [f64], to_norm: &impl Fn(DVec3) -> DVec3) {
+        let [a, bx, by, bz] = self.npoly;
+        let nb = p.len().div_ceil(LANES);
+        let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
+        for (k, b) in blocks[..nb].iter_mut().enumerate() {
+            for l in 0..LANES {
+                let q = to_norm(p[(k * LANES + l).min(p.len() - 1)]);
+                b.x[l] = q.x;
+                b.y[l] = q.y;
+                b.z[l] = q.z;
+            }
+        }
+        let mut sums = [[0.0; LANES]; EVAL_CHUNK / LANES];
+        dispatch_values(self.kernel, &self.soa, &blocks[..nb], &mut sums[..nb]);
+        for (i, oi) in o.iter_mut().enumerate() {
+            let (k, l) = (i / LANES, i % LANES);
+            let b = &blocks[k];
+            *oi = sums[k][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
+        }
+    }
+
+    /// Values, and gradients when `gradients` is given, at points in the caller's coordinates,
+    /// on the calling thread (for callers that split the work themselves). The bits are those of
+    /// [`Field::values`] and [`VariationalSurface::values_gradients`].
+    pub(crate) fn eval_on_this_thread(
+        &self,
+        points: &[DVec3],
+        values: &mut [f64],
+        gradients: Option<&mut [DVec3]>,
+    ) {
+        assert_eq!(points.len(), values.len());
+        let (shift, scale) = (self.shift, self.scale);
+        match gradients {
+            None => {
+                for (p, o) in points.chunks(EVAL_CHUNK).zip(values.chunks_mut(EVAL_CHUNK)) {
+                    self.values_chunk(p, o, &|p| (p - shift) * scale);
                 }
-                let mut sums = [[0.0; LANES]; EVAL_CHUNK / LANES];
-                dispatch_values(self.kernel, &self.soa, &blocks[..nb], &mut sums[..nb]);
-                for (i, oi) in o.iter_mut().enumerate() {
-                    let (k, l) = (i / LANES, i % LANES);
-                    let b = &blocks[k];
-                    *oi = sums[k][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
+            }
+            Some(g) => {
+                assert_eq!(points.len(), g.len());
+                for ((p, v), g) in points
+                    .chunks(EVAL_CHUNK)
+                    .zip(values.chunks_mut(EVAL_CHUNK))
+                    .zip(g.chunks_mut(EVAL_CHUNK))
+                {
+                    self.gradients_chunk(p, Some(v), g);
                 }
-            });
+            }
+        }
     }
 
     /// Values and gradients at many points (gradients in the caller's coordinates).
@@ -323,44 +363,8 @@ impl VariationalSurface {
         gradients: &mut [DVec3],
     ) {
         assert_eq!(points.len(), gradients.len());
-        let [a, bx, by, bz] = self.npoly;
-        let (shift, scale) = (self.shift, self.scale);
-        let with_values = values.is_some();
-        let chunk = |p: &[DVec3], v: Option<&mut [f64]>, g: &mut [DVec3]| {
-            let nb = p.len().div_ceil(LANES);
-            let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
-            for (k, b) in blocks[..nb].iter_mut().enumerate() {
-                for l in 0..LANES {
-                    let q = (p[(k * LANES + l).min(p.len() - 1)] - shift) * scale;
-                    b.x[l] = q.x;
-                    b.y[l] = q.y;
-                    b.z[l] = q.z;
-                }
-            }
-            let mut sums = [[[0.0; LANES]; 4]; EVAL_CHUNK / LANES];
-            dispatch_values_gradients(
-                self.kernel,
-                &self.soa,
-                &blocks[..nb],
-                &mut sums[..nb],
-                with_values,
-            );
-            for (i, g) in g.iter_mut().enumerate() {
-                let s = &sums[i / LANES];
-                *g = DVec3::new(
-                    s[1][i % LANES] + bx,
-                    s[2][i % LANES] + by,
-                    s[3][i % LANES] + bz,
-                ) * scale;
-            }
-            if let Some(v) = v {
-                for (i, v) in v.iter_mut().enumerate() {
-                    let (k, l) = (i / LANES, i % LANES);
-                    let b = &blocks[k];
-                    *v = sums[k][0][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
-                }
-            }
-        };
+        let chunk =
+            |p: &[DVec3], v: Option<&mut [f64]>, g: &mut [DVec3]| self.gradients_chunk(p, v, g);
         match values {
             Some(values) => points
                 .par_chunks(EVAL_CHUNK)
@@ -372,6 +376,81 @@ impl VariationalSurface {
                 .zip(gradients.par_chunks_mut(EVAL_CHUNK))
                 .for_each(|(p, g)| chunk(p, None, g)),
         }
+    }
+
+    /// Gradients, and values when `v` is given, at up to [`EVAL_CHUNK`] points in the caller's
+    /// coordinates.
+    fn gradients_chunk(&self, p: &[DVec3], v: Option<&mut [f64]>, g: &mut [DVec3]) {
+        let [a, bx, by, bz] = self.npoly;
+        let (shift, scale) = (self.shift, self.scale);
+        let nb = p.len().div_ceil(LANES);
+        let mut blocks = [Block::default(); EVAL_CHUNK / LANES];
+        for (k, b) in blocks[..nb].iter_mut().enumerate() {
+            for l in 0..LANES {
+                let q = (p[(k * LANES + l).min(p.len() - 1)] - shift) * scale;
+                b.x[l] = q.x;
+                b.y[l] = q.y;
+                b.z[l] = q.z;
+            }
+        }
+        let mut sums = [[[0.0; LANES]; 4]; EVAL_CHUNK / LANES];
+        dispatch_values_gradients(
+            self.kernel,
+            &self.soa,
+            &blocks[..nb],
+            &mut sums[..nb],
+            v.is_some(),
+        );
+        for (i, g) in g.iter_mut().enumerate() {
+            let s = &sums[i / LANES];
+            *g = DVec3::new(
+                s[1][i % LANES] + bx,
+                s[2][i % LANES] + by,
+                s[3][i % LANES] + bz,
+            ) * scale;
+        }
+        if let Some(v) = v {
+            for (i, v) in v.iter_mut().enumerate() {
+                let (k, l) = (i / LANES, i % LANES);
+                let b = &blocks[k];
+                *v = sums[k][0][l] + a + bx * b.x[l] + by * b.y[l] + bz * b.z[l];
+            }
+        }
+    }
+
+    /// Fits the interpolant of `points` and `values` as one patch of a partition-of-unity fit:
+    /// as [`VariationalSurface::interpolate`] without its checks, with the given parallelism
+    /// for the factorization, and keeping only what evaluation needs (the centres, weights and
+    /// constraints read back empty).
+    pub(crate) fn fit_patch(
+        points: Vec<DVec3>,
+        values: Vec<f64>,
+        settings: &Settings,
+        par: Par,
+    ) -> Result<Self> {
+        let boundary = points.len();
+        let c = Constraints {
+            points,
+            values,
+            offsets: vec![],
+            boundary,
+        };
+        let mut s = Self::solve(c, settings, par)?;
+        s.centers = vec![];
+        s.weights = vec![];
+        s.constraints = Constraints::default();
+        Ok(s)
+    }
+
+    /// Bytes a patch of `n` centres keeps after [`VariationalSurface::fit_patch`].
+    pub(crate) fn patch_bytes(n: usize) -> u64 {
+        (std::mem::size_of::<Self>() + 4 * 8 * n) as u64
+    }
+
+    /// Bytes the dense system of `n` constraints needs while it is solved.
+    pub(crate) fn system_bytes(n: usize) -> u64 {
+        let m = n as u64 + 4;
+        2 * m * m * 8
     }
 
     /// The kernel.
@@ -414,9 +493,8 @@ impl VariationalSurface {
 
 /// Errors when the dense system for `n` constraints would exceed `limit` bytes.
 fn check_system_memory(n: usize, limit: u64) -> Result<()> {
-    let m = n as u64 + 4;
     // The assembled matrix and the factor's copy.
-    let bytes = 2 * m * m * 8;
+    let bytes = VariationalSurface::system_bytes(n);
     if bytes > limit {
         return Err(Error::TooMuchMemory {
             name: "points",

@@ -48,10 +48,25 @@ pub struct SaddleSolver {
     factor: Factor,
 }
 
-fn assemble(points: &[DVec3], phi: &(impl Fn(f64) -> f64 + Sync), smoothing: f64) -> Vec<f64> {
+/// Calls `f(j, column j)` for the columns of the column-major `a` (`n` rows), over rayon unless
+/// `par` is [`Par::Seq`].
+fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) + Sync) {
+    if matches!(par, Par::Seq) {
+        a.chunks_mut(n).enumerate().for_each(|(j, c)| f(j, c));
+    } else {
+        a.par_chunks_mut(n).enumerate().for_each(|(j, c)| f(j, c));
+    }
+}
+
+fn assemble(
+    points: &[DVec3],
+    phi: &(impl Fn(f64) -> f64 + Sync),
+    smoothing: f64,
+    par: Par,
+) -> Vec<f64> {
     let n = points.len();
     let mut a = vec![0.0f64; n * n];
-    a.par_chunks_mut(n).enumerate().for_each(|(j, col)| {
+    for_columns(&mut a, n, par, |j, col| {
         let cj = points[j];
         for (i, x) in col.iter_mut().enumerate() {
             *x = phi((points[i] - cj).length());
@@ -70,16 +85,28 @@ impl SaddleSolver {
         smoothing: f64,
         sign: f64,
     ) -> Self {
+        Self::with_parallelism(points, phi, smoothing, sign, faer::get_global_parallelism())
+    }
+
+    /// As [`SaddleSolver::new`], with the parallelism of the assembly and factorization:
+    /// [`Par::Seq`] inside one's own rayon loops.
+    pub fn with_parallelism(
+        points: &[DVec3],
+        phi: impl Fn(f64) -> f64 + Sync,
+        smoothing: f64,
+        sign: f64,
+        par: Par,
+    ) -> Self {
         let n = points.len();
-        let a = assemble(points, &phi, smoothing);
-        if let Some(f) = Self::null_space(points, a, sign) {
+        let a = assemble(points, &phi, smoothing, par);
+        if let Some(f) = Self::null_space(points, a, sign, par) {
             return SaddleSolver { n, factor: f };
         }
         // Fallback: the whole (n + 4) × (n + 4) saddle-point matrix with LBLᵀ.
-        let a = assemble(points, &phi, smoothing);
+        let a = assemble(points, &phi, smoothing, par);
         let m = n + 4;
         let mut full = vec![0.0f64; m * m];
-        full.par_chunks_mut(m).enumerate().for_each(|(j, col)| {
+        for_columns(&mut full, m, par, |j, col| {
             if j < n {
                 col[..n].copy_from_slice(&a[j * n..(j + 1) * n]);
                 let c = points[j];
@@ -95,6 +122,8 @@ impl SaddleSolver {
             }
         });
         drop(a);
+        // faer's LBLᵀ constructor runs with the global parallelism whatever `par` says (it
+        // takes no parallelism argument); nested in a rayon loop it joins that loop's pool.
         let lblt = Lblt::new(MatRef::from_column_major_slice(&full, m, m), Side::Lower);
         SaddleSolver {
             n,
@@ -102,7 +131,7 @@ impl SaddleSolver {
         }
     }
 
-    fn null_space(points: &[DVec3], mut a: Vec<f64>, sign: f64) -> Option<Factor> {
+    fn null_space(points: &[DVec3], mut a: Vec<f64>, sign: f64, par: Par) -> Option<Factor> {
         let n = points.len();
         if n < 5 {
             return None;
@@ -158,16 +187,18 @@ impl SaddleSolver {
         }
         // QᵀAQ = A − V Zᵀ − Z Vᵀ with W = AV, S = Tᵀ(VᵀW)T, Z = WT − ½VS: one pass to read A
         // (W) and one to update it.
-        let w: Vec<[f64; 4]> = a
-            .par_chunks(n)
-            .map(|c| {
-                let mut o = [0.0; 4];
-                for (k, ok) in o.iter_mut().enumerate() {
-                    *ok = c.iter().zip(col(k)).map(|(x, y)| x * y).sum();
-                }
-                o
-            })
-            .collect();
+        let wcol = |c: &[f64]| {
+            let mut o = [0.0; 4];
+            for (k, ok) in o.iter_mut().enumerate() {
+                *ok = c.iter().zip(col(k)).map(|(x, y)| x * y).sum();
+            }
+            o
+        };
+        let w: Vec<[f64; 4]> = if matches!(par, Par::Seq) {
+            a.chunks(n).map(wcol).collect()
+        } else {
+            a.par_chunks(n).map(wcol).collect()
+        };
         let mut m = [[0.0; 4]; 4];
         for i in 0..4 {
             for j in 0..4 {
@@ -207,7 +238,7 @@ impl SaddleSolver {
         let vrows: Vec<[f64; 4]> = (0..n)
             .map(|q| [col(0)[q], col(1)[q], col(2)[q], col(3)[q]])
             .collect();
-        a.par_chunks_mut(n).enumerate().for_each(|(j, c)| {
+        for_columns(&mut a, n, par, |j, c| {
             let (vj, zj) = (vrows[j], z[j]);
             for (i, x) in c.iter_mut().enumerate() {
                 let (vi, zi) = (&vrows[i], &z[i]);
@@ -230,7 +261,6 @@ impl SaddleSolver {
             .collect();
         // In-place Cholesky of the trailing block (faer reads and writes its lower triangle).
         let mm = n - 4;
-        let par = faer::get_global_parallelism();
         let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
             mm,
             par,

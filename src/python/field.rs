@@ -3,8 +3,7 @@
 //! that called the polygonizer (never from a rayon worker), with the GIL re-acquired for the call.
 
 use super::blob::PyBlobField;
-use super::variational::PyVariationalSurface;
-use crate::field::rbf::VariationalSurface;
+use super::variational::{Fitted, PyVariationalSurface};
 use crate::field::Field;
 use glam::DVec3;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
@@ -92,7 +91,7 @@ impl Field for CallableField {
 /// A field argument resolved to something the core can run with the GIL released: take
 /// [`FieldArg::as_field`] before `py.detach` and use only that reference inside.
 pub enum FieldArg<'py> {
-    Variational(Arc<VariationalSurface>),
+    Variational(Fitted),
     Blob(PyRef<'py, PyBlobField>),
     Callable(Arc<CallableField>),
 }
@@ -119,7 +118,7 @@ impl<'py> FieldArg<'py> {
     /// The field as a core field (Sync, so the reference may cross `py.detach`).
     pub fn as_field(&self) -> &(dyn Field + '_) {
         match self {
-            FieldArg::Variational(v) => v.as_ref(),
+            FieldArg::Variational(v) => v.as_field(),
             FieldArg::Blob(b) => &b.inner,
             FieldArg::Callable(c) => c.as_ref(),
         }

@@ -6,6 +6,7 @@ use super::convert::{points, points_to_py, triangles, triangles_to_py};
 use super::errors::value_error;
 use super::field::FieldArg;
 use super::interrupt::run;
+use super::variational::Fitted;
 use crate::mesh::Mesh;
 use crate::polygonize::subdivision::{self, Settings, SubdivisionStats, MAX_LEVELS};
 use pyo3::prelude::*;
@@ -107,22 +108,22 @@ pub fn subdivide<'py>(
         }
     }
     let result = match &field {
-        FieldArg::Variational(s) => {
+        FieldArg::Variational(Fitted::Global(s)) => {
             let s = s.clone();
             run(py, None, false, move || {
                 subdivision::subdivide_surface(&s, &control, levels, &settings)
+            })
+        }
+        FieldArg::Variational(Fitted::Partition(_)) | FieldArg::Blob(_) => {
+            let f = field.as_field();
+            run(py, None, false, || {
+                subdivision::subdivide(f, &control, levels, &settings)
             })
         }
         FieldArg::Callable(_) => {
             let f = field.as_field();
             run(py, None, true, || {
                 subdivision::subdivide_by_differences(f, &control, levels, &settings, step)
-            })
-        }
-        FieldArg::Blob(_) => {
-            let f = field.as_field();
-            run(py, None, false, || {
-                subdivision::subdivide(f, &control, levels, &settings)
             })
         }
     };

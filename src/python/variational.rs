@@ -4,13 +4,129 @@ use super::convert::{
     field_gradients, field_values, points, points_to_py, triangles, values, values_to_py,
 };
 use super::errors::value_error;
-use crate::field::constraints;
+use crate::error::Result;
+use crate::field::constraints::{self, Constraints};
 use crate::field::kernel::Kernel;
+use crate::field::partition::{self, PartitionSurface};
 use crate::field::rbf::{self, VariationalSurface};
+use crate::field::Field;
 use glam::DVec3;
+use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
+
+/// Constraints (2 per data point for `fit` and `from_mesh`) from which `method="auto"` fits a
+/// partition of unity instead of one global system: about where the partition fit becomes the
+/// faster, at the same distance to the sampled surface (see benchmarks/bench_partition.py,
+/// `crossover`).
+pub const AUTO_PARTITION_CONSTRAINTS: usize = 2000;
+
+/// The fitted surface behind the Python class: one global system, or a partition of unity.
+#[derive(Clone)]
+pub enum Fitted {
+    Global(Arc<VariationalSurface>),
+    Partition(Arc<PartitionSurface>),
+}
+
+impl Fitted {
+    /// The surface as a core field.
+    pub fn as_field(&self) -> &(dyn Field + '_) {
+        match self {
+            Fitted::Global(s) => s.as_ref(),
+            Fitted::Partition(s) => s.as_ref(),
+        }
+    }
+    pub fn constraints(&self) -> &Constraints {
+        match self {
+            Fitted::Global(s) => s.constraints(),
+            Fitted::Partition(s) => s.constraints(),
+        }
+    }
+    fn kernel(&self) -> Kernel {
+        match self {
+            Fitted::Global(s) => s.kernel(),
+            Fitted::Partition(s) => s.kernel(),
+        }
+    }
+    fn residual(&self) -> f64 {
+        match self {
+            Fitted::Global(s) => s.residual(),
+            Fitted::Partition(s) => s.residual(),
+        }
+    }
+    fn data_bounding_box(&self) -> (DVec3, DVec3) {
+        match self {
+            Fitted::Global(s) => s.data_bounding_box(),
+            Fitted::Partition(s) => s.data_bounding_box(),
+        }
+    }
+    fn method(&self) -> &'static str {
+        match self {
+            Fitted::Global(_) => "global",
+            Fitted::Partition(_) => "partition",
+        }
+    }
+}
+
+/// How to fit: `"global"`, `"partition"`, or `"auto"` (decided by the number of constraints).
+#[derive(Clone, Copy, PartialEq)]
+enum Method {
+    Global,
+    Partition,
+    Auto,
+}
+
+fn parse_method(method: &str) -> PyResult<Method> {
+    match method {
+        "global" => Ok(Method::Global),
+        "partition" => Ok(Method::Partition),
+        "auto" => Ok(Method::Auto),
+        _ => Err(value_error(
+            "method",
+            format!("unknown method {method:?}; use \"auto\", \"global\" or \"partition\""),
+        )),
+    }
+}
+
+/// Runs the global or the partition fit (with the GIL released), as `method` and the number of
+/// constraints decide.
+fn run(
+    py: Python<'_>,
+    method: Method,
+    constraints: usize,
+    settings: rbf::Settings,
+    global: impl FnOnce(&rbf::Settings) -> Result<VariationalSurface> + Send,
+    partition: impl FnOnce(&partition::Settings) -> Result<PartitionSurface> + Send,
+) -> PyResult<PyVariationalSurface> {
+    let use_partition = match method {
+        Method::Global => false,
+        Method::Partition => true,
+        Method::Auto => constraints >= AUTO_PARTITION_CONSTRAINTS,
+    };
+    let inner = if use_partition {
+        let ps = partition::Settings {
+            kernel: settings.kernel,
+            smoothing: settings.smoothing,
+            memory_limit: settings.memory_limit,
+            ..Default::default()
+        };
+        Fitted::Partition(Arc::new(super::interrupt::run(
+            py,
+            None,
+            false,
+            move || partition(&ps),
+        )?))
+    } else {
+        Fitted::Global(Arc::new(super::interrupt::run(
+            py,
+            None,
+            false,
+            move || global(&settings),
+        )?))
+    };
+    Ok(PyVariationalSurface { inner })
+}
 
 /// A variational implicit surface f(x) = Σ λ_j φ(‖x − c_j‖) + a + b·x fitted to constraints;
 /// negative inside, positive outside.
@@ -18,9 +134,22 @@ use std::sync::Arc;
 /// Create one with :meth:`fit` (points with normals), :meth:`from_mesh` (a triangle mesh) or
 /// :meth:`interpolate` (values at points). Evaluate with :meth:`evaluate` / :meth:`gradient` or by
 /// calling it; polygonize it with :func:`implicitmesh.polygonize`.
+///
+/// Two fits (``method``): ``"global"`` solves one dense system over all constraints (time
+/// O(M³), memory O(M²) for M constraints: a few thousand points at most); ``"partition"`` splits
+/// the constraints with an octree into overlapping patches of a few hundred, fits each patch
+/// the same way and blends them, f = Σ w_i f_i / Σ w_i with compactly supported C² weights
+/// w_i = (1 − ‖x − c_i‖²/R_i²)³₊. Every patch whose weight is non-zero at a constraint
+/// interpolates it, so both fits interpolate every constraint; away from the data the partition
+/// fit differs slightly from the global one (the global fit minimises the energy over all the
+/// data at once). ``"auto"`` (default) uses the global fit below 2000 constraints (1000 points
+/// for :meth:`fit` and :meth:`from_mesh`), about where the partition fit becomes the faster,
+/// and the partition from there on. Attributes that
+/// describe one global system (:attr:`weights`, :attr:`polynomial`) raise ``ValueError`` for a
+/// partition fit, which has :attr:`patches` instead.
 #[pyclass(name = "VariationalSurface", module = "implicitmesh", frozen)]
 pub struct PyVariationalSurface {
-    pub inner: Arc<VariationalSurface>,
+    pub inner: Fitted,
 }
 
 fn fit_settings(
@@ -42,6 +171,13 @@ fn placement(d: Option<f64>, w: Option<f64>) -> constraints::Settings {
         w,
         ..Default::default()
     }
+}
+
+fn global_only(name: &str) -> PyErr {
+    value_error(
+        name,
+        "only defined for a global fit (method=\"global\"); a partition fit has one per patch",
+    )
 }
 
 #[pymethods]
@@ -68,7 +204,11 @@ impl PyVariationalSurface {
     /// smoothing : float
     ///     Added to the diagonal for noisy data; 0 (default) interpolates exactly.
     /// memory_limit : int, optional
-    ///     Refuse fits whose dense system needs more bytes than this (default 8 GiB).
+    ///     Refuse fits whose dense system (``"global"``) or patches and the systems being solved
+    ///     at once (``"partition"``) need more bytes than this (default 8 GiB).
+    /// method : {"auto", "global", "partition"}
+    ///     One dense system, or a partition of unity of patches (see the class docstring);
+    ///     ``"auto"`` (default): global below 1000 points, partition from 1000 on.
     ///
     /// Returns
     /// -------
@@ -78,9 +218,10 @@ impl PyVariationalSurface {
     /// ------
     /// ValueError
     ///     For wrong shapes, NaN/inf, fewer than 4 points, coplanar or duplicate points,
-    ///     zero-length normals, a singular system or a system over the memory limit.
+    ///     zero-length normals, a singular system, a system over the memory limit or an unknown
+    ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None))]
+    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto"))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
@@ -91,7 +232,9 @@ impl PyVariationalSurface {
         kernel: &str,
         smoothing: f64,
         memory_limit: Option<u64>,
+        method: &str,
     ) -> PyResult<Self> {
+        let m = parse_method(method)?;
         let p = self::points(points, "points")?;
         let n = self::points(normals, "normals")?;
         if n.len() != p.len() {
@@ -106,10 +249,15 @@ impl PyVariationalSurface {
         }
         let s = fit_settings(kernel, smoothing, memory_limit)?;
         let pl = placement(d, w);
-        let surface = py.detach(move || VariationalSurface::fit(&p, &n, &pl, &s))?;
-        Ok(PyVariationalSurface {
-            inner: Arc::new(surface),
-        })
+        let count = 2 * p.len();
+        run(
+            py,
+            m,
+            count,
+            s,
+            |s| VariationalSurface::fit(&p, &n, &pl, s),
+            |s| PartitionSurface::fit(&p, &n, &pl, s),
+        )
     }
 
     /// Fits a surface to the vertices of a triangle mesh.
@@ -126,15 +274,15 @@ impl PyVariationalSurface {
     /// vertices : (V, 3) float64
     /// faces : (F, 3) int
     ///     Vertex indices of each triangle.
-    /// d, w, kernel, smoothing, memory_limit
-    ///     As for :meth:`fit`.
+    /// d, w, kernel, smoothing, memory_limit, method
+    ///     As for :meth:`fit` (``"auto"``: global below 1000 vertices).
     ///
     /// Raises
     /// ------
     /// ValueError
     ///     For out-of-range or repeated indices, unused vertices, and everything :meth:`fit` refuses.
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None))]
+    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto"))]
     #[allow(clippy::too_many_arguments)]
     fn from_mesh(
         py: Python<'_>,
@@ -145,15 +293,22 @@ impl PyVariationalSurface {
         kernel: &str,
         smoothing: f64,
         memory_limit: Option<u64>,
+        method: &str,
     ) -> PyResult<Self> {
+        let m = parse_method(method)?;
         let v = points(vertices, "vertices")?;
         let f = triangles(faces, "faces")?;
         let s = fit_settings(kernel, smoothing, memory_limit)?;
         let pl = placement(d, w);
-        let surface = py.detach(move || VariationalSurface::from_mesh(&v, &f, &pl, &s))?;
-        Ok(PyVariationalSurface {
-            inner: Arc::new(surface),
-        })
+        let count = 2 * v.len();
+        run(
+            py,
+            m,
+            count,
+            s,
+            |s| VariationalSurface::from_mesh(&v, &f, &pl, s),
+            |s| PartitionSurface::from_mesh(&v, &f, &pl, s),
+        )
     }
 
     /// Interpolates values at points (no normal constraints): f(points[i]) = values[i].
@@ -162,10 +317,14 @@ impl PyVariationalSurface {
     /// ----------
     /// points : (N, 3) float64
     /// values : (N,) float64
-    /// kernel, smoothing, memory_limit
-    ///     As for :meth:`fit`.
+    /// kernel, smoothing, memory_limit, method
+    ///     As for :meth:`fit` (``"auto"``: global below 2000 points).
+    ///
+    /// Returns
+    /// -------
+    /// VariationalSurface
     #[staticmethod]
-    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None))]
+    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto"))]
     fn interpolate(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
@@ -173,14 +332,21 @@ impl PyVariationalSurface {
         kernel: &str,
         smoothing: f64,
         memory_limit: Option<u64>,
+        method: &str,
     ) -> PyResult<Self> {
+        let m = parse_method(method)?;
         let p = self::points(points, "points")?;
         let v = self::values(values, "values")?;
         let s = fit_settings(kernel, smoothing, memory_limit)?;
-        let surface = py.detach(move || VariationalSurface::interpolate(&p, &v, &s))?;
-        Ok(PyVariationalSurface {
-            inner: Arc::new(surface),
-        })
+        let count = p.len();
+        run(
+            py,
+            m,
+            count,
+            s,
+            |s| VariationalSurface::interpolate(&p, &v, s),
+            |s| PartitionSurface::interpolate(&p, &v, s),
+        )
     }
 
     /// f at points.
@@ -197,7 +363,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        field_values(py, self.inner.as_ref(), points)
+        field_values(py, self.inner.as_field(), points)
     }
 
     /// ∇f at points.
@@ -214,7 +380,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        field_gradients(py, self.inner.as_ref(), points)
+        field_gradients(py, self.inner.as_field(), points)
     }
 
     /// Same as :meth:`evaluate`, so that the surface can be used where a callable is expected.
@@ -227,21 +393,71 @@ impl PyVariationalSurface {
     }
 
     /// (M, 3) float64: the RBF centres (boundary constraints first, then normal constraints).
+    /// For a partition fit, the centres of all patches together: the constraint points.
     #[getter]
     fn centers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        points_to_py(py, self.inner.centers().to_vec())
+        points_to_py(py, self.inner.constraints().points.clone())
     }
 
-    /// (M,) float64: the weights λ_j.
+    /// (M,) float64: the weights λ_j. Global fits only: a partition fit has one set of weights
+    /// per patch (ValueError).
     #[getter]
-    fn weights<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        values_to_py(py, self.inner.weights().to_vec())
+    fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        match &self.inner {
+            Fitted::Global(s) => Ok(values_to_py(py, s.weights().to_vec())),
+            Fitted::Partition(_) => Err(global_only("weights")),
+        }
     }
 
-    /// (4,) float64: the polynomial [a, bx, by, bz] of f = Σ λ φ + a + b·x.
+    /// (4,) float64: the polynomial [a, bx, by, bz] of f = Σ λ φ + a + b·x. Global fits only: a
+    /// partition fit has one polynomial per patch (ValueError).
     #[getter]
-    fn polynomial<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        values_to_py(py, self.inner.polynomial().to_vec())
+    fn polynomial<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        match &self.inner {
+            Fitted::Global(s) => Ok(values_to_py(py, s.polynomial().to_vec())),
+            Fitted::Partition(_) => Err(global_only("polynomial")),
+        }
+    }
+
+    /// str: ``"global"`` or ``"partition"``, the fit in use (what ``method="auto"`` chose).
+    #[getter]
+    fn method(&self) -> &'static str {
+        self.inner.method()
+    }
+
+    /// dict describing the patches of a partition fit: ``centers`` (P, 3) float64, ``radii``
+    /// (P,) float64 (support radii: a patch's weight is zero from there on), ``inside`` (P,)
+    /// int64 (constraints inside each support, all of which the patch interpolates) and
+    /// ``sizes`` (P,) int64 (constraints each patch interpolates: those inside, and for patches
+    /// with few inside, constraints from around the support). Partition fits only (ValueError
+    /// otherwise).
+    #[getter]
+    fn patches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let Fitted::Partition(s) = &self.inner else {
+            return Err(value_error(
+                "patches",
+                "only a partition fit (method=\"partition\") has patches",
+            ));
+        };
+        let p = s.patches();
+        let d = PyDict::new(py);
+        d.set_item(
+            "centers",
+            points_to_py(py, p.iter().map(|q| q.centre).collect())?,
+        )?;
+        d.set_item(
+            "radii",
+            values_to_py(py, p.iter().map(|q| q.radius).collect()),
+        )?;
+        d.set_item(
+            "inside",
+            PyArray1::from_vec(py, p.iter().map(|q| q.inside as i64).collect()),
+        )?;
+        d.set_item(
+            "sizes",
+            PyArray1::from_vec(py, p.iter().map(|q| q.size as i64).collect()),
+        )?;
+        Ok(d)
     }
 
     /// dict with ``points`` (M, 3), ``values`` (M,), ``d`` (N,) per-data-point offsets, and
@@ -263,7 +479,8 @@ impl PyVariationalSurface {
         self.inner.kernel().name()
     }
 
-    /// float: largest ``|f(c_i) − v_i|`` over the constraints after the fit.
+    /// float: largest ``|f(c_i) − v_i|`` over the constraints after the fit (for a partition fit,
+    /// the largest over the patches and their constraints, which bounds the blend's).
     #[getter]
     fn residual(&self) -> f64 {
         self.inner.residual()
@@ -281,14 +498,19 @@ impl PyVariationalSurface {
     }
 
     fn __len__(&self) -> usize {
-        self.inner.centers().len()
+        self.inner.constraints().points.len()
     }
 
     fn __repr__(&self) -> String {
+        let patches = match &self.inner {
+            Fitted::Global(_) => String::new(),
+            Fitted::Partition(s) => format!(", patches={}", s.patches().len()),
+        };
         format!(
-            "VariationalSurface(kernel={:?}, centers={}, residual={:.2e})",
+            "VariationalSurface(method={:?}, kernel={:?}, centers={}{patches}, residual={:.2e})",
+            self.inner.method(),
             self.inner.kernel().name(),
-            self.inner.centers().len(),
+            self.inner.constraints().points.len(),
             self.inner.residual()
         )
     }

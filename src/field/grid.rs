@@ -1,0 +1,152 @@
+//! A uniform grid over a point set, for fixed-radius neighbour queries: the points are sorted by
+//! cell (counting sort), so that the points of a cell are one contiguous run of indices.
+//!
+//! The number of cells is capped at about eight per point, so a query radius far below the
+//! spacing of the points (a duplicate tolerance) still gives a grid of bounded size; queries
+//! then visit one cell and its neighbours and test the distances.
+
+use glam::DVec3;
+
+/// Points binned into cubic cells.
+pub struct Grid<'a> {
+    points: &'a [DVec3],
+    lo: DVec3,
+    cell: f64,
+    dims: [usize; 3],
+    /// `start[c]..start[c + 1]` indexes `order` for the points of cell `c`.
+    start: Vec<u32>,
+    /// Point indices, sorted by cell and, within a cell, increasing.
+    order: Vec<u32>,
+}
+
+impl<'a> Grid<'a> {
+    /// Bins `points` (finite) into cells of side at least `cell` (larger when `cell` would give
+    /// more than about eight cells per point).
+    pub fn new(points: &'a [DVec3], cell: f64) -> Self {
+        let (lo, hi) = points.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        let (lo, hi) = if points.is_empty() {
+            (DVec3::ZERO, DVec3::ZERO)
+        } else {
+            (lo, hi)
+        };
+        let extent = (hi - lo).max(DVec3::splat(0.0));
+        let max_cells = (8 * points.len()).max(64) as f64;
+        let mut cell = if cell.is_finite() && cell > 0.0 {
+            cell
+        } else {
+            f64::INFINITY
+        };
+        let cells_for = |c: f64| -> f64 {
+            (0..3)
+                .map(|k| (extent[k] / c).floor() + 1.0)
+                .product::<f64>()
+        };
+        let largest = extent.max_element();
+        if !cell.is_finite() || cells_for(cell) > max_cells {
+            // Grow the cell until the grid is small enough (the ratio is applied per axis).
+            cell = if largest > 0.0 {
+                largest / max_cells.cbrt().floor().max(1.0)
+            } else {
+                1.0
+            };
+            while cells_for(cell) > max_cells {
+                cell *= 1.25;
+            }
+        }
+        let dims = [0, 1, 2].map(|k| (extent[k] / cell).floor() as usize + 1);
+        let ncells = dims[0] * dims[1] * dims[2];
+        let key = |p: DVec3| -> usize {
+            let c = |k: usize| (((p[k] - lo[k]) / cell).floor() as usize).min(dims[k] - 1);
+            c(0) + dims[0] * (c(1) + dims[1] * c(2))
+        };
+        let mut start = vec![0u32; ncells + 1];
+        let keys: Vec<usize> = points.iter().map(|p| key(*p)).collect();
+        for &k in &keys {
+            start[k + 1] += 1;
+        }
+        for c in 0..ncells {
+            start[c + 1] += start[c];
+        }
+        let mut fill = start.clone();
+        let mut order = vec![0u32; points.len()];
+        for (i, &k) in keys.iter().enumerate() {
+            order[fill[k] as usize] = i as u32;
+            fill[k] += 1;
+        }
+        Grid {
+            points,
+            lo,
+            cell,
+            dims,
+            start,
+            order,
+        }
+    }
+
+    /// Calls `visit(j)` for every point `j` with `|points[j] − p| ≤ radius`, cell by cell (z,
+    /// then y, then x), increasing within a cell.
+    pub fn for_each_within(&self, p: DVec3, radius: f64, mut visit: impl FnMut(u32)) {
+        if self.points.is_empty() {
+            return;
+        }
+        let r2 = radius * radius;
+        let range = |k: usize| -> Option<(usize, usize)> {
+            let a = ((p[k] - radius - self.lo[k]) / self.cell).floor();
+            let b = ((p[k] + radius - self.lo[k]) / self.cell).floor();
+            let top = (self.dims[k] - 1) as f64;
+            if b < 0.0 || a > top {
+                return None;
+            }
+            Some((a.max(0.0) as usize, b.min(top) as usize))
+        };
+        let (Some(rx), Some(ry), Some(rz)) = (range(0), range(1), range(2)) else {
+            return;
+        };
+        for z in rz.0..=rz.1 {
+            for y in ry.0..=ry.1 {
+                let row = self.dims[0] * (y + self.dims[1] * z);
+                let (a, b) = (
+                    self.start[row + rx.0] as usize,
+                    self.start[row + rx.1 + 1] as usize,
+                );
+                for &j in &self.order[a..b] {
+                    if (self.points[j as usize] - p).length_squared() <= r2 {
+                        visit(j);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The indices of the points within `radius` of `p`, increasing.
+    pub fn within(&self, p: DVec3, radius: f64) -> Vec<u32> {
+        let mut out = Vec::new();
+        self.for_each_within(p, radius, |j| out.push(j));
+        out.sort_unstable();
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::testing::random_points;
+
+    #[test]
+    fn finds_the_same_neighbours_as_brute_force() {
+        let pts = random_points(500, -1.0, 1.0, 5);
+        for (cell, radius) in [(0.2, 0.2), (0.05, 0.3), (1e-12, 0.1), (10.0, 0.25)] {
+            let g = Grid::new(&pts, cell);
+            for p in pts.iter().step_by(7).chain([DVec3::splat(3.0)].iter()) {
+                let brute: Vec<u32> = (0..pts.len() as u32)
+                    .filter(|&j| (pts[j as usize] - *p).length_squared() <= radius * radius)
+                    .collect();
+                assert_eq!(g.within(*p, radius), brute, "cell {cell}, radius {radius}");
+            }
+        }
+        assert!(Grid::new(&[], 0.1).within(DVec3::ZERO, 1.0).is_empty());
+    }
+}

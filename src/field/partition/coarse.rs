@@ -1,0 +1,60 @@
+//! Subsampled copies of the constraints, for the patches of leaves with few constraints in
+//! their support (the leaves away from the data).
+//!
+//! Such a patch must interpolate the few constraints inside its support, but any other
+//! constraints may complete its system: the blend's exactness only needs the ones inside. Its
+//! nearest constraints would be one small cluster, and a fit to a small cluster extrapolates
+//! badly over a support many times its size; so the system is completed with constraints spread
+//! over a ball reaching one support radius past the nearest data, taken from the finest of
+//! these levels where they fit the patch's budget. Level `L` keeps every data point `j` (with
+//! its normal constraint) whose hash is divisible by 8^L: about one in 8^L, wherever it is.
+
+use super::octree::Octree;
+use glam::DVec3;
+
+/// One subsampled level.
+pub struct Level {
+    /// Indices of the kept constraints.
+    pub index: Vec<u32>,
+    pub points: Vec<DVec3>,
+    pub tree: Octree,
+}
+
+fn splitmix(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^ (x >> 31)
+}
+
+/// Levels 1, 2, … of `points` (constraint `i` belongs to data point `i mod boundary`), down to
+/// the first with at most `smallest` points, each with an octree over the cube (`centre`,
+/// `half`).
+pub fn levels(
+    points: &[DVec3],
+    boundary: usize,
+    smallest: usize,
+    centre: DVec3,
+    half: f64,
+    max_per_leaf: usize,
+) -> Vec<Level> {
+    let boundary = boundary.max(1) as u64;
+    let mut out = Vec::new();
+    let mut step = 1u64;
+    let mut size = points.len();
+    while size > smallest && step < 1 << 60 {
+        step *= 8;
+        let index: Vec<u32> = (0..points.len() as u32)
+            .filter(|&i| splitmix(i as u64 % boundary).is_multiple_of(step))
+            .collect();
+        let pts: Vec<DVec3> = index.iter().map(|&i| points[i as usize]).collect();
+        let tree = Octree::new(&pts, centre, half, max_per_leaf);
+        size = pts.len();
+        out.push(Level {
+            index,
+            points: pts,
+            tree,
+        });
+    }
+    out
+}

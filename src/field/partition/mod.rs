@@ -1,0 +1,297 @@
+//! Partition-of-unity variational surfaces, for data too large for one dense system (Ohtake et
+//! al.'s multi-level partition of unity, with variational patches instead of quadrics).
+//!
+//! - [`octree`]: an octree over the constraints (boundary and normal constraints together),
+//!   split until each leaf holds at most [`Settings::max_per_leaf`] of them and the ball of
+//!   its patch at most [`Settings::max_patch`]; its cube covers the constraints and the
+//!   surface's default polygonization bounds.
+//! - [`patches`]: one patch per leaf, a ball of radius [`Settings::overlap`] × the leaf's
+//!   half-diagonal around its centre, fitted with r³ + linear (as
+//!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball
+//!   (completed, when they are fewer than [`Settings::min_points`], by constraints spread over a
+//!   larger ball, from the subsampled levels of [`coarse`]); patches are solved in parallel.
+//! - [`blend`]: f = Σ w_i f_i / Σ w_i with compactly supported C² weights. Each patch whose
+//!   weight is non-zero at a constraint interpolates it, so the blend interpolates every
+//!   constraint to the patches' residual.
+
+pub mod blend;
+pub mod coarse;
+pub mod octree;
+pub mod patches;
+
+use super::constraints::{self, bounding_box, Constraints};
+use super::kernel::Kernel;
+use super::Field;
+use crate::error::{check_finite_values, Error, Result};
+use glam::DVec3;
+use octree::Octree;
+use patches::Patch;
+
+/// How a partition-of-unity surface is fitted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Leaves split until they hold at most this many constraints. With the default overlap a
+    /// patch then interpolates about 100–400 constraints.
+    pub max_per_leaf: usize,
+    /// Support radius of a leaf's patch over the leaf's half-diagonal (> 1, so that the supports
+    /// overlap and each covers its leaf).
+    pub overlap: f64,
+    /// Leaves also split until the ball of their patch holds at most this many constraints;
+    /// completed systems (see [`patches`]) hold at most 3/2 of it.
+    pub max_patch: usize,
+    /// Patches whose support holds fewer constraints complete their system with constraints
+    /// from outside it (see [`patches`] and [`coarse`]).
+    pub min_points: usize,
+    pub kernel: Kernel,
+    /// Added to the diagonal of each patch's kernel block; 0 interpolates exactly.
+    pub smoothing: f64,
+    /// Refuse fits whose patches (kept, and the dense systems being solved) would need more
+    /// than this many bytes.
+    pub memory_limit: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            max_per_leaf: 96,
+            overlap: 1.25,
+            max_patch: 400,
+            min_points: 256,
+            kernel: Kernel::Triharmonic,
+            smoothing: 0.0,
+            memory_limit: 8 << 30,
+        }
+    }
+}
+
+impl Settings {
+    fn check(&self) -> Result<()> {
+        if self.max_per_leaf < 8 {
+            return Err(Error::invalid(
+                "max_per_leaf",
+                format!("must be at least 8, got {}", self.max_per_leaf),
+            ));
+        }
+        if !(self.overlap.is_finite() && self.overlap > 1.0) {
+            return Err(Error::invalid(
+                "overlap",
+                format!("must be finite and above 1, got {}", self.overlap),
+            ));
+        }
+        if self.max_patch < self.max_per_leaf {
+            return Err(Error::invalid(
+                "max_patch",
+                format!(
+                    "must be at least max_per_leaf ({}), got {}",
+                    self.max_per_leaf, self.max_patch
+                ),
+            ));
+        }
+        if self.min_points < 8 {
+            return Err(Error::invalid(
+                "min_points",
+                format!("must be at least 8, got {}", self.min_points),
+            ));
+        }
+        if !(self.smoothing.is_finite() && self.smoothing >= 0.0) {
+            return Err(Error::invalid(
+                "smoothing",
+                format!("must be finite and non-negative, got {}", self.smoothing),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A partition-of-unity variational surface: negative inside, positive outside (when the
+/// normals given point out of the solid).
+#[derive(Clone, Debug)]
+pub struct PartitionSurface {
+    settings: Settings,
+    constraints: Constraints,
+    tree: Octree,
+    patches: Vec<Patch>,
+    /// Patches covering each leaf: `cover[cover_start[l]..cover_start[l + 1]]`, increasing.
+    cover_start: Vec<u32>,
+    cover: Vec<u32>,
+    residual: f64,
+}
+
+impl PartitionSurface {
+    /// Fits a surface to `points` with outward `normals`, with the constraints of
+    /// [`constraints::place`].
+    pub fn fit(
+        points: &[DVec3],
+        normals: &[DVec3],
+        placement: &constraints::Settings,
+        settings: &Settings,
+    ) -> Result<Self> {
+        settings.check()?;
+        let c = constraints::place(points, normals, placement)?;
+        Self::solve(c, settings)
+    }
+
+    /// Fits a surface to the vertices of a triangle mesh, as
+    /// [`VariationalSurface::from_mesh`](super::rbf::VariationalSurface::from_mesh).
+    pub fn from_mesh(
+        vertices: &[DVec3],
+        faces: &[[u32; 3]],
+        placement: &constraints::Settings,
+        settings: &Settings,
+    ) -> Result<Self> {
+        settings.check()?;
+        let (v, f, n) = constraints::mesh_vertices_normals(vertices, faces)?;
+        let caps = constraints::crease_caps(&v, &f, &n);
+        let c = constraints::place_capped(&v, &n, placement, Some(&caps))?;
+        Self::solve(c, settings)
+    }
+
+    /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
+    pub fn interpolate(points: &[DVec3], values: &[f64], settings: &Settings) -> Result<Self> {
+        settings.check()?;
+        constraints::check_points("points", points)?;
+        if values.len() != points.len() {
+            return Err(Error::invalid(
+                "values",
+                format!(
+                    "need one value per point: {} values, {} points",
+                    values.len(),
+                    points.len()
+                ),
+            ));
+        }
+        check_finite_values("values", values)?;
+        constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
+        let c = Constraints {
+            points: points.to_vec(),
+            values: values.to_vec(),
+            offsets: vec![],
+            boundary: points.len(),
+        };
+        Self::solve(c, settings)
+    }
+
+    fn solve(c: Constraints, settings: &Settings) -> Result<Self> {
+        // The cube: centred on the data's bounding box, covering the default polygonization
+        // bounds (half-side 0.6 × the data's largest side) and every constraint.
+        let (lo, hi) = bounding_box(&c.points[..c.boundary]);
+        let centre = (lo + hi) * 0.5;
+        let reach = c
+            .points
+            .iter()
+            .map(|p| (*p - centre).abs().max_element())
+            .fold(0.6 * (hi - lo).max_element(), f64::max);
+        let half = reach * (1.0 + 1e-9);
+        // A first octree counts the constraints in the balls of the final one's nodes.
+        let counts = Octree::new(&c.points, centre, half, settings.max_per_leaf);
+        let tree = Octree::build(&c.points, centre, half, |n| {
+            (n.end - n.start) as usize > settings.max_per_leaf
+                || counts.more_within_than(
+                    &c.points,
+                    n.centre,
+                    settings.overlap * n.half_diagonal(),
+                    settings.max_patch,
+                )
+        });
+        let levels = coarse::levels(
+            &c.points,
+            c.boundary,
+            settings.max_patch,
+            centre,
+            half,
+            settings.max_per_leaf,
+        );
+        let supports = patches::supports(&tree, &c.points, &levels, settings);
+        let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
+        let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
+            + (c.points.len() * 48) as u64
+            + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
+        patches::check_memory(bytes, settings.memory_limit)?;
+        let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
+        let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
+        let (cover_start, cover) = patches::cover(&tree, &fitted);
+        Ok(PartitionSurface {
+            settings: *settings,
+            constraints: c,
+            tree,
+            patches: fitted,
+            cover_start,
+            cover,
+            residual,
+        })
+    }
+
+    /// The settings of the fit.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+    /// The kernel.
+    pub fn kernel(&self) -> Kernel {
+        self.settings.kernel
+    }
+    /// The constraints the surface interpolates.
+    pub fn constraints(&self) -> &Constraints {
+        &self.constraints
+    }
+    /// Largest |f_i(c) − v| over the patches and their constraints, as measured after each
+    /// patch's fit (the blend's error at a constraint is at most this).
+    pub fn residual(&self) -> f64 {
+        self.residual
+    }
+    /// The patches (centre, support radius, numbers of constraints, fit).
+    pub fn patches(&self) -> &[Patch] {
+        &self.patches
+    }
+    /// The octree.
+    pub fn octree(&self) -> &Octree {
+        &self.tree
+    }
+    /// Bounding box of the boundary constraints (the data points).
+    pub fn data_bounding_box(&self) -> (DVec3, DVec3) {
+        bounding_box(&self.constraints.points[..self.constraints.boundary])
+    }
+    /// The normalised blending weights w_i(x) / Σ w_i(x) of the patches whose support holds
+    /// `x`, in increasing patch order (empty where no support reaches).
+    pub fn weights_at(&self, x: DVec3) -> Vec<(u32, f64)> {
+        let l = self.tree.leaf_of(x);
+        let mut w: Vec<(u32, f64)> = self.cover
+            [self.cover_start[l as usize] as usize..self.cover_start[l as usize + 1] as usize]
+            .iter()
+            .map(|&i| {
+                let p = &self.patches[i as usize];
+                (i, blend::weight(x, p.centre, p.radius).0)
+            })
+            .filter(|(_, w)| *w > 0.0)
+            .collect();
+        let total: f64 = w.iter().map(|(_, w)| w).sum();
+        w.iter_mut().for_each(|(_, v)| *v /= total);
+        w
+    }
+}
+
+impl Field for PartitionSurface {
+    fn value(&self, p: DVec3) -> f64 {
+        let mut out = [0.0];
+        self.blend(&[p], &mut out, None);
+        out[0]
+    }
+
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        let mut v = [0.0];
+        let mut g = [DVec3::ZERO];
+        self.blend(&[p], &mut v, Some(&mut g));
+        g[0]
+    }
+
+    fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        self.blend(points, out, None);
+    }
+
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        let mut v = vec![0.0; points.len()];
+        self.blend(points, &mut v, Some(out));
+    }
+}
+
+#[cfg(test)]
+mod tests;

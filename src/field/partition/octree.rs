@@ -1,0 +1,327 @@
+//! The octree of a partition-of-unity fit: a cube split into eight children until each leaf holds
+//! at most `max_per_leaf` points. Every split creates all eight children, so the leaves tile the
+//! cube (empty leaves included) and every point of the cube lies in exactly one leaf.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Depth at which leaves stop splitting whatever they hold (coincident points).
+const MAX_DEPTH: u32 = 24;
+
+/// One node: a cube, its children and the run of points it holds.
+#[derive(Clone, Copy, Debug)]
+pub struct Node {
+    pub centre: DVec3,
+    /// Half the side of the cube.
+    pub half: f64,
+    /// Index of the first of eight consecutive children; 0 for a leaf (the root is node 0, so no
+    /// node has it as a child).
+    pub children: u32,
+    /// `order[start..end]` are the points inside the cube.
+    pub start: u32,
+    pub end: u32,
+}
+
+impl Node {
+    pub fn is_leaf(&self) -> bool {
+        self.children == 0
+    }
+
+    /// Squared distance from `p` to the cube (0 inside).
+    pub fn distance_squared(&self, p: DVec3) -> f64 {
+        let d = ((p - self.centre).abs() - DVec3::splat(self.half)).max(DVec3::ZERO);
+        d.length_squared()
+    }
+
+    /// Half the diagonal of the cube.
+    pub fn half_diagonal(&self) -> f64 {
+        self.half * 3f64.sqrt()
+    }
+}
+
+/// An octree over a point set.
+#[derive(Clone, Debug)]
+pub struct Octree {
+    pub nodes: Vec<Node>,
+    /// Point indices, grouped by node (each node's run splits into its children's runs, in
+    /// child order); increasing within a leaf.
+    pub order: Vec<u32>,
+    /// The leaves' node indices, in node order.
+    pub leaves: Vec<u32>,
+    /// For each node, its position in `leaves` (`u32::MAX` for inner nodes).
+    pub leaf_slot: Vec<u32>,
+}
+
+/// Which child of a node centred at `c` holds `p`: bit 0 for x ≥ c.x, bit 1 for y, bit 2 for z.
+fn octant(p: DVec3, c: DVec3) -> usize {
+    (p.x >= c.x) as usize | ((p.y >= c.y) as usize) << 1 | ((p.z >= c.z) as usize) << 2
+}
+
+impl Octree {
+    /// Splits the cube (`centre`, `half`) until each leaf holds at most `max_per_leaf` of
+    /// `points` (all inside the cube).
+    pub fn new(points: &[DVec3], centre: DVec3, half: f64, max_per_leaf: usize) -> Octree {
+        Self::build(points, centre, half, |n| {
+            (n.end - n.start) as usize > max_per_leaf
+        })
+    }
+
+    /// Splits the cube (`centre`, `half`), holding `points` (all inside it), wherever `split`
+    /// says so (and the depth is below 24).
+    pub fn build(
+        points: &[DVec3],
+        centre: DVec3,
+        half: f64,
+        split: impl Fn(&Node) -> bool + Sync,
+    ) -> Octree {
+        let mut nodes = vec![Node {
+            centre,
+            half,
+            children: 0,
+            start: 0,
+            end: points.len() as u32,
+        }];
+        let mut order: Vec<u32> = (0..points.len() as u32).collect();
+        let mut scratch = vec![0u32; points.len()];
+        let mut depth = vec![0u32];
+        // Level by level (the nodes of one level are consecutive): the decisions in parallel,
+        // the splits in node order.
+        let mut level = 0..1;
+        while !level.is_empty() {
+            let decisions: Vec<bool> = nodes[level.clone()]
+                .par_iter()
+                .zip(&depth[level.clone()])
+                .map(|(n, &d)| d < MAX_DEPTH && split(n))
+                .collect();
+            let next = nodes.len();
+            for (k, &yes) in level.clone().zip(&decisions) {
+                if !yes {
+                    continue;
+                }
+                let n = nodes[k];
+                let count = (n.end - n.start) as usize;
+                // Stable counting sort of the node's run by octant.
+                let run = &mut order[n.start as usize..n.end as usize];
+                let mut bounds = [0usize; 9];
+                for &i in run.iter() {
+                    bounds[octant(points[i as usize], n.centre) + 1] += 1;
+                }
+                for o in 0..8 {
+                    bounds[o + 1] += bounds[o];
+                }
+                let mut fill = bounds;
+                for &i in run.iter() {
+                    let o = octant(points[i as usize], n.centre);
+                    scratch[fill[o]] = i;
+                    fill[o] += 1;
+                }
+                run.copy_from_slice(&scratch[..count]);
+                let first = nodes.len() as u32;
+                nodes[k].children = first;
+                let h = 0.5 * n.half;
+                for o in 0..8 {
+                    let sign = |bit: usize| if o >> bit & 1 == 1 { h } else { -h };
+                    nodes.push(Node {
+                        centre: n.centre + DVec3::new(sign(0), sign(1), sign(2)),
+                        half: h,
+                        children: 0,
+                        start: n.start + bounds[o] as u32,
+                        end: n.start + bounds[o + 1] as u32,
+                    });
+                    depth.push(depth[k] + 1);
+                }
+            }
+            level = next..nodes.len();
+        }
+        let mut leaves = Vec::new();
+        let mut leaf_slot = vec![u32::MAX; nodes.len()];
+        for (i, n) in nodes.iter().enumerate() {
+            if n.is_leaf() {
+                leaf_slot[i] = leaves.len() as u32;
+                leaves.push(i as u32);
+            }
+        }
+        Octree {
+            nodes,
+            order,
+            leaves,
+            leaf_slot,
+        }
+    }
+
+    /// The root cube's corners.
+    pub fn cube(&self) -> (DVec3, DVec3) {
+        let r = &self.nodes[0];
+        (r.centre - r.half, r.centre + r.half)
+    }
+
+    /// The leaf holding `p` clamped into the root cube, as its position in `leaves`.
+    pub fn leaf_of(&self, p: DVec3) -> u32 {
+        let (lo, hi) = self.cube();
+        let p = p.clamp(lo, hi);
+        let mut k = 0usize;
+        loop {
+            let n = &self.nodes[k];
+            if n.is_leaf() {
+                return self.leaf_slot[k];
+            }
+            k = n.children as usize + octant(p, n.centre);
+        }
+    }
+
+    /// Calls `visit(node)` for every leaf whose cube meets the closed ball (`c`, `r`).
+    pub fn for_each_leaf_meeting(&self, c: DVec3, r: f64, mut visit: impl FnMut(u32)) {
+        let r2 = r * r;
+        let mut stack = vec![0u32];
+        while let Some(k) = stack.pop() {
+            let n = &self.nodes[k as usize];
+            if n.distance_squared(c) > r2 {
+                continue;
+            }
+            if n.is_leaf() {
+                visit(k);
+            } else {
+                // Reverse order so that children are visited in increasing order.
+                stack.extend((0..8).rev().map(|o| n.children + o));
+            }
+        }
+    }
+
+    /// Number of `points` within the closed ball (`c`, `r`).
+    pub fn count_within(&self, points: &[DVec3], c: DVec3, r: f64) -> usize {
+        let mut count = 0;
+        self.for_each_within(points, c, r, |_| count += 1);
+        count
+    }
+
+    /// Whether more than `limit` of `points` lie within the closed ball (`c`, `r`); stops
+    /// counting once they do.
+    pub fn more_within_than(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> bool {
+        let r2 = r * r;
+        let mut count = 0;
+        let mut stack = vec![0u32];
+        while let Some(k) = stack.pop() {
+            let n = &self.nodes[k as usize];
+            if n.distance_squared(c) > r2 {
+                continue;
+            }
+            if n.is_leaf() {
+                let run = &self.order[n.start as usize..n.end as usize];
+                count += run
+                    .iter()
+                    .filter(|&&i| (points[i as usize] - c).length_squared() <= r2)
+                    .count();
+                if count > limit {
+                    return true;
+                }
+            } else {
+                stack.extend((0..8).map(|o| n.children + o));
+            }
+        }
+        false
+    }
+
+    /// Distance from `c` to its `k`-th nearest point of `points` (`k` ≥ 1, at most the number
+    /// of points).
+    pub fn kth_nearest_distance(&self, points: &[DVec3], c: DVec3, k: usize) -> f64 {
+        use std::cmp::Reverse;
+        use std::collections::BinaryHeap;
+        // Squared distances are non-negative, so their bit patterns order like the values.
+        let mut best: BinaryHeap<u64> = BinaryHeap::with_capacity(k + 1);
+        let mut queue = BinaryHeap::new();
+        queue.push(Reverse((self.nodes[0].distance_squared(c).to_bits(), 0u32)));
+        while let Some(Reverse((d2, node))) = queue.pop() {
+            if best.len() == k && d2 >= *best.peek().unwrap() {
+                break;
+            }
+            let n = &self.nodes[node as usize];
+            if n.is_leaf() {
+                for &i in &self.order[n.start as usize..n.end as usize] {
+                    let e = (points[i as usize] - c).length_squared().to_bits();
+                    if best.len() < k {
+                        best.push(e);
+                    } else if e < *best.peek().unwrap() {
+                        best.pop();
+                        best.push(e);
+                    }
+                }
+            } else {
+                for o in 0..8 {
+                    let ch = n.children + o;
+                    let d = self.nodes[ch as usize].distance_squared(c);
+                    queue.push(Reverse((d.to_bits(), ch)));
+                }
+            }
+        }
+        best.peek()
+            .map_or(f64::INFINITY, |&b| f64::from_bits(b).sqrt())
+    }
+
+    /// Calls `visit(i)` for every point `points[i]` within the closed ball (`c`, `r`).
+    pub fn for_each_within(&self, points: &[DVec3], c: DVec3, r: f64, mut visit: impl FnMut(u32)) {
+        let r2 = r * r;
+        self.for_each_leaf_meeting(c, r, |k| {
+            let n = &self.nodes[k as usize];
+            for &i in &self.order[n.start as usize..n.end as usize] {
+                if (points[i as usize] - c).length_squared() <= r2 {
+                    visit(i);
+                }
+            }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::testing::random_points;
+
+    #[test]
+    fn leaves_tile_the_cube_and_hold_their_points() {
+        let pts = random_points(3000, -0.9, 0.9, 21);
+        let t = Octree::new(&pts, DVec3::ZERO, 1.0, 50);
+        // Every point is in exactly one leaf, which contains it.
+        let mut seen = vec![0u32; pts.len()];
+        for &k in &t.leaves {
+            let n = &t.nodes[k as usize];
+            assert!(n.end - n.start <= 50);
+            for &i in &t.order[n.start as usize..n.end as usize] {
+                seen[i as usize] += 1;
+                assert_eq!(n.distance_squared(pts[i as usize]), 0.0);
+                assert_eq!(t.leaf_of(pts[i as usize]), t.leaf_slot[k as usize]);
+            }
+        }
+        assert!(seen.iter().all(|&s| s == 1));
+        // The leaves' volumes add up to the cube's.
+        let volume: f64 = t
+            .leaves
+            .iter()
+            .map(|&k| (2.0 * t.nodes[k as usize].half).powi(3))
+            .sum();
+        assert!((volume - 8.0).abs() < 1e-9);
+        // Ball queries agree with brute force.
+        for (c, r) in [(DVec3::new(0.1, -0.2, 0.3), 0.25), (DVec3::splat(1.5), 0.7)] {
+            let mut got = Vec::new();
+            t.for_each_within(&pts, c, r, |i| got.push(i));
+            got.sort_unstable();
+            let want: Vec<u32> = (0..pts.len() as u32)
+                .filter(|&i| (pts[i as usize] - c).length_squared() <= r * r)
+                .collect();
+            assert_eq!(got, want);
+            assert_eq!(
+                t.more_within_than(&pts, c, r, want.len()),
+                false,
+                "{c:?} {r}"
+            );
+            assert!(want.is_empty() || t.more_within_than(&pts, c, r, want.len() - 1));
+        }
+        // k-th nearest distances agree with sorting.
+        for c in [DVec3::ZERO, DVec3::new(0.9, -0.9, 0.2), DVec3::splat(2.0)] {
+            let mut d: Vec<f64> = pts.iter().map(|p| (*p - c).length()).collect();
+            d.sort_by(f64::total_cmp);
+            for k in [1, 7, 64, 3000] {
+                assert_eq!(t.kth_nearest_distance(&pts, c, k), d[k - 1]);
+            }
+        }
+    }
+}

@@ -1,0 +1,239 @@
+//! The patches of a partition-of-unity fit: one per octree leaf, a ball around the leaf's centre
+//! of radius `overlap` × the leaf's half-diagonal, fitted to **every** constraint inside the
+//! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
+//! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], the
+//! system is completed with up to max(`max_patch` − inside, `max_patch` / 2) constraints outside
+//! it, spread over a larger ball (see [`super::coarse`]).
+
+use super::coarse::Level;
+use super::octree::Octree;
+use super::Settings;
+use crate::error::{Error, Result};
+use crate::field::constraints::Constraints;
+use crate::field::rbf::{self, VariationalSurface};
+use faer::Par;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// One fitted patch.
+#[derive(Clone, Debug)]
+pub struct Patch {
+    pub centre: DVec3,
+    /// Support radius: the patch's weight is zero from this distance on.
+    pub radius: f64,
+    /// Number of constraints inside the support (all interpolated).
+    pub inside: usize,
+    /// Number of constraints it interpolates (`inside`, and those completing a small system).
+    pub size: usize,
+    pub fit: VariationalSurface,
+}
+
+/// Where a patch's system comes from.
+#[derive(Clone, Copy, Debug)]
+pub struct Support {
+    pub centre: DVec3,
+    pub radius: f64,
+    /// Constraints within `radius`.
+    pub inside: usize,
+    /// For small systems: the level (index into the coarse levels) and the radius of the ball
+    /// whose constraints outside `radius` complete the system, and how many they are.
+    pub extra: Option<(usize, f64, usize)>,
+}
+
+impl Support {
+    pub fn size(&self) -> usize {
+        self.inside + self.extra.map_or(0, |e| e.2)
+    }
+}
+
+/// Leaves holding fewer constraints than this have their patch's system completed (see
+/// [`super::coarse`]).
+pub const SPARSE_LEAF: usize = 16;
+
+/// The support of each leaf's patch.
+pub fn supports(
+    tree: &Octree,
+    points: &[DVec3],
+    levels: &[Level],
+    settings: &Settings,
+) -> Vec<Support> {
+    let want = settings.min_points.min(points.len());
+    tree.leaves
+        .par_iter()
+        .map(|&k| {
+            let n = &tree.nodes[k as usize];
+            let r = settings.overlap * n.half_diagonal();
+            let inside = tree.count_within(points, n.centre, r);
+            let mut s = Support {
+                centre: n.centre,
+                radius: r,
+                inside,
+                extra: None,
+            };
+            // Leaves with (almost) no constraints of their own see the data only at the edge
+            // of their support: those are completed too, however many constraints it holds.
+            let own = (n.end - n.start) as usize;
+            if inside >= want && own >= SPARSE_LEAF {
+                return s;
+            }
+            // A ball reaching one support radius past the `want`-th nearest constraint.
+            let reach = tree.kth_nearest_distance(points, n.centre, want).max(r) + r;
+            let budget = settings
+                .max_patch
+                .saturating_sub(inside)
+                .max(settings.max_patch / 2);
+            let count_outside = |pts: &[DVec3], t: &Octree| {
+                let mut m = 0;
+                t.for_each_within(pts, n.centre, reach, |i| {
+                    if (pts[i as usize] - n.centre).length_squared() > r * r {
+                        m += 1;
+                    }
+                });
+                m
+            };
+            let full = count_outside(points, tree);
+            // The finest level whose share of the ball fits the budget; a finer one when that
+            // leaves too few constraints for a fit.
+            let mut choice = (usize::MAX, full);
+            if full > budget {
+                for (l, level) in levels.iter().enumerate() {
+                    let last = l + 1 == levels.len();
+                    if !last
+                        && level
+                            .tree
+                            .more_within_than(&level.points, n.centre, reach, budget)
+                    {
+                        continue;
+                    }
+                    let m = count_outside(&level.points, &level.tree);
+                    if inside + m >= 16 {
+                        choice = (l, m);
+                    } else if l > 0 {
+                        let finer = &levels[l - 1];
+                        choice = (l - 1, count_outside(&finer.points, &finer.tree));
+                    }
+                    break;
+                }
+            }
+            s.extra = Some((choice.0, reach, choice.1));
+            s
+        })
+        .collect()
+}
+
+/// Bytes the fit keeps for patches of the given sizes, plus the largest dense systems that
+/// `threads` workers factorize at once.
+pub fn estimate_bytes(sizes: &[usize], threads: usize) -> u64 {
+    let kept: u64 = sizes
+        .iter()
+        .map(|&m| VariationalSurface::patch_bytes(m) + 4 * m as u64)
+        .sum();
+    let mut largest: Vec<usize> = sizes.to_vec();
+    largest.sort_unstable_by(|a, b| b.cmp(a));
+    let solving: u64 = largest
+        .iter()
+        .take(threads.max(1))
+        .map(|&m| VariationalSurface::system_bytes(m) + 64 * m as u64)
+        .sum();
+    kept + solving
+}
+
+/// Fits one patch per support, in parallel; errors with the first failing patch's error (in
+/// leaf order).
+pub fn fit(
+    tree: &Octree,
+    c: &Constraints,
+    levels: &[Level],
+    supports: &[Support],
+    settings: &Settings,
+) -> Result<Vec<Patch>> {
+    let rbf_settings = rbf::Settings {
+        kernel: settings.kernel,
+        smoothing: settings.smoothing,
+        memory_limit: u64::MAX,
+    };
+    let fitted: Vec<Result<Patch>> = supports
+        .par_iter()
+        .map(|s| {
+            let (centre, radius) = (s.centre, s.radius);
+            let mut idx = Vec::with_capacity(s.size());
+            tree.for_each_within(&c.points, centre, radius, |i| idx.push(i));
+            let mut outside = Vec::new();
+            if let Some((l, reach, _)) = s.extra {
+                let (pts, t, index): (&[DVec3], &Octree, Option<&[u32]>) = if l == usize::MAX {
+                    (&c.points, tree, None)
+                } else {
+                    let lv = &levels[l];
+                    (&lv.points, &lv.tree, Some(&lv.index))
+                };
+                t.for_each_within(pts, centre, reach, |i| {
+                    if (pts[i as usize] - centre).length_squared() > radius * radius {
+                        outside.push(index.map_or(i, |x| x[i as usize]));
+                    }
+                });
+            }
+            idx.sort_unstable();
+            outside.sort_unstable();
+            let inside = idx.len();
+            idx.extend_from_slice(&outside);
+            let pts: Vec<DVec3> = idx.iter().map(|&i| c.points[i as usize]).collect();
+            let vals: Vec<f64> = idx.iter().map(|&i| c.values[i as usize]).collect();
+            let fit = VariationalSurface::fit_patch(pts, vals, &rbf_settings, Par::Seq)?;
+            Ok(Patch {
+                centre,
+                radius,
+                inside,
+                size: idx.len(),
+                fit,
+            })
+        })
+        .collect();
+    fitted.into_iter().collect()
+}
+
+/// For each leaf (its position in `tree.leaves`), the patches whose support meets it, in
+/// increasing order: `(start, list)` with leaf `l`'s patches at `list[start[l]..start[l + 1]]`.
+pub fn cover(tree: &Octree, patches: &[Patch]) -> (Vec<u32>, Vec<u32>) {
+    let per_patch: Vec<Vec<u32>> = patches
+        .par_iter()
+        .map(|p| {
+            let mut leaves = Vec::new();
+            tree.for_each_leaf_meeting(p.centre, p.radius, |k| {
+                leaves.push(tree.leaf_slot[k as usize])
+            });
+            leaves
+        })
+        .collect();
+    let nl = tree.leaves.len();
+    let mut start = vec![0u32; nl + 1];
+    for leaves in &per_patch {
+        for &l in leaves {
+            start[l as usize + 1] += 1;
+        }
+    }
+    for l in 0..nl {
+        start[l + 1] += start[l];
+    }
+    let mut fill = start.clone();
+    let mut list = vec![0u32; start[nl] as usize];
+    // Patches in increasing order: each leaf's list comes out sorted.
+    for (i, leaves) in per_patch.iter().enumerate() {
+        for &l in leaves {
+            list[fill[l as usize] as usize] = i as u32;
+            fill[l as usize] += 1;
+        }
+    }
+    (start, list)
+}
+
+/// Errors when `bytes` exceeds `limit`.
+pub fn check_memory(bytes: u64, limit: u64) -> Result<()> {
+    if bytes > limit {
+        return Err(Error::TooMuchMemory {
+            name: "points",
+            needed_mib: bytes.div_ceil(1 << 20),
+            limit_mib: limit >> 20,
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,186 @@
+use super::*;
+use crate::field::testing::{gradient_error, random_points};
+
+/// `n` points on a torus (major radius 0.6, minor 0.25, axis z) with outward normals.
+fn torus_data(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
+    let uv = random_points(n, 0.0, 1.0, seed);
+    let tau = std::f64::consts::TAU;
+    uv.iter()
+        .map(|q| {
+            let (u, v) = (q.x * tau, q.y * tau);
+            let ring = DVec3::new(u.cos(), u.sin(), 0.0);
+            let normal = ring * v.cos() + DVec3::Z * v.sin();
+            (ring * 0.6 + normal * 0.25, normal)
+        })
+        .unzip()
+}
+
+fn torus_surface() -> PartitionSurface {
+    let (p, n) = torus_data(3000, 5);
+    PartitionSurface::fit(&p, &n, &Default::default(), &Default::default()).unwrap()
+}
+
+#[test]
+fn interpolates_every_constraint() {
+    let s = torus_surface();
+    let c = s.constraints();
+    assert!(s.patches().len() > 20, "{} patches", s.patches().len());
+    let mut v = vec![0.0; c.points.len()];
+    s.values(&c.points, &mut v);
+    let scale = c.values.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let err = v
+        .iter()
+        .zip(&c.values)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(err <= 1e-9 * scale, "{err}");
+    assert!(s.residual() <= 1e-9 * scale);
+    // Inside the tube negative, in the hole and far out positive.
+    assert!(s.value(DVec3::new(0.6, 0.0, 0.0)) < 0.0);
+    assert!(s.value(DVec3::ZERO) > 0.0);
+    assert!(s.value(DVec3::new(0.0, 0.95, 0.3)) > 0.0);
+}
+
+#[test]
+fn interpolate_reproduces_values() {
+    let p = random_points(2000, -1.0, 1.0, 8);
+    let v: Vec<f64> = p.iter().map(|q| (3.0 * q.x).sin() + q.y * q.z).collect();
+    let s = PartitionSurface::interpolate(&p, &v, &Default::default()).unwrap();
+    let mut f = vec![0.0; p.len()];
+    s.values(&p, &mut f);
+    let err = f
+        .iter()
+        .zip(&v)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(err <= 1e-9, "{err}");
+}
+
+#[test]
+fn patches_hold_every_constraint_of_their_support() {
+    let s = torus_surface();
+    let c = s.constraints();
+    let t = s.octree();
+    assert_eq!(s.patches().len(), t.leaves.len());
+    for (i, p) in s.patches().iter().enumerate() {
+        let inside = c
+            .points
+            .iter()
+            .filter(|q| (**q - p.centre).length_squared() <= p.radius * p.radius)
+            .count();
+        assert_eq!(p.inside, inside, "patch {i}");
+        assert!(p.size >= p.inside.max(16), "patch {i}");
+        assert!(
+            p.size <= s.settings().max_patch * 3 / 2,
+            "patch {i}: {}",
+            p.size
+        );
+        // The patch interpolates every constraint inside its support.
+        for (q, v) in c.points.iter().zip(&c.values) {
+            if (*q - p.centre).length_squared() <= p.radius * p.radius {
+                assert!((p.fit.value(*q) - v).abs() <= 1e-11, "patch {i}");
+            }
+        }
+        // Each patch's ball covers its leaf (with room: the weight is positive on the leaf).
+        let leaf = &t.nodes[t.leaves[i] as usize];
+        assert_eq!(leaf.centre, p.centre);
+        assert!(p.radius >= s.settings().overlap * leaf.half_diagonal());
+    }
+    for &k in &t.leaves {
+        assert!(t.nodes[k as usize].end - t.nodes[k as usize].start <= 96);
+    }
+}
+
+#[test]
+fn weights_sum_to_one_and_cover_lists_are_complete() {
+    let s = torus_surface();
+    let (lo, hi) = s.octree().cube();
+    let mut pts = random_points(2000, lo.x, hi.x, 9);
+    pts.extend_from_slice(&s.constraints().points[..500]);
+    for x in pts {
+        let w = s.weights_at(x);
+        assert!(!w.is_empty());
+        let total: f64 = w.iter().map(|(_, w)| w).sum();
+        assert!((total - 1.0).abs() < 1e-12, "{total}");
+        // Brute force: every patch whose support holds x is listed.
+        let all: Vec<u32> = (0..s.patches().len() as u32)
+            .filter(|&i| {
+                let p = &s.patches()[i as usize];
+                blend::weight(x, p.centre, p.radius).0 > 0.0
+            })
+            .collect();
+        assert_eq!(w.iter().map(|(i, _)| *i).collect::<Vec<_>>(), all);
+    }
+}
+
+#[test]
+fn gradient_matches_central_differences() {
+    let s = torus_surface();
+    let mut pts = random_points(300, -0.95, 0.95, 12);
+    let inner = gradient_error(&s, &pts, 1e-6);
+    // And points outside every support (the nearest patch alone), where the kernel sums cancel
+    // more: a longer step.
+    let far = random_points(20, 3.0, 4.0, 13);
+    let outer = gradient_error(&s, &far, 1e-4);
+    assert!(inner < 1e-5 && outer < 1e-5, "{inner} {outer}");
+    pts.extend(far);
+    // Batched gradients are the single-point ones.
+    let mut g = vec![DVec3::ZERO; pts.len()];
+    s.gradients(&pts, &mut g);
+    for (p, gi) in pts.iter().zip(&g) {
+        assert_eq!(s.gradient(*p), *gi);
+    }
+}
+
+#[test]
+fn same_bits_whatever_the_batch_and_threads() {
+    let s = torus_surface();
+    let pts = random_points(5000, -1.2, 1.2, 14);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut v = vec![0.0; pts.len()];
+            s.values(&pts, &mut v);
+            v
+        })
+    };
+    let (one, four) = (run(1), run(4));
+    assert_eq!(
+        one.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        four.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
+    for k in (0..pts.len()).step_by(97) {
+        assert_eq!(s.value(pts[k]).to_bits(), one[k].to_bits());
+    }
+}
+
+#[test]
+fn refuses_bad_settings_and_memory() {
+    let (p, n) = torus_data(500, 3);
+    let fit = |s: Settings| PartitionSurface::fit(&p, &n, &Default::default(), &s);
+    let named = |s: Settings| match fit(s) {
+        Err(Error::InvalidArgument { name, .. }) => name,
+        other => panic!("{other:?}"),
+    };
+    let d = Settings::default();
+    assert_eq!(named(Settings { overlap: 1.0, ..d }), "overlap");
+    assert_eq!(
+        named(Settings {
+            max_per_leaf: 2,
+            ..d
+        }),
+        "max_per_leaf"
+    );
+    assert_eq!(named(Settings { min_points: 3, ..d }), "min_points");
+    assert_eq!(named(Settings { max_patch: 50, ..d }), "max_patch");
+    assert!(matches!(
+        fit(Settings {
+            memory_limit: 1 << 16,
+            ..d
+        }),
+        Err(Error::TooMuchMemory { .. })
+    ));
+}
