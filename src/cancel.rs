@@ -36,10 +36,29 @@ impl Token {
     pub fn stopped(&self) -> bool {
         self.0.stop.load(Relaxed)
     }
-    /// Units of work the call reported done (field values and gradients computed).
+    /// Units of work the call reported done (field values and gradients computed, or
+    /// constraints fitted).
     pub fn done(&self) -> u64 {
         self.0.done.load(Relaxed)
     }
+    /// Reports `n` units done, from any thread; `Err(Error::Interrupted)` when told to stop.
+    pub fn advance(&self, n: u64) -> Result<()> {
+        self.0.done.fetch_add(n, Relaxed);
+        self.check()
+    }
+    /// `Err(Error::Interrupted)` when told to stop.
+    pub fn check(&self) -> Result<()> {
+        if self.stopped() {
+            Err(Error::Interrupted)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// This thread's token, for work that fans out over rayon's threads (which do not see it).
+pub fn current() -> Option<Token> {
+    CURRENT.with(|c| c.borrow().clone())
 }
 
 thread_local! {

@@ -92,3 +92,38 @@ def test_ctrl_c_stops_subdivision():
             im.subdivide(v, f, levels=6, surface=im.shapes.Torus(major=0.5, minor=0.2))
     finally:
         timer.cancel()
+
+
+@pytest.fixture(scope="module")
+def scan():
+    """2·10⁴ points with normals on a sphere: a partition fit of a few seconds."""
+    return im.shapes.fibonacci_sphere(20000)
+
+
+def test_partition_fit_reports_progress(scan):
+    p, n = scan
+    counts: list[int] = []
+    s = im.VariationalSurface.fit(p[:4000], n[:4000], method="partition", progress=counts.append)
+    assert s.method == "partition"
+    assert counts == sorted(counts)
+    # Every constraint is inside at least one patch: the count reaches the constraints.
+    assert counts[-1] >= 2 * 4000
+
+
+def test_ctrl_c_stops_a_partition_fit(scan):
+    p, n = scan
+    timer = interrupt_after(1.0)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            im.VariationalSurface.fit(p, n, method="partition")
+    finally:
+        timer.cancel()
+    # The next fit works.
+    s = im.VariationalSurface.fit(p[::10], n[::10])
+    assert np.abs(s.evaluate(p[::10])).max() < 1e-6
+
+
+def test_fit_progress_must_be_a_bool_or_callable(scan):
+    p, n = scan
+    with pytest.raises(ValueError, match="progress"):
+        im.VariationalSurface.fit(p[:50], n[:50], progress="yes")

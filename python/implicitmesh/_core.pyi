@@ -23,6 +23,7 @@ class VariationalSurface:
         smoothing: float = 0.0,
         memory_limit: int | None = None,
         method: FitMethod = "auto",
+        progress: bool | Callable[[int], object] | None = None,
     ) -> VariationalSurface: ...
     @staticmethod
     def from_mesh(
@@ -35,6 +36,7 @@ class VariationalSurface:
         smoothing: float = 0.0,
         memory_limit: int | None = None,
         method: FitMethod = "auto",
+        progress: bool | Callable[[int], object] | None = None,
     ) -> VariationalSurface: ...
     @staticmethod
     def interpolate(
@@ -45,6 +47,7 @@ class VariationalSurface:
         smoothing: float = 0.0,
         memory_limit: int | None = None,
         method: FitMethod = "auto",
+        progress: bool | Callable[[int], object] | None = None,
     ) -> VariationalSurface: ...
     def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
     def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...

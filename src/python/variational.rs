@@ -69,6 +69,21 @@ impl Fitted {
     }
 }
 
+/// The progress callback and the function that ends the report, from `progress` as users pass
+/// it (False, True or a callable; see `implicitmesh._progress.reporter`).
+fn reporter<'py>(
+    py: Python<'py>,
+    progress: Option<&Bound<'py, PyAny>>,
+    what: &str,
+) -> PyResult<(Option<Bound<'py, PyAny>>, Bound<'py, PyAny>)> {
+    let r = py.import("implicitmesh._progress")?.call_method1(
+        "reporter",
+        (progress, what, py.None(), "constraints fitted"),
+    )?;
+    let (callback, end): (Bound<'py, PyAny>, Bound<'py, PyAny>) = r.extract()?;
+    Ok(((!callback.is_none()).then_some(callback), end))
+}
+
 /// How to fit: `"global"`, `"partition"`, or `"auto"` (decided by the number of constraints).
 #[derive(Clone, Copy, PartialEq)]
 enum Method {
@@ -93,6 +108,7 @@ fn parse_method(method: &str) -> PyResult<Method> {
 /// constraints decide.
 fn run(
     py: Python<'_>,
+    progress: Option<&Bound<'_, PyAny>>,
     method: Method,
     constraints: usize,
     settings: rbf::Settings,
@@ -111,19 +127,15 @@ fn run(
             memory_limit: settings.memory_limit,
             ..Default::default()
         };
-        Fitted::Partition(Arc::new(super::interrupt::run(
-            py,
-            None,
-            false,
-            move || partition(&ps),
-        )?))
+        let (report, end) = reporter(py, progress, "fit (partition)")?;
+        let fitted = super::interrupt::run(py, report.as_ref(), false, move || partition(&ps));
+        end.call0()?;
+        Fitted::Partition(Arc::new(fitted?))
     } else {
-        Fitted::Global(Arc::new(super::interrupt::run(
-            py,
-            None,
-            false,
-            move || global(&settings),
-        )?))
+        let (report, end) = reporter(py, progress, "fit (global)")?;
+        let fitted = super::interrupt::run(py, report.as_ref(), false, move || global(&settings));
+        end.call0()?;
+        Fitted::Global(Arc::new(fitted?))
     };
     Ok(PyVariationalSurface { inner })
 }
@@ -209,6 +221,10 @@ impl PyVariationalSurface {
     /// method : {"auto", "global", "partition"}
     ///     One dense system, or a partition of unity of patches (see the class docstring);
     ///     ``"auto"`` (default): global below 1000 points, partition from 1000 on.
+    /// progress : bool or callable, optional
+    ///     ``True``: show the constraints fitted so far (a tqdm bar when tqdm is installed, else
+    ///     a line on standard error); a callable gets that count (an int) about every 50 ms. The
+    ///     partition fit counts patch by patch; the global fit reports once, at the end.
     ///
     /// Returns
     /// -------
@@ -216,12 +232,14 @@ impl PyVariationalSurface {
     ///
     /// Raises
     /// ------
+    /// KeyboardInterrupt
+    ///     On Ctrl-C: the partition fit stops between patches; the global fit when it is done.
     /// ValueError
     ///     For wrong shapes, NaN/inf, fewer than 4 points, coplanar or duplicate points,
     ///     zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto"))]
+    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
@@ -233,6 +251,7 @@ impl PyVariationalSurface {
         smoothing: f64,
         memory_limit: Option<u64>,
         method: &str,
+        progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let m = parse_method(method)?;
         let p = self::points(points, "points")?;
@@ -252,6 +271,7 @@ impl PyVariationalSurface {
         let count = 2 * p.len();
         run(
             py,
+            progress,
             m,
             count,
             s,
@@ -274,7 +294,7 @@ impl PyVariationalSurface {
     /// vertices : (V, 3) float64
     /// faces : (F, 3) int
     ///     Vertex indices of each triangle.
-    /// d, w, kernel, smoothing, memory_limit, method
+    /// d, w, kernel, smoothing, memory_limit, method, progress
     ///     As for :meth:`fit` (``"auto"``: global below 1000 vertices).
     ///
     /// Raises
@@ -282,7 +302,7 @@ impl PyVariationalSurface {
     /// ValueError
     ///     For out-of-range or repeated indices, unused vertices, and everything :meth:`fit` refuses.
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto"))]
+    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_mesh(
         py: Python<'_>,
@@ -294,6 +314,7 @@ impl PyVariationalSurface {
         smoothing: f64,
         memory_limit: Option<u64>,
         method: &str,
+        progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let m = parse_method(method)?;
         let v = points(vertices, "vertices")?;
@@ -303,6 +324,7 @@ impl PyVariationalSurface {
         let count = 2 * v.len();
         run(
             py,
+            progress,
             m,
             count,
             s,
@@ -317,14 +339,14 @@ impl PyVariationalSurface {
     /// ----------
     /// points : (N, 3) float64
     /// values : (N,) float64
-    /// kernel, smoothing, memory_limit, method
+    /// kernel, smoothing, memory_limit, method, progress
     ///     As for :meth:`fit` (``"auto"``: global below 2000 points).
     ///
     /// Returns
     /// -------
     /// VariationalSurface
     #[staticmethod]
-    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto"))]
+    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None))]
     fn interpolate(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
@@ -333,6 +355,7 @@ impl PyVariationalSurface {
         smoothing: f64,
         memory_limit: Option<u64>,
         method: &str,
+        progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let m = parse_method(method)?;
         let p = self::points(points, "points")?;
@@ -341,6 +364,7 @@ impl PyVariationalSurface {
         let count = p.len();
         run(
             py,
+            progress,
             m,
             count,
             s,

@@ -152,9 +152,15 @@ pub fn fit(
         smoothing: settings.smoothing,
         memory_limit: u64::MAX,
     };
+    // The caller's token (rayon's threads do not see it): patches stop when it is set, and
+    // count the constraints they fitted.
+    let token = crate::cancel::current();
     let fitted: Vec<Result<Patch>> = supports
         .par_iter()
         .map(|s| {
+            if let Some(t) = &token {
+                t.check()?;
+            }
             let (centre, radius) = (s.centre, s.radius);
             let mut idx = Vec::with_capacity(s.size());
             tree.for_each_within(&c.points, centre, radius, |i| idx.push(i));
@@ -179,6 +185,9 @@ pub fn fit(
             let pts: Vec<DVec3> = idx.iter().map(|&i| c.points[i as usize]).collect();
             let vals: Vec<f64> = idx.iter().map(|&i| c.values[i as usize]).collect();
             let fit = VariationalSurface::fit_patch(pts, vals, &rbf_settings, Par::Seq)?;
+            if let Some(t) = &token {
+                t.advance(inside as u64)?;
+            }
             Ok(Patch {
                 centre,
                 radius,
