@@ -67,3 +67,15 @@ pub fn check_finite_values(name: &'static str, values: &[f64]) -> Result<()> {
         None => Ok(()),
     }
 }
+
+/// Errors with [`Error::TooMuchMemory`], naming argument `name`, when `bytes` exceed `limit`.
+pub fn check_memory(name: &'static str, bytes: u64, limit: u64) -> Result<()> {
+    if bytes > limit {
+        return Err(Error::TooMuchMemory {
+            name,
+            needed_mib: bytes.div_ceil(1 << 20),
+            limit_mib: limit >> 20,
+        });
+    }
+    Ok(())
+}

@@ -104,6 +104,22 @@ pub fn check_points(name: &'static str, points: &[DVec3]) -> Result<()> {
     Ok(())
 }
 
+/// Checks data for interpolation: points as [`check_points`], one finite value per point.
+pub fn check_points_and_values(points: &[DVec3], values: &[f64]) -> Result<()> {
+    check_points("points", points)?;
+    if values.len() != points.len() {
+        return Err(Error::invalid(
+            "values",
+            format!(
+                "need one value per point: {} values, {} points",
+                values.len(),
+                points.len()
+            ),
+        ));
+    }
+    crate::error::check_finite_values("values", values)
+}
+
 /// For each point, the indices of the other points within `radius`, increasing (uniform grid,
 /// parallel over the points).
 fn neighbours_within(points: &[DVec3], radius: f64) -> Vec<Vec<u32>> {

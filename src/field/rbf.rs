@@ -12,7 +12,7 @@ use super::kernel::{
 };
 use super::saddle::SaddleSolver;
 use super::Field;
-use crate::error::{check_finite_values, Error, Result};
+use crate::error::{Error, Result};
 use faer::Par;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -120,18 +120,7 @@ impl VariationalSurface {
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
     pub fn interpolate(points: &[DVec3], values: &[f64], settings: &Settings) -> Result<Self> {
-        constraints::check_points("points", points)?;
-        if values.len() != points.len() {
-            return Err(Error::invalid(
-                "values",
-                format!(
-                    "need one value per point: {} values, {} points",
-                    values.len(),
-                    points.len()
-                ),
-            ));
-        }
-        check_finite_values("values", values)?;
+        constraints::check_points_and_values(points, values)?;
         check_system_memory(points.len(), settings.memory_limit)?;
         constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
         let c = Constraints {
@@ -494,15 +483,7 @@ impl VariationalSurface {
 /// Errors when the dense system for `n` constraints would exceed `limit` bytes.
 fn check_system_memory(n: usize, limit: u64) -> Result<()> {
     // The assembled matrix and the factor's copy.
-    let bytes = VariationalSurface::system_bytes(n);
-    if bytes > limit {
-        return Err(Error::TooMuchMemory {
-            name: "points",
-            needed_mib: bytes.div_ceil(1 << 20),
-            limit_mib: limit >> 20,
-        });
-    }
-    Ok(())
+    crate::error::check_memory("points", VariationalSurface::system_bytes(n), limit)
 }
 
 impl Field for VariationalSurface {

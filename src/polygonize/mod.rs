@@ -105,16 +105,9 @@ pub fn estimate_triangles(l: &Lattice) -> u64 {
     8 * (x * y + y * z + z * x)
 }
 
-/// Errors when `bytes` exceed the limit.
+/// Errors when `bytes` exceed the limit (the lattice's `resolution` is what asks for them).
 pub fn check_memory(bytes: u64, limit: u64) -> Result<()> {
-    if bytes > limit {
-        return Err(Error::TooMuchMemory {
-            name: "resolution",
-            needed_mib: bytes.div_ceil(1 << 20),
-            limit_mib: limit >> 20,
-        });
-    }
-    Ok(())
+    crate::error::check_memory("resolution", bytes, limit)
 }
 
 /// Evaluates `points` through the field in batches and checks the values are finite.

@@ -22,7 +22,7 @@ pub mod patches;
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::Kernel;
 use super::Field;
-use crate::error::{check_finite_values, Error, Result};
+use crate::error::{Error, Result};
 use glam::DVec3;
 use octree::Octree;
 use patches::Patch;
@@ -149,18 +149,7 @@ impl PartitionSurface {
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
     pub fn interpolate(points: &[DVec3], values: &[f64], settings: &Settings) -> Result<Self> {
         settings.check()?;
-        constraints::check_points("points", points)?;
-        if values.len() != points.len() {
-            return Err(Error::invalid(
-                "values",
-                format!(
-                    "need one value per point: {} values, {} points",
-                    values.len(),
-                    points.len()
-                ),
-            ));
-        }
-        check_finite_values("values", values)?;
+        constraints::check_points_and_values(points, values)?;
         constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
         let c = Constraints {
             points: points.to_vec(),

@@ -8,7 +8,7 @@
 use super::coarse::Level;
 use super::octree::Octree;
 use super::Settings;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::field::constraints::Constraints;
 use crate::field::rbf::{self, VariationalSurface};
 use faer::Par;
@@ -237,12 +237,5 @@ pub fn cover(tree: &Octree, patches: &[Patch]) -> (Vec<u32>, Vec<u32>) {
 
 /// Errors when `bytes` exceeds `limit`.
 pub fn check_memory(bytes: u64, limit: u64) -> Result<()> {
-    if bytes > limit {
-        return Err(Error::TooMuchMemory {
-            name: "points",
-            needed_mib: bytes.div_ceil(1 << 20),
-            limit_mib: limit >> 20,
-        });
-    }
-    Ok(())
+    crate::error::check_memory("points", bytes, limit)
 }
