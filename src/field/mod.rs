@@ -331,6 +331,19 @@ impl<F: BlockField> BlockField for Counting<F> {
 pub(crate) mod testing {
     use super::*;
 
+    /// `n` evenly spread unit vectors (a Fibonacci sphere, the pole along z).
+    pub fn fibonacci_sphere(n: usize) -> Vec<DVec3> {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let a = golden * i as f64;
+                DVec3::new(r * a.cos(), r * a.sin(), z)
+            })
+            .collect()
+    }
+
     /// Largest relative difference between a field's analytic gradient and central differences
     /// at the given points.
     pub fn gradient_error<F: Field>(field: &F, points: &[DVec3], h: f64) -> f64 {

@@ -515,18 +515,8 @@ mod tests {
     use super::*;
 
     fn sphere_data(n: usize) -> (Vec<DVec3>, Vec<DVec3>) {
-        // Fibonacci sphere.
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let pts: Vec<DVec3> = (0..n)
-            .map(|i| {
-                let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let r = (1.0 - y * y).sqrt();
-                let t = golden * i as f64;
-                DVec3::new(r * t.cos(), y, r * t.sin()) * 0.8
-            })
-            .collect();
-        let normals = pts.iter().map(|p| p.normalize()).collect();
-        (pts, normals)
+        let normals = fibonacci_sphere(n);
+        (normals.iter().map(|u| 0.8 * *u).collect(), normals)
     }
 
     #[test]

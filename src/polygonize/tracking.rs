@@ -611,15 +611,9 @@ mod tests {
     /// A hollow shell: 150 blobs of radius 0.25 on a sphere of radius 0.6 (Fibonacci points).
     /// Its inner surface, around a cavity at the centre, is a component of its own.
     fn shell() -> BlobField {
-        let n = 150;
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let centers: Vec<DVec3> = (0..n)
-            .map(|i| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let r = (1.0 - z * z).sqrt();
-                let a = golden * i as f64;
-                0.6 * DVec3::new(r * a.cos(), r * a.sin(), z)
-            })
+        let centers: Vec<DVec3> = crate::field::testing::fibonacci_sphere(150)
+            .into_iter()
+            .map(|u| 0.6 * u)
             .collect();
         let one = |v| PerPrimitive::All(v);
         BlobField::new(&centers, one(0.25), one(1.0), 0.5, BlobSettings::default()).unwrap()

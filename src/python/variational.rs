@@ -122,9 +122,7 @@ fn run(
     };
     let inner = if use_partition {
         let ps = partition::Settings {
-            kernel: settings.kernel,
-            smoothing: settings.smoothing,
-            memory_limit: settings.memory_limit,
+            fit: settings,
             ..Default::default()
         };
         let (report, end) = reporter(py, progress, "fit (partition)")?;

@@ -42,12 +42,9 @@ pub struct Settings {
     /// Patches whose support holds fewer constraints complete their system with constraints
     /// from outside it (see [`patches`] and [`coarse`]).
     pub min_points: usize,
-    pub kernel: Kernel,
-    /// Added to the diagonal of each patch's kernel block; 0 interpolates exactly.
-    pub smoothing: f64,
-    /// Refuse fits whose patches (kept, and the dense systems being solved) would need more
-    /// than this many bytes.
-    pub memory_limit: u64,
+    /// Each patch's fit (kernel, smoothing); its `memory_limit` refuses fits whose patches (kept,
+    /// and the dense systems being solved) would need more bytes.
+    pub fit: super::rbf::Settings,
 }
 
 impl Default for Settings {
@@ -57,9 +54,7 @@ impl Default for Settings {
             overlap: 1.25,
             max_patch: 400,
             min_points: 256,
-            kernel: Kernel::Triharmonic,
-            smoothing: 0.0,
-            memory_limit: 8 << 30,
+            fit: super::rbf::Settings::default(),
         }
     }
 }
@@ -93,10 +88,13 @@ impl Settings {
                 format!("must be at least 8, got {}", self.min_points),
             ));
         }
-        if !(self.smoothing.is_finite() && self.smoothing >= 0.0) {
+        if !(self.fit.smoothing.is_finite() && self.fit.smoothing >= 0.0) {
             return Err(Error::invalid(
                 "smoothing",
-                format!("must be finite and non-negative, got {}", self.smoothing),
+                format!(
+                    "must be finite and non-negative, got {}",
+                    self.fit.smoothing
+                ),
             ));
         }
         Ok(())
@@ -195,7 +193,7 @@ impl PartitionSurface {
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
             + (c.points.len() * 48) as u64
             + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
-        patches::check_memory(bytes, settings.memory_limit)?;
+        patches::check_memory(bytes, settings.fit.memory_limit)?;
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
         let (cover_start, cover) = patches::cover(&tree, &fitted);
@@ -216,7 +214,7 @@ impl PartitionSurface {
     }
     /// The kernel.
     pub fn kernel(&self) -> Kernel {
-        self.settings.kernel
+        self.settings.fit.kernel
     }
     /// The constraints the surface interpolates.
     pub fn constraints(&self) -> &Constraints {

@@ -147,10 +147,10 @@ pub fn fit(
     supports: &[Support],
     settings: &Settings,
 ) -> Result<Vec<Patch>> {
+    // The memory of all patches is checked before (see `check_memory`).
     let rbf_settings = rbf::Settings {
-        kernel: settings.kernel,
-        smoothing: settings.smoothing,
         memory_limit: u64::MAX,
+        ..settings.fit
     };
     // The caller's token (rayon's threads do not see it): patches stop when it is set, and
     // count the constraints they fitted.

@@ -178,7 +178,10 @@ fn refuses_bad_settings_and_memory() {
     assert_eq!(named(Settings { max_patch: 50, ..d }), "max_patch");
     assert!(matches!(
         fit(Settings {
-            memory_limit: 1 << 16,
+            fit: crate::field::rbf::Settings {
+                memory_limit: 1 << 16,
+                ..d.fit
+            },
             ..d
         }),
         Err(Error::TooMuchMemory { .. })
