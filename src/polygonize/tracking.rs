@@ -45,7 +45,7 @@ pub enum Components {
 }
 
 /// Neighbour offsets across the six faces (face f = 2·axis + side).
-const FACE_STEP: [(usize, i64); 6] = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)];
+pub(super) const FACE_STEP: [(usize, i64); 6] = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)];
 
 /// The directions a seed walk tries, in order, as faces: +x first (Triquet's Fig. 1), then −x,
 /// ±y, ±z.

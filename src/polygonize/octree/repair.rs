@@ -24,12 +24,10 @@ use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
 use crate::polygonize::cell::case_index;
+use crate::polygonize::tracking::FACE_STEP;
 use crate::polygonize::{CaseTable, Stats};
 use rayon::prelude::*;
 use std::collections::HashSet;
-
-/// Neighbour offsets across the six faces (face f = 2·axis + side), as in the case table.
-const FACE_STEP: [(usize, i64); 6] = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)];
 
 /// Where the levels' and leaves' decisions may have been wrong, found while settling.
 #[derive(Default)]
