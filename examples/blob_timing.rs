@@ -2,7 +2,7 @@
 //! `cargo run --release --example blob_timing -- 200 0.25 128 dense [repeats] [voxel_size]`
 //! (method `dense`, `sparse`, `tracking` or `blocks` (the `Tessellator`'s walk block by block); prints the phases of the last run and the median).
 use glam::DVec3;
-use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
 use implicitmesh::lattice::Lattice;
 use implicitmesh::polygonize::tracking::Components;
 use implicitmesh::polygonize::{dense, sparse, tracking, Settings};

@@ -1,7 +1,7 @@
 //! Times the phases of a variational fit and of batched evaluation on a PLY mesh:
 //! `cargo run --release --example fit_timing -- path/to/mesh.ply`.
 use glam::DVec3;
-use implicitmesh::field::rbf::{Settings, VariationalSurface};
+use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::field::Field;
 use std::time::Instant;
 
@@ -14,7 +14,7 @@ fn main() {
     let (v, f) = read_ply(&path);
     for _ in 0..3 {
         let t = Instant::now();
-        let s = VariationalSurface::from_mesh(&v, &f, &Default::default(), &Settings::default())
+        let s = VariationalSurface::from_mesh(&v, &f, &Default::default(), &FitSettings::default())
             .unwrap();
         println!(
             "fit {} centres: {:.4} s (residual {:.2e})",
@@ -23,8 +23,8 @@ fn main() {
             s.residual()
         );
     }
-    let s =
-        VariationalSurface::from_mesh(&v, &f, &Default::default(), &Settings::default()).unwrap();
+    let s = VariationalSurface::from_mesh(&v, &f, &Default::default(), &FitSettings::default())
+        .unwrap();
     let n = 1_000_000;
     let mut state = 12345u64;
     let pts: Vec<DVec3> = (0..n)

@@ -5,9 +5,9 @@
 //! `octree` skips dense, for profiles of the octree alone).
 use glam::DVec3;
 use implicitmesh::field::constraints;
-use implicitmesh::field::rbf::{Settings, VariationalSurface};
+use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::lattice::Lattice;
-use implicitmesh::polygonize::{dense, octree, Settings as PolySettings};
+use implicitmesh::polygonize::{dense, octree, Settings};
 use std::time::Instant;
 
 #[path = "common/ply.rs"]
@@ -21,13 +21,13 @@ fn main() {
     let rounds: usize = a.get(3).map_or(7, |s| s.parse().unwrap());
     let alone = a.get(4).is_some_and(|s| s == "octree");
     let (v, f) = read_ply(path);
-    let placement = constraints::Settings {
+    let placement = constraints::ConstraintSettings {
         d: Some(0.015),
         ..Default::default()
     };
-    let s = VariationalSurface::from_mesh(&v, &f, &placement, &Settings::default()).unwrap();
+    let s = VariationalSurface::from_mesh(&v, &f, &placement, &FitSettings::default()).unwrap();
     let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [res; 3]).unwrap();
-    let set = PolySettings::default();
+    let set = Settings::default();
     let oct = octree::Settings::default();
     let (mut ratios, mut best) = (Vec::new(), None::<(f64, _)>);
     for _ in 0..rounds {

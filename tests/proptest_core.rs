@@ -4,8 +4,8 @@
 
 use glam::DVec3;
 use implicitmesh::field::analytic::Sphere;
-use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
-use implicitmesh::field::rbf::{Settings as FitSettings, VariationalSurface};
+use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
+use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::field::{constraints, Field};
 use implicitmesh::lattice::Lattice;
 use implicitmesh::mesh::Mesh;
@@ -60,7 +60,7 @@ proptest! {
     #[test]
     fn fits_refuse_or_interpolate(p in points(24), n in points(24)) {
         let k = p.len().min(n.len());
-        let fit = VariationalSurface::fit(&p[..k], &n[..k], &constraints::Settings::default(), &FitSettings::default());
+        let fit = VariationalSurface::fit(&p[..k], &n[..k], &constraints::ConstraintSettings::default(), &FitSettings::default());
         if let Ok(s) = fit {
             let c = s.constraints();
             let scale = c.values.iter().fold(1e-300f64, |m, v| m.max(v.abs()));

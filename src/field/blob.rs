@@ -15,9 +15,9 @@ use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Settings of a blob field.
+/// BlobSettings of a blob field.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Settings {
+pub struct BlobSettings {
     /// Voxel side as a multiple of the mean radius of influence. Default 0.5, from the sweep in
     /// `notebooks/triquet_blobs.ipynb` (tracking at 128³ over [-1, 1]³, machine loaded):
     /// 7,000 blobs (R = 0.08) took 0.96, 0.57, 0.69, 0.66, 0.66, 0.69, 0.79, 0.89 s at 0.25,
@@ -28,9 +28,9 @@ pub struct Settings {
     pub voxel_size: f64,
 }
 
-impl Default for Settings {
+impl Default for BlobSettings {
     fn default() -> Self {
-        Settings { voxel_size: 0.5 }
+        BlobSettings { voxel_size: 0.5 }
     }
 }
 
@@ -45,7 +45,7 @@ pub struct BlobField {
     /// The same numbers packed per primitive for point queries (one cache line each).
     packed: Vec<Packed>,
     threshold: f64,
-    settings: Settings,
+    settings: BlobSettings,
     grid: VoxelGrid,
 }
 
@@ -112,7 +112,7 @@ impl BlobField {
         radii: PerPrimitive,
         strengths: PerPrimitive,
         threshold: f64,
-        settings: Settings,
+        settings: BlobSettings,
     ) -> Result<Self> {
         if !(threshold.is_finite() && threshold > 0.0) {
             return Err(Error::invalid(
@@ -662,7 +662,7 @@ impl BlobField {
     pub fn grid(&self) -> &VoxelGrid {
         &self.grid
     }
-    pub fn settings(&self) -> Settings {
+    pub fn settings(&self) -> BlobSettings {
         self.settings
     }
 
@@ -1157,7 +1157,7 @@ mod tests {
             PerPrimitive::Each(&r),
             PerPrimitive::All(1.0),
             0.5,
-            Settings::default(),
+            BlobSettings::default(),
         )
         .unwrap()
     }
@@ -1219,7 +1219,7 @@ mod tests {
             PerPrimitive::All(0.5),
             PerPrimitive::All(2.0),
             0.5,
-            Settings::default(),
+            BlobSettings::default(),
         )
         .unwrap();
         let p = DVec3::new(0.5 / 3f64.sqrt(), 0.0, 0.0);
@@ -1269,7 +1269,7 @@ mod tests {
             PerPrimitive::All(-1.0),
             PerPrimitive::All(1.0),
             0.5,
-            Settings::default()
+            BlobSettings::default()
         )
         .is_err());
         assert!(BlobField::new(
@@ -1277,7 +1277,7 @@ mod tests {
             PerPrimitive::All(1.0),
             PerPrimitive::All(1.0),
             0.0,
-            Settings::default()
+            BlobSettings::default()
         )
         .is_err());
         assert!(BlobField::new(
@@ -1285,7 +1285,7 @@ mod tests {
             PerPrimitive::Each(&[1.0, 2.0]),
             PerPrimitive::All(1.0),
             0.5,
-            Settings::default()
+            BlobSettings::default()
         )
         .is_err());
         assert!(BlobField::new(
@@ -1293,7 +1293,7 @@ mod tests {
             PerPrimitive::All(1.0),
             PerPrimitive::All(1.0),
             0.5,
-            Settings::default()
+            BlobSettings::default()
         )
         .is_err());
     }

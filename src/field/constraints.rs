@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 /// How constraint points are placed.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Settings {
+pub struct ConstraintSettings {
     /// Offset of normal constraints along the normal. `None`: 0.015 for data whose bounding box has
     /// largest side 2 (the papers' [-1, 1]³), scaled with the data (0.0075 × the largest side).
     pub d: Option<f64>,
@@ -23,9 +23,9 @@ pub struct Settings {
     pub shrink: bool,
 }
 
-impl Default for Settings {
+impl Default for ConstraintSettings {
     fn default() -> Self {
-        Settings {
+        ConstraintSettings {
             d: None,
             w: None,
             w_over_d: 0.75,
@@ -184,7 +184,11 @@ pub fn unit_normals(name: &'static str, normals: &[DVec3]) -> Result<Vec<DVec3>>
 
 /// Places boundary and normal constraints for `points` with `normals` (one per point, any
 /// non-zero length).
-pub fn place(points: &[DVec3], normals: &[DVec3], settings: &Settings) -> Result<Constraints> {
+pub fn place(
+    points: &[DVec3],
+    normals: &[DVec3],
+    settings: &ConstraintSettings,
+) -> Result<Constraints> {
     place_capped(points, normals, settings, None)
 }
 
@@ -192,7 +196,7 @@ pub fn place(points: &[DVec3], normals: &[DVec3], settings: &Settings) -> Result
 pub fn place_capped(
     points: &[DVec3],
     normals: &[DVec3],
-    settings: &Settings,
+    settings: &ConstraintSettings,
     caps: Option<&[f64]>,
 ) -> Result<Constraints> {
     check_points("points", points)?;
@@ -434,7 +438,7 @@ mod tests {
         let c = place(
             &pts,
             &normals,
-            &Settings {
+            &ConstraintSettings {
                 d: Some(d),
                 ..Default::default()
             },
@@ -485,7 +489,7 @@ mod tests {
         let c = place(
             &pts,
             &normals,
-            &Settings {
+            &ConstraintSettings {
                 d: Some(0.05),
                 ..Default::default()
             },

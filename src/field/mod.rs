@@ -366,9 +366,15 @@ pub(crate) mod testing {
         /// One blob of radius 0.9 at the origin: its surface (a sphere of radius 0.487) crosses
         /// blocks with bx = 2 on a 32³ lattice over [-1, 1]³.
         pub fn sphere() -> Lying {
-            use super::blob::{BlobField, PerPrimitive, Settings};
+            use super::blob::{BlobField, BlobSettings, PerPrimitive};
             let one = |r| PerPrimitive::All(r);
-            let blob = BlobField::new(&[DVec3::ZERO], one(0.9), one(1.0), 0.5, Settings::default());
+            let blob = BlobField::new(
+                &[DVec3::ZERO],
+                one(0.9),
+                one(1.0),
+                0.5,
+                BlobSettings::default(),
+            );
             Lying(blob.unwrap())
         }
     }
@@ -438,14 +444,14 @@ pub(crate) mod testing {
 
     /// `n` blobs of radius `r` (strength 1, threshold 0.5) at random centres in [-0.8, 0.8]³.
     pub fn random_blobs(n: usize, r: f64, seed: u64) -> super::blob::BlobField {
-        use super::blob::{BlobField, PerPrimitive, Settings};
+        use super::blob::{BlobField, BlobSettings, PerPrimitive};
         let c = random_points(n, -0.8, 0.8, seed);
         BlobField::new(
             &c,
             PerPrimitive::All(r),
             PerPrimitive::All(1.0),
             0.5,
-            Settings::default(),
+            BlobSettings::default(),
         )
         .unwrap()
     }

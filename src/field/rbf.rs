@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 /// How a variational surface is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Settings {
+pub struct FitSettings {
     pub kernel: Kernel,
     /// Added to the diagonal of the kernel block: 0 interpolates exactly, > 0 smooths noisy data.
     pub smoothing: f64,
@@ -27,9 +27,9 @@ pub struct Settings {
     pub memory_limit: u64,
 }
 
-impl Default for Settings {
+impl Default for FitSettings {
     fn default() -> Self {
-        Settings {
+        FitSettings {
             kernel: Kernel::Triharmonic,
             smoothing: 0.0,
             memory_limit: 8 << 30,
@@ -95,8 +95,8 @@ impl VariationalSurface {
     pub fn fit(
         points: &[DVec3],
         normals: &[DVec3],
-        placement: &constraints::Settings,
-        settings: &Settings,
+        placement: &constraints::ConstraintSettings,
+        settings: &FitSettings,
     ) -> Result<Self> {
         check_system_memory(2 * points.len(), settings.memory_limit)?;
         let c = constraints::place(points, normals, placement)?;
@@ -108,8 +108,8 @@ impl VariationalSurface {
     pub fn from_mesh(
         vertices: &[DVec3],
         faces: &[[u32; 3]],
-        placement: &constraints::Settings,
-        settings: &Settings,
+        placement: &constraints::ConstraintSettings,
+        settings: &FitSettings,
     ) -> Result<Self> {
         let (v, f, n) = constraints::mesh_vertices_normals(vertices, faces)?;
         check_system_memory(2 * v.len(), settings.memory_limit)?;
@@ -119,7 +119,7 @@ impl VariationalSurface {
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
-    pub fn interpolate(points: &[DVec3], values: &[f64], settings: &Settings) -> Result<Self> {
+    pub fn interpolate(points: &[DVec3], values: &[f64], settings: &FitSettings) -> Result<Self> {
         constraints::check_points_and_values(points, values)?;
         check_system_memory(points.len(), settings.memory_limit)?;
         constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
@@ -132,7 +132,7 @@ impl VariationalSurface {
         Self::solve(c, settings, faer::get_global_parallelism())
     }
 
-    fn solve(c: Constraints, settings: &Settings, par: Par) -> Result<Self> {
+    fn solve(c: Constraints, settings: &FitSettings, par: Par) -> Result<Self> {
         if !(settings.smoothing.is_finite() && settings.smoothing >= 0.0) {
             return Err(Error::invalid(
                 "smoothing",
@@ -414,7 +414,7 @@ impl VariationalSurface {
     pub(crate) fn fit_patch(
         points: Vec<DVec3>,
         values: Vec<f64>,
-        settings: &Settings,
+        settings: &FitSettings,
         par: Par,
     ) -> Result<Self> {
         let boundary = points.len();
@@ -527,7 +527,7 @@ mod tests {
                 &p,
                 &n,
                 &Default::default(),
-                &Settings {
+                &FitSettings {
                     kernel,
                     ..Default::default()
                 },
@@ -600,7 +600,7 @@ mod tests {
             &p,
             &n,
             &Default::default(),
-            &Settings {
+            &FitSettings {
                 memory_limit: 1000,
                 ..Default::default()
             },

@@ -31,7 +31,7 @@
 //!
 //! ```
 //! use glam::DVec3;
-//! use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+//! use implicitmesh::field::blob::{BlobField, PerPrimitive, BlobSettings};
 //! use implicitmesh::lattice::Lattice;
 //! use implicitmesh::polygonize::tracking::Components;
 //! use implicitmesh::polygonize::{block_tracking, dense, Settings};
@@ -904,7 +904,7 @@ mod tests {
     fn one_seed_finds_one_component_of_many() {
         // Separate blobs on a line, sharing blocks: a seed in one finds it alone, and only the
         // vertices of its triangles.
-        use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+        use crate::field::blob::{BlobField, BlobSettings, PerPrimitive};
         let centers: Vec<DVec3> = (0..4)
             .map(|i| DVec3::new(-0.45 + 0.3 * i as f64, 0.1, -0.05))
             .collect();
@@ -1121,7 +1121,7 @@ mod tests {
         // Blobs 0.08 apart on a grid by the lattice's upper corner, cut by its sides, in
         // blocks shared by several (and last blocks of 2 points along each axis): seeded one at
         // a time, each equals cell tracking's, bit for bit, and keeps only its own vertices.
-        use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+        use crate::field::blob::{BlobField, BlobSettings, PerPrimitive};
         let mut centers = vec![];
         for i in 0..4 {
             for j in 0..4 {

@@ -28,7 +28,7 @@
 //!
 //! ```
 //! use glam::DVec3;
-//! use implicitmesh::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+//! use implicitmesh::field::blob::{BlobField, PerPrimitive, BlobSettings};
 //! use implicitmesh::lattice::Lattice;
 //! use implicitmesh::polygonize::{dense, sparse, Settings};
 //!

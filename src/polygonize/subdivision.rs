@@ -1296,8 +1296,8 @@ mod tests {
         let s = VariationalSurface::from_mesh(
             &m.vertices,
             &m.triangles,
-            &constraints::Settings::default(),
-            &rbf::Settings::default(),
+            &constraints::ConstraintSettings::default(),
+            &rbf::FitSettings::default(),
         )
         .unwrap();
         (m, s)

@@ -567,7 +567,7 @@ pub fn polygonize_all<F: BlockField + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::blob::{BlobField, PerPrimitive, Settings as BlobSettings};
+    use crate::field::blob::{BlobField, BlobSettings, PerPrimitive};
     use crate::field::testing::random_blobs as blobs;
     use crate::field::testing::{
         canonical_triangles as canonical, random_points, vertex_normal_bits,

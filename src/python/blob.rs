@@ -59,8 +59,8 @@ impl PyBlobField {
             Some(s) => per_primitive(s, "strengths")?,
             None => Ok(1.0),
         };
-        let settings = blob::Settings {
-            voxel_size: voxel_size.unwrap_or(blob::Settings::default().voxel_size),
+        let settings = blob::BlobSettings {
+            voxel_size: voxel_size.unwrap_or(blob::BlobSettings::default().voxel_size),
         };
         let inner =
             py.detach(|| BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings))?;

@@ -111,9 +111,9 @@ fn run(
     progress: Option<&Bound<'_, PyAny>>,
     method: Method,
     constraints: usize,
-    settings: rbf::Settings,
-    global: impl FnOnce(&rbf::Settings) -> Result<VariationalSurface> + Send,
-    partition: impl FnOnce(&partition::Settings) -> Result<PartitionSurface> + Send,
+    settings: rbf::FitSettings,
+    global: impl FnOnce(&rbf::FitSettings) -> Result<VariationalSurface> + Send,
+    partition: impl FnOnce(&partition::PartitionSettings) -> Result<PartitionSurface> + Send,
 ) -> PyResult<PyVariationalSurface> {
     let use_partition = match method {
         Method::Global => false,
@@ -121,7 +121,7 @@ fn run(
         Method::Auto => constraints >= AUTO_PARTITION_CONSTRAINTS,
     };
     let inner = if use_partition {
-        let ps = partition::Settings {
+        let ps = partition::PartitionSettings {
             fit: settings,
             ..Default::default()
         };
@@ -166,17 +166,17 @@ fn fit_settings(
     kernel: &str,
     smoothing: f64,
     memory_limit: Option<u64>,
-) -> PyResult<rbf::Settings> {
-    let d = rbf::Settings::default();
-    Ok(rbf::Settings {
+) -> PyResult<rbf::FitSettings> {
+    let d = rbf::FitSettings::default();
+    Ok(rbf::FitSettings {
         kernel: Kernel::parse(kernel)?,
         smoothing,
         memory_limit: memory_limit.unwrap_or(d.memory_limit),
     })
 }
 
-fn placement(d: Option<f64>, w: Option<f64>) -> constraints::Settings {
-    constraints::Settings {
+fn placement(d: Option<f64>, w: Option<f64>) -> constraints::ConstraintSettings {
+    constraints::ConstraintSettings {
         d,
         w,
         ..Default::default()

@@ -2,13 +2,13 @@
 //! al.'s multi-level partition of unity, with variational patches instead of quadrics).
 //!
 //! - [`octree`]: an octree over the constraints (boundary and normal constraints together),
-//!   split until each leaf holds at most [`Settings::max_per_leaf`] of them and the ball of
-//!   its patch at most [`Settings::max_patch`]; its cube covers the constraints and the
+//!   split until each leaf holds at most [`PartitionSettings::max_per_leaf`] of them and the ball of
+//!   its patch at most [`PartitionSettings::max_patch`]; its cube covers the constraints and the
 //!   surface's default polygonization bounds.
-//! - [`patches`]: one patch per leaf, a ball of radius [`Settings::overlap`] × the leaf's
+//! - [`patches`]: one patch per leaf, a ball of radius [`PartitionSettings::overlap`] × the leaf's
 //!   half-diagonal around its centre, fitted with r³ + linear (as
 //!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball
-//!   (completed, when they are fewer than [`Settings::min_points`], by constraints spread over a
+//!   (completed, when they are fewer than [`PartitionSettings::min_points`], by constraints spread over a
 //!   larger ball, from the subsampled levels of [`coarse`]); patches are solved in parallel.
 //! - [`blend`]: f = Σ w_i f_i / Σ w_i with compactly supported C² weights. Each patch whose
 //!   weight is non-zero at a constraint interpolates it, so the blend interpolates every
@@ -29,7 +29,7 @@ use patches::Patch;
 
 /// How a partition-of-unity surface is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Settings {
+pub struct PartitionSettings {
     /// Leaves split until they hold at most this many constraints. With the default overlap a
     /// patch then interpolates about 100–400 constraints.
     pub max_per_leaf: usize,
@@ -44,22 +44,22 @@ pub struct Settings {
     pub min_points: usize,
     /// Each patch's fit (kernel, smoothing); its `memory_limit` refuses fits whose patches (kept,
     /// and the dense systems being solved) would need more bytes.
-    pub fit: super::rbf::Settings,
+    pub fit: super::rbf::FitSettings,
 }
 
-impl Default for Settings {
+impl Default for PartitionSettings {
     fn default() -> Self {
-        Settings {
+        PartitionSettings {
             max_per_leaf: 96,
             overlap: 1.25,
             max_patch: 400,
             min_points: 256,
-            fit: super::rbf::Settings::default(),
+            fit: super::rbf::FitSettings::default(),
         }
     }
 }
 
-impl Settings {
+impl PartitionSettings {
     fn check(&self) -> Result<()> {
         if self.max_per_leaf < 8 {
             return Err(Error::invalid(
@@ -105,7 +105,7 @@ impl Settings {
 /// normals given point out of the solid).
 #[derive(Clone, Debug)]
 pub struct PartitionSurface {
-    settings: Settings,
+    settings: PartitionSettings,
     constraints: Constraints,
     tree: Octree,
     patches: Vec<Patch>,
@@ -121,8 +121,8 @@ impl PartitionSurface {
     pub fn fit(
         points: &[DVec3],
         normals: &[DVec3],
-        placement: &constraints::Settings,
-        settings: &Settings,
+        placement: &constraints::ConstraintSettings,
+        settings: &PartitionSettings,
     ) -> Result<Self> {
         settings.check()?;
         let c = constraints::place(points, normals, placement)?;
@@ -134,8 +134,8 @@ impl PartitionSurface {
     pub fn from_mesh(
         vertices: &[DVec3],
         faces: &[[u32; 3]],
-        placement: &constraints::Settings,
-        settings: &Settings,
+        placement: &constraints::ConstraintSettings,
+        settings: &PartitionSettings,
     ) -> Result<Self> {
         settings.check()?;
         let (v, f, n) = constraints::mesh_vertices_normals(vertices, faces)?;
@@ -145,7 +145,11 @@ impl PartitionSurface {
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
-    pub fn interpolate(points: &[DVec3], values: &[f64], settings: &Settings) -> Result<Self> {
+    pub fn interpolate(
+        points: &[DVec3],
+        values: &[f64],
+        settings: &PartitionSettings,
+    ) -> Result<Self> {
         settings.check()?;
         constraints::check_points_and_values(points, values)?;
         constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
@@ -158,7 +162,7 @@ impl PartitionSurface {
         Self::solve(c, settings)
     }
 
-    fn solve(c: Constraints, settings: &Settings) -> Result<Self> {
+    fn solve(c: Constraints, settings: &PartitionSettings) -> Result<Self> {
         // The cube: centred on the data's bounding box, covering the default polygonization
         // bounds (half-side 0.6 × the data's largest side) and every constraint.
         let (lo, hi) = bounding_box(&c.points[..c.boundary]);
@@ -209,7 +213,7 @@ impl PartitionSurface {
     }
 
     /// The settings of the fit.
-    pub fn settings(&self) -> &Settings {
+    pub fn settings(&self) -> &PartitionSettings {
         &self.settings
     }
     /// The kernel.

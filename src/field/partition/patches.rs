@@ -7,7 +7,7 @@
 
 use super::coarse::Level;
 use super::octree::Octree;
-use super::Settings;
+use super::PartitionSettings;
 use crate::error::Result;
 use crate::field::constraints::Constraints;
 use crate::field::rbf::{self, VariationalSurface};
@@ -55,7 +55,7 @@ pub fn supports(
     tree: &Octree,
     points: &[DVec3],
     levels: &[Level],
-    settings: &Settings,
+    settings: &PartitionSettings,
 ) -> Vec<Support> {
     let want = settings.min_points.min(points.len());
     tree.leaves
@@ -145,10 +145,10 @@ pub fn fit(
     c: &Constraints,
     levels: &[Level],
     supports: &[Support],
-    settings: &Settings,
+    settings: &PartitionSettings,
 ) -> Result<Vec<Patch>> {
     // The memory of all patches is checked before (see `check_memory`).
-    let rbf_settings = rbf::Settings {
+    let rbf_settings = rbf::FitSettings {
         memory_limit: u64::MAX,
         ..settings.fit
     };

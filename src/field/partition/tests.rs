@@ -160,25 +160,28 @@ fn same_bits_whatever_the_batch_and_threads() {
 #[test]
 fn refuses_bad_settings_and_memory() {
     let (p, n) = torus_data(500, 3);
-    let fit = |s: Settings| PartitionSurface::fit(&p, &n, &Default::default(), &s);
-    let named = |s: Settings| match fit(s) {
+    let fit = |s: PartitionSettings| PartitionSurface::fit(&p, &n, &Default::default(), &s);
+    let named = |s: PartitionSettings| match fit(s) {
         Err(Error::InvalidArgument { name, .. }) => name,
         other => panic!("{other:?}"),
     };
-    let d = Settings::default();
-    assert_eq!(named(Settings { overlap: 1.0, ..d }), "overlap");
+    let d = PartitionSettings::default();
+    assert_eq!(named(PartitionSettings { overlap: 1.0, ..d }), "overlap");
     assert_eq!(
-        named(Settings {
+        named(PartitionSettings {
             max_per_leaf: 2,
             ..d
         }),
         "max_per_leaf"
     );
-    assert_eq!(named(Settings { min_points: 3, ..d }), "min_points");
-    assert_eq!(named(Settings { max_patch: 50, ..d }), "max_patch");
+    assert_eq!(
+        named(PartitionSettings { min_points: 3, ..d }),
+        "min_points"
+    );
+    assert_eq!(named(PartitionSettings { max_patch: 50, ..d }), "max_patch");
     assert!(matches!(
-        fit(Settings {
-            fit: crate::field::rbf::Settings {
+        fit(PartitionSettings {
+            fit: crate::field::rbf::FitSettings {
                 memory_limit: 1 << 16,
                 ..d.fit
             },
