@@ -127,3 +127,28 @@ def test_fit_progress_must_be_a_bool_or_callable(scan):
     p, n = scan
     with pytest.raises(ValueError, match="progress"):
         im.VariationalSurface.fit(p[:50], n[:50], progress="yes")
+
+
+def test_global_fit_reports_progress(scan):
+    # The factorization reports the columns of the system's null-space block it has done:
+    # all 2·1500 − 4 of them by the end, in steps.
+    p, n = scan
+    counts: list[int] = []
+    s = im.VariationalSurface.fit(p[:1500], n[:1500], method="global", progress=counts.append)
+    assert s.method == "global"
+    assert counts == sorted(counts)
+    assert counts[-1] == 2 * 1500 - 4
+
+
+def test_ctrl_c_stops_a_global_fit(scan):
+    p, n = scan
+    counts: list[int] = []
+    timer = interrupt_after(1.0)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            im.VariationalSurface.fit(p[:4000], n[:4000], method="global", progress=counts.append)
+    finally:
+        timer.cancel()
+    assert not counts or counts[-1] < 2 * 4000 - 4
+    s = im.VariationalSurface.fit(p[::20], n[::20], method="global")
+    assert np.abs(s.evaluate(p[::20])).max() < 1e-6

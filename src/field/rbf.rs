@@ -159,7 +159,7 @@ impl VariationalSurface {
             smoothing,
             kernel.cpd_sign(),
             par,
-        );
+        )?;
         let (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
         let mut x = (lam0, a0);
 
@@ -188,6 +188,7 @@ impl VariationalSurface {
                 .fold(1.0, |a: f64, v| a.max(v.abs()));
         let mut best: Option<(f64, (Vec<f64>, [f64; 4]))> = None;
         for _ in 0..4 {
+            crate::cancel::check()?;
             s.set_solution(&x.0, x.1);
             // Residual of the system measured with our own evaluator (what users will see).
             let mut fvals = vec![0.0; n];

@@ -18,12 +18,20 @@
 //!   for symmetric indefinite systems (symmetric pivoting with 1×1 and 2×2 blocks). Used when
 //!   Cholesky fails (smoothing that destroys definiteness, or rounding on near-degenerate data).
 
+use crate::cancel;
+use crate::error::Result;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
+use faer::linalg::matmul::triangular::{self as tri, BlockStructure};
 use faer::linalg::solvers::{Lblt, SolveCore};
-use faer::{Conj, Mat, MatMut, MatRef, Par, Side};
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::{Accum, Conj, Mat, MatMut, MatRef, Par, Side};
 use glam::DVec3;
 use rayon::prelude::*;
+
+/// Columns per step of the assembly and of the blocked Cholesky factorization: the call
+/// checks for interruption and reports progress (columns done) between steps.
+const COLUMNS_PER_STEP: usize = 2048;
 
 enum Factor {
     NullSpace {
@@ -58,22 +66,83 @@ fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) 
     }
 }
 
+/// Φ + sI, column-major, [`COLUMNS_PER_STEP`] columns at a time.
 fn assemble(
     points: &[DVec3],
     phi: &(impl Fn(f64) -> f64 + Sync),
     smoothing: f64,
     par: Par,
-) -> Vec<f64> {
+) -> Result<Vec<f64>> {
     let n = points.len();
     let mut a = vec![0.0f64; n * n];
-    for_columns(&mut a, n, par, |j, col| {
-        let cj = points[j];
-        for (i, x) in col.iter_mut().enumerate() {
-            *x = phi((points[i] - cj).length());
+    for (s, step) in a.chunks_mut(n * COLUMNS_PER_STEP).enumerate() {
+        cancel::check()?;
+        for_columns(step, n, par, |k, col| {
+            let j = s * COLUMNS_PER_STEP + k;
+            let cj = points[j];
+            for (i, x) in col.iter_mut().enumerate() {
+                *x = phi((points[i] - cj).length());
+            }
+            col[j] += smoothing;
+        });
+    }
+    Ok(a)
+}
+
+/// Cholesky factorization in place of the lower triangle of `a` (faer's, which cannot be
+/// stopped), by blocks of [`COLUMNS_PER_STEP`] columns when `a` is larger than one block, with
+/// a check for interruption between blocks and, unless `par` is [`Par::Seq`] (a fit inside
+/// someone else's parallel loop, which reports its own progress), a progress report of the
+/// columns done. `Ok(false)` when `a` is not positive definite.
+fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
+    let m = a.nrows();
+    let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
+        m.min(COLUMNS_PER_STEP),
+        par,
+        Default::default(),
+    ));
+    let mut k = 0;
+    while k < m {
+        cancel::check()?;
+        let b = COLUMNS_PER_STEP.min(m - k);
+        let rest = a.as_mut().submatrix_mut(k, k, m - k, m - k);
+        let (l11, _, l21, a22) = rest.split_at_mut(b, b);
+        let mut l11 = l11;
+        if llt::factor::cholesky_in_place(
+            l11.as_mut(),
+            Default::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .is_err()
+        {
+            return Ok(false);
         }
-        col[j] += smoothing;
-    });
-    a
+        if b < m - k {
+            // L₂₁ = A₂₁ L₁₁⁻ᵀ, then the trailing block's lower triangle A₂₂ −= L₂₁ L₂₁ᵀ.
+            let mut l21 = l21;
+            solve_lower_triangular_in_place(l11.as_ref(), l21.as_mut().transpose_mut(), par);
+            tri::matmul(
+                a22,
+                BlockStructure::TriangularLower,
+                Accum::Add,
+                l21.as_ref(),
+                BlockStructure::Rectangular,
+                l21.as_ref().transpose(),
+                BlockStructure::Rectangular,
+                -1.0,
+                par,
+            );
+        }
+        if matches!(par, Par::Seq) {
+            cancel::check()?;
+        } else {
+            cancel::advance(b as u64)?;
+        }
+        k += b;
+    }
+    Ok(true)
 }
 
 impl SaddleSolver {
@@ -84,26 +153,27 @@ impl SaddleSolver {
         phi: impl Fn(f64) -> f64 + Sync,
         smoothing: f64,
         sign: f64,
-    ) -> Self {
+    ) -> Result<Self> {
         Self::with_parallelism(points, phi, smoothing, sign, faer::get_global_parallelism())
     }
 
     /// As [`SaddleSolver::new`], with the parallelism of the assembly and factorization:
-    /// [`Par::Seq`] inside one's own rayon loops.
+    /// [`Par::Seq`] inside one's own rayon loops. Stops with [`crate::Error::Interrupted`] when
+    /// this thread's [`cancel`] token is set.
     pub fn with_parallelism(
         points: &[DVec3],
         phi: impl Fn(f64) -> f64 + Sync,
         smoothing: f64,
         sign: f64,
         par: Par,
-    ) -> Self {
+    ) -> Result<Self> {
         let n = points.len();
-        let a = assemble(points, &phi, smoothing, par);
-        if let Some(f) = Self::null_space(points, a, sign, par) {
-            return SaddleSolver { n, factor: f };
+        let a = assemble(points, &phi, smoothing, par)?;
+        if let Some(f) = Self::null_space(points, a, sign, par)? {
+            return Ok(SaddleSolver { n, factor: f });
         }
         // Fallback: the whole (n + 4) × (n + 4) saddle-point matrix with LBLᵀ.
-        let a = assemble(points, &phi, smoothing, par);
+        let a = assemble(points, &phi, smoothing, par)?;
         let m = n + 4;
         let mut full = vec![0.0f64; m * m];
         for_columns(&mut full, m, par, |j, col| {
@@ -124,17 +194,26 @@ impl SaddleSolver {
         drop(a);
         // faer's LBLᵀ constructor runs with the global parallelism whatever `par` says (it
         // takes no parallelism argument); nested in a rayon loop it joins that loop's pool.
+        cancel::check()?;
         let lblt = Lblt::new(MatRef::from_column_major_slice(&full, m, m), Side::Lower);
-        SaddleSolver {
+        cancel::check()?;
+        Ok(SaddleSolver {
             n,
             factor: Factor::Full(lblt),
-        }
+        })
     }
 
-    fn null_space(points: &[DVec3], mut a: Vec<f64>, sign: f64, par: Par) -> Option<Factor> {
+    /// The null-space factorization; `Ok(None)` when it does not apply (fewer than five or
+    /// coplanar points, or a trailing block that is not positive definite).
+    fn null_space(
+        points: &[DVec3],
+        mut a: Vec<f64>,
+        sign: f64,
+        par: Par,
+    ) -> Result<Option<Factor>> {
         let n = points.len();
         if n < 5 {
-            return None;
+            return Ok(None);
         }
         // Householder QR of P (n × 4).
         let mut p: Vec<[f64; 4]> = points.iter().map(|c| [1.0, c.x, c.y, c.z]).collect();
@@ -143,7 +222,7 @@ impl SaddleSolver {
         for k in 0..4 {
             let norm = (k..n).map(|i| p[i][k] * p[i][k]).sum::<f64>().sqrt();
             if norm == 0.0 {
-                return None;
+                return Ok(None);
             }
             let alpha = if p[k][k] > 0.0 { -norm } else { norm };
             let vk = &mut v[k * n..(k + 1) * n];
@@ -153,7 +232,7 @@ impl SaddleSolver {
             vk[k] -= alpha;
             let vv: f64 = vk[k..].iter().map(|x| x * x).sum();
             if vv == 0.0 {
-                return None;
+                return Ok(None);
             }
             tau[k] = 2.0 / vv;
             for col in k..4 {
@@ -171,7 +250,7 @@ impl SaddleSolver {
         let rmax = (0..4).map(|i| r[i][i].abs()).fold(0.0, f64::max);
         let rmin = (0..4).map(|i| r[i][i].abs()).fold(f64::INFINITY, f64::min);
         if rmin <= 1e-10 * rmax {
-            return None;
+            return Ok(None);
         }
         let col = |k: usize| &v[k * n..(k + 1) * n];
         // T of the compact WY form Q = H₀H₁H₂H₃ = I − V T Vᵀ (upper triangular).
@@ -259,30 +338,20 @@ impl SaddleSolver {
             .flat_map(|j| (0..4).map(move |i| (i, j)))
             .map(|(i, j)| a[j * n + i])
             .collect();
-        // In-place Cholesky of the trailing block (faer reads and writes its lower triangle).
+        // In-place Cholesky of the trailing block (its lower triangle).
         let mm = n - 4;
-        let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
-            mm,
-            par,
-            Default::default(),
-        ));
         let block = MatMut::from_column_major_slice_mut(&mut a, n, n).submatrix_mut(4, 4, mm, mm);
-        llt::factor::cholesky_in_place(
-            block,
-            Default::default(),
-            par,
-            MemStack::new(&mut mem),
-            Default::default(),
-        )
-        .ok()?;
-        Some(Factor::NullSpace {
+        if !cholesky_in_steps(block, par)? {
+            return Ok(None);
+        }
+        Ok(Some(Factor::NullSpace {
             v,
             t,
             r,
             top,
             l: a,
             sign,
-        })
+        }))
     }
 
     /// Which factorization is in use: `"cholesky"` (null space) or `"lblt"`.
@@ -391,7 +460,7 @@ mod tests {
     use crate::field::testing::random_points;
 
     fn check(points: &[DVec3], phi: fn(f64) -> f64, smoothing: f64, sign: f64, expect: &str) {
-        let s = SaddleSolver::new(points, phi, smoothing, sign);
+        let s = SaddleSolver::new(points, phi, smoothing, sign).unwrap();
         assert_eq!(s.method(), expect);
         let n = points.len();
         let f: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
@@ -440,5 +509,56 @@ mod tests {
         let p = random_points(60, -1.0, 1.0, 5);
         // Wrong sign: −r³ on the null space is negative definite, so Cholesky fails.
         check(&p, |r| -r * r * r, 0.0, 1.0, "lblt");
+    }
+
+    /// Above one block of columns the factorization runs in steps; it solves the system as the
+    /// single call does (the residual check above), and the steps' factor equals the single
+    /// call's to rounding.
+    #[test]
+    fn cholesky_in_steps_solves_large_systems() {
+        let p = random_points(COLUMNS_PER_STEP + 300, -1.0, 1.0, 3);
+        // Smoothed: well conditioned at this size, so the residual check is about the steps.
+        check(&p, |r| r * r * r, 0.01, 1.0, "cholesky");
+        let m = 2 * COLUMNS_PER_STEP + 77;
+        let b = Mat::<f64>::from_fn(m, m, |i, j| ((i * 7 + j * 13) % 17) as f64 / 17.0 - 0.5);
+        let spd = &b * b.transpose() + Mat::<f64>::identity(m, m) * (m as f64);
+        let mut whole = spd.clone();
+        let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
+            m,
+            Par::Seq,
+            Default::default(),
+        ));
+        llt::factor::cholesky_in_place(
+            whole.as_mut(),
+            Default::default(),
+            Par::Seq,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .unwrap();
+        let mut steps = spd.clone();
+        assert!(cholesky_in_steps(steps.as_mut(), Par::rayon(2)).unwrap());
+        for j in 0..m {
+            for i in j..m {
+                let (x, y) = (whole[(i, j)], steps[(i, j)]);
+                assert!(
+                    (x - y).abs() <= 1e-12 * whole[(j, j)].abs(),
+                    "({i}, {j}): {x} vs {y}"
+                );
+            }
+        }
+        let mut indefinite = spd.clone();
+        indefinite[(m - 1, m - 1)] = -1e9;
+        assert!(!cholesky_in_steps(indefinite.as_mut(), Par::Seq).unwrap());
+    }
+
+    /// A set token stops the factorization between steps.
+    #[test]
+    fn stops_when_told() {
+        let p = random_points(COLUMNS_PER_STEP + 300, -1.0, 1.0, 3);
+        let t = cancel::Token::new();
+        t.stop();
+        let r = cancel::run_under(t, || SaddleSolver::new(&p, |r| r * r * r, 0.0, 1.0));
+        assert!(matches!(r, Err(crate::Error::Interrupted)));
     }
 }
