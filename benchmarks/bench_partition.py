@@ -3,8 +3,11 @@
 Each measurement runs in a fresh process, so that the peak resident size (VmHWM in
 /proc/self/status) is that run's.
 
-    python benchmarks/bench_partition.py scale 10000 100000      # points sampled on knot_hires
-    python benchmarks/bench_partition.py crossover 500 1000 2000  # global vs partition fit time
+    python -m benchmarks.bench_partition scale 10000 100000      # points sampled on knot_hires
+    python -m benchmarks.bench_partition crossover 500 1000 2000  # global vs partition fit time
+
+It prints one JSON line per size (the tables of ``docs/variational.md``); it has no section in
+BENCHMARKS.md.
 """
 
 from __future__ import annotations
@@ -15,7 +18,9 @@ import sys
 import time
 from pathlib import Path
 
-MESH = Path(__file__).resolve().parent.parent / "tests" / "data" / "meshes"
+from benchmarks.timing import ROOT
+
+MESH = ROOT / "tests" / "data" / "meshes"
 
 
 def vmhwm_mib() -> float:
@@ -94,7 +99,8 @@ def main() -> None:
         return
     for n in sizes:
         r = subprocess.run(
-            [sys.executable, __file__, "one", kind, n, "knot", "256"], capture_output=True, text=True, check=True
+            [sys.executable, "-m", "benchmarks.bench_partition", "one", kind, n, "knot", "256"],
+            capture_output=True, text=True, check=True, cwd=ROOT,
         )
         print(r.stdout.strip(), flush=True)
 
