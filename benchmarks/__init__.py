@@ -4,9 +4,9 @@
     python -m benchmarks.run_all --render                      # BENCHMARKS.md from the stored results
     python -m benchmarks.bench_octree [--quick]                # one section
 
-Each ``bench_NAME`` module with a section has ``measure(args) -> dict`` (the raw results:
-every timing's runs, exact counts, the machine and the run) and ``render(raw) -> str`` (its
-markdown section). The raw results are kept in ``benchmarks/results/NAME.json`` and the section
-in ``benchmarks/results/NAME.md``. ``bench_partition`` measures the partition-of-unity fit at scan
-scale for ``docs/variational.md`` and has no section. The package is not part of the wheel.
+Each ``bench_NAME`` module has ``measure(args) -> dict`` (the raw results: every timing's runs,
+exact counts, the machine and the run) and ``render(raw) -> str`` (its markdown section). The
+raw results are kept in ``benchmarks/results/NAME.json`` and the section in
+``benchmarks/results/NAME.md``. The package is not part of the wheel (``pyproject.toml`` packages
+``python/implicitmesh`` alone).
 """
