@@ -30,6 +30,8 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 
 __all__ = [
+    "ROOT",
+    "RESULTS",
     "Timing",
     "timeit_median",
     "cpu_snapshot",
