@@ -2,7 +2,7 @@
 evaluation of the grid followed by VTK flying edges (pyvista) or scikit-image marching cubes, in
 one run, plus an animation loop (a script, not a test).
 
-    python benchmarks/bench_blobs.py [--quick] [--output PATH]
+    python -m benchmarks.bench_blobs [--quick] [--results DIR]
 
 Cases (issue 4): 200 primitives (R = 0.25) and 7,000 primitives (R = 0.08), centres uniform in
 [-0.8, 0.8]³ (fixed seed), strengths 1, threshold 0.5, at 20³, 128³ and 256³ cells over [-1, 1]³
@@ -14,28 +14,23 @@ Animation: 200 primitives at 64³ moving smoothly, ``BlobField.update`` then pol
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import statistics
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(HERE))
-
-from _timing import (  # noqa: E402
-    run_section,
+from benchmarks.timing import (
+    RunRecord,
     Timing,
     cpu_snapshot,
-    foreign_load,
+    fmt_cpu_per_wall as _cpw,
+    fmt_foreign_load as _fl,
     fmt_ratio,
     fmt_s,
-    loadavg,
-    machine_info,
-    machine_markdown,
+    foreign_load,
     md_table,
+    run_markdown,
+    run_section,
     timeit_median,
 )
 
@@ -238,15 +233,6 @@ def missing_components(dense, track) -> str:
             "reaches (README, Known limits)")
 
 
-def _fl(t: Timing | None) -> str:
-    return "—" if t is None or t.foreign_load is None else f"{t.foreign_load:.1f}"
-
-
-def _cpw(t: Timing | None) -> str:
-    c = None if t is None else t.cpu_per_wall
-    return "—" if c is None else f"{c:.1f}"
-
-
 def _same(cmp: dict | None, n_dense: int, n_track: int) -> str:
     if cmp is None:
         return "same count (not compared)" if n_dense == n_track else f"no ({n_track - n_dense:+,} triangles)"
@@ -255,7 +241,21 @@ def _same(cmp: dict | None, n_dense: int, n_track: int) -> str:
     return f"no ({cmp['missing']:,} missing, {cmp['extra']:,} extra)"
 
 
-def bench(a: argparse.Namespace) -> str:
+def pipelines(grid: float, vtk: float, vtk_normals: float, skimage: float) -> tuple[dict, dict]:
+    """Seconds of the peer pipelines end to end (numpy grid + contour): (without normals, with normals)."""
+    return ({"numpy + VTK": grid + vtk},
+            {"numpy + VTK + normals": grid + vtk_normals, "numpy + skimage": grid + skimage})
+
+
+def fastest(pipes: dict) -> tuple[str, float]:
+    return min(pipes.items(), key=lambda kv: kv[1])
+
+
+#: Our polygonizers in the order they are timed: (method, normals).
+OURS = tuple((method, normals) for method in ("dense", "sparse", "tracking") for normals in (True, False))
+
+
+def measure(a: argparse.Namespace) -> dict:
     import numpy as np
 
     import implicitmesh as im
@@ -266,19 +266,14 @@ def bench(a: argparse.Namespace) -> str:
     frames = 30 if quick else 120
     warm_frames = 5 if quick else 10
     bounds = np.array([[LO] * 3, [HI] * 3])
-    started = _dt.datetime.now().astimezone()
-    load_before = loadavg()
-    snap = cpu_snapshot()
+    run = RunRecord("benchmarks.bench_blobs", quick)
     rng = np.random.default_rng(SEED)
     check_rng = np.random.default_rng(SEED + 1)
     import vtk
 
     vtk_default = f"{vtk.vtkSMPTools.GetBackend()} ({vtk.vtkSMPTools.GetEstimatedNumberOfThreads()} thread(s))"
 
-    rows_s, rows_r, rows_c, rows_t, notes = [], [], [], [], []
-    all_timings: list[tuple[str, str, Timing]] = []
-    splat_choice: dict[tuple[int, int], str] = {}
-    vtk_choice: dict[tuple[int, int], str] = {}
+    cases, notes = [], []
     for N, R in CASES:
         centers = rng.uniform(-0.8, 0.8, size=(N, 3))
         field = im.BlobField(centers, R, threshold=THRESHOLD)
@@ -287,13 +282,10 @@ def bench(a: argparse.Namespace) -> str:
             case = f"{N:,} × R={R}, {n}³"
             log(f"{case}: ours ({runs} runs)")
             ours: dict[tuple[str, bool], Timing] = {}
-            for method in ("dense", "sparse", "tracking"):
-                for normals in (True, False):
-                    ours[method, normals] = timeit_median(
-                        lambda: im.polygonize(field, bounds=bounds, resolution=n, method=method, normals=normals),
-                        runs, 1)
-                    all_timings.append((case, f"ours {method}" + ("" if normals else ", normals=False"),
-                                        ours[method, normals]))
+            for method, normals in OURS:
+                ours[method, normals] = timeit_median(
+                    lambda: im.polygonize(field, bounds=bounds, resolution=n, method=method, normals=normals),
+                    runs, 1)
             dense, track = ours["dense", True].result, ours["tracking", True].result
             sp = ours["sparse", True].result
             counts = {k: len(t.result.faces) for k, t in ours.items()}
@@ -321,9 +313,7 @@ def bench(a: argparse.Namespace) -> str:
                 fn(centers, R, n)
                 probe[name] = time.perf_counter() - t0
             best = min(probe, key=probe.get)
-            splat_choice[N, n] = best
             t_np = timeit_median(lambda: SPLATS[best](centers, R, n), runs, 1)
-            all_timings.append((case, f"numpy grid ({best})", t_np))
             G = t_np.result
             err = check_grid(field, G, n, check_rng)
             if not err <= EVAL_TOL:
@@ -331,47 +321,24 @@ def bench(a: argparse.Namespace) -> str:
 
             log(f"{case}: VTK flying edges, skimage")
             vt: dict[bool, Timing] = {}
+            vtk_backend: dict[bool, str] = {}
             for normals in (False, True):
                 by_backend = {}
                 for backend in ("Sequential", "STDThread"):
                     set_vtk_backend(backend)
                     by_backend[backend] = timeit_median(lambda: vtk_contour(G, n, normals), runs, 1)
-                fast = min(by_backend, key=lambda b: by_backend[b].median)
-                vtk_choice[N, n, normals] = fast
-                vt[normals] = by_backend[fast]
-                all_timings.append((case, f"VTK flying edges{' + normals' if normals else ''} ({fast})", vt[normals]))
+                vtk_backend[normals] = min(by_backend, key=lambda b: by_backend[b].median)
+                vt[normals] = by_backend[vtk_backend[normals]]
             set_vtk_backend("Sequential")
             t_sk = timeit_median(lambda: skimage_contour(G, n), runs, 1)
-            all_timings.append((case, "skimage marching_cubes (normals always)", t_sk))
 
-            g = t_np.median
-            pipes_nn = {"numpy + VTK": g + vt[False].median}
-            pipes_wn = {"numpy + VTK + normals": g + vt[True].median, "numpy + skimage": g + t_sk.median}
-            best_any = min({**pipes_nn, **pipes_wn}.items(), key=lambda kv: kv[1])
-            best_wn = min(pipes_wn.items(), key=lambda kv: kv[1])
-            best_nn = min(pipes_nn.items(), key=lambda kv: kv[1])
-            od, odn = ours["dense", True].median, ours["dense", False].median
-            osp, ospn = ours["sparse", True].median, ours["sparse", False].median
-            rows_s.append([
-                f"{N:,}", f"{n}³",
-                fmt_s(osp), fmt_s(ospn), fmt_s(od), fmt_s(odn),
-                fmt_s(ours["tracking", True].median), fmt_s(ours["tracking", False].median),
-                fmt_s(g), fmt_s(vt[False].median), fmt_s(vt[True].median), fmt_s(t_sk.median),
-                fmt_s(pipes_nn["numpy + VTK"]), fmt_s(pipes_wn["numpy + VTK + normals"]),
-                fmt_s(pipes_wn["numpy + skimage"]),
-            ])
-            target = TARGETS.get(n)
-            strict = best_any[1] / osp
-            lfl = min(best_wn[1] / osp, best_nn[1] / ospn)
-
-            def met(r: float) -> str:
-                return "—" if target is None else ("yes" if r >= target else "no")
-
+            pipes_nn, pipes_wn = pipelines(t_np.median, vt[False].median, vt[True].median, t_sk.median)
+            best_any = fastest({**pipes_nn, **pipes_wn})
             # Paired rounds: ours, then the fastest peer pipeline, in turn, a ratio per round;
             # the median of those ratios is immune to the machine changing speed between the
             # blocks of runs above (seen here: a third, in both directions).
-            paired = "—"
-            if target is not None:
+            ratios = None
+            if TARGETS.get(n) is not None:
                 rounds = PAIRED_ROUNDS[n]
                 log(f"{case}: {rounds} paired rounds against {best_any[0]}")
                 contour = {
@@ -380,7 +347,7 @@ def bench(a: argparse.Namespace) -> str:
                     "numpy + skimage": lambda G: skimage_contour(G, n),
                 }[best_any[0]]
                 if "VTK" in best_any[0]:
-                    set_vtk_backend(vtk_choice[N, n, best_any[0].endswith("normals")])
+                    set_vtk_backend(vtk_backend[best_any[0].endswith("normals")])
                 ratios = []
                 for _ in range(rounds):
                     t0 = time.perf_counter()
@@ -389,37 +356,36 @@ def bench(a: argparse.Namespace) -> str:
                     contour(SPLATS[best](centers, R, n))
                     ratios.append((time.perf_counter() - t1) / (t1 - t0))
                 set_vtk_backend("Sequential")
-                ratios.sort()
-                mid = ratios[len(ratios) // 2]
-                paired = f"{mid:.2f}× ({ratios[0]:.2f}–{ratios[-1]:.2f}×, {rounds} rounds): {met(mid)}"
-
-            rows_r.append([
-                f"{N:,}", f"{n}³",
-                f"{fmt_ratio(best_any[1], osp)} ({best_any[0]})",
-                f"{fmt_ratio(best_wn[1], osp)} ({best_wn[0]})",
-                f"{fmt_ratio(best_nn[1], ospn)} ({best_nn[0]})",
-                fmt_ratio(best_any[1], od),
-                fmt_ratio(best_any[1], min(t.median for t in ours.values())),
-                "—" if target is None else f"≥ {target:g}×",
-                met(strict), met(lfl), paired,
-            ])
-            vtk_tris = vt[False].result
-            rows_c.append([
-                f"{N:,}", f"{n}³", f"{counts['dense', True]:,}",
-                ("yes (same triangles)" if cmp_sp is not None else "same count (not compared)") if sparse_same else "NO",
-                f"{counts['tracking', True]:,}",
-                _same(cmp, counts["dense", True], counts["tracking", True]),
-                f"{vtk_tris:,}" + ("" if vtk_tris == counts["dense", True] else
-                                   f" ({vtk_tris - counts['dense', True]:+,})"),
-                f"{t_sk.result:,}" + ("" if t_sk.result == counts["dense", True] else
-                                      f" ({t_sk.result - counts['dense', True]:+,})"),
-                f"{dense.stats['evaluations']:,}",
-                f"{sp.stats['evaluations']:,} ({sp.stats['evaluation_percent']:.1f} %)",
-                f"{track.stats['evaluations']:,} ({track.stats['evaluation_percent']:.1f} %)",
-                f"{dense.stats['normal_evaluations']:,}",
-                f"{err:.1e}",
-            ])
-            log(f"{case}: ours sparse {osp:.4f} s, dense {od:.4f} s, best peer {best_any[0]} {best_any[1]:.4f} s")
+            cases.append({
+                "primitives": N,
+                "radius": R,
+                "cells": n,
+                "runs": runs,
+                "ours": [{"method": m, "normals": nn, "timing": ours[m, nn].to_json(), "triangles": counts[m, nn]}
+                         for m, nn in OURS],
+                "sparse_compared": cmp_sp is not None,
+                "sparse_same": sparse_same,
+                "tracking_vs_dense": None if cmp is None else {"missing": int(cmp["missing"]), "extra": int(cmp["extra"])},
+                "dense_evaluations": int(dense.stats["evaluations"]),
+                "dense_normal_evaluations": int(dense.stats["normal_evaluations"]),
+                "sparse_evaluations": int(sp.stats["evaluations"]),
+                "sparse_evaluation_percent": float(sp.stats["evaluation_percent"]),
+                "tracking_evaluations": int(track.stats["evaluations"]),
+                "tracking_evaluation_percent": float(track.stats["evaluation_percent"]),
+                "numpy_grid": best,
+                "numpy_grid_probe": probe,
+                "numpy_grid_timing": t_np.to_json(),
+                "numpy_grid_max_abs_diff": err,
+                "vtk_backend": [vtk_backend[False], vtk_backend[True]],
+                "vtk": vt[False].to_json(),
+                "vtk_normals": vt[True].to_json(),
+                "vtk_triangles": int(vt[False].result),
+                "skimage": t_sk.to_json(),
+                "skimage_triangles": int(t_sk.result),
+                "paired_peer_over_sparse": ratios,
+            })
+            log(f"{case}: ours sparse {ours['sparse', True].median:.4f} s, dense {ours['dense', True].median:.4f} s, "
+                f"best peer {best_any[0]} {best_any[1]:.4f} s")
             del G, t_np
 
     # ---------------------------------------------------------------- animation
@@ -505,7 +471,6 @@ def bench(a: argparse.Namespace) -> str:
     anim_vtk = min(vb, key=vb.get)
     set_vtk_backend(anim_vtk)
 
-    anim_rows, anim_tris = [], {}
     tess_label = "ours `Tessellator().polygonize` (tracking block by block, buffers kept)"
     dense_label = "ours `polygonize(method=\"dense\")`"
     sparse_label = "ours `polygonize(method=\"sparse\")`"
@@ -521,16 +486,12 @@ def bench(a: argparse.Namespace) -> str:
         (f"peer: numpy grid ({anim_splat}) + VTK flying edges ({anim_vtk}), no normals", peer_vtk(False)),
         (f"peer: numpy grid + VTK flying edges ({anim_vtk}) + normals", peer_vtk(True)),
     )
+    animation = []
+    anim_tris = {}
     for label, (times, tris, evals, fl, cpw) in animate_all(makers).items():
         anim_tris[label] = tris
-        med = statistics.median(times)
-        fps = 1.0 / med
-        anim_rows.append([
-            label, f"{fps:.0f}", f"{1e3 * med:.2f}", f"{1e3 * statistics.quantiles(times, n=10)[-1]:.2f}",
-            f"{statistics.median(tris):,.0f}", f"{statistics.median(evals):,.0f}",
-            "—" if cpw is None else f"{cpw:.1f}", "—" if fl is None else f"{fl:.1f}",
-            ("yes" if fps > ANIM_FPS else "no") if label.startswith("ours") else "",
-        ])
+        animation.append({"label": label, "times": times, "triangles": tris, "evaluations": evals,
+                          "foreign_load": fl, "cpu_per_wall": cpw})
     set_vtk_backend("Sequential")
     t_tris, d_tris = anim_tris[tess_label], anim_tris[dense_label]
     differ = sum(a != b for a, b in zip(t_tris, d_tris))
@@ -541,23 +502,127 @@ def bench(a: argparse.Namespace) -> str:
         notes.append(f"animation: tracking and dense triangle counts differ in {differ} of {frames} frames "
                      f"(at most {max(b - a for a, b in zip(t_tris, d_tris)):,} "
                      "triangles fewer for tracking; the frames' meshes are not analysed further)")
+    return {
+        "resolutions": list(resolutions),
+        "runs": {str(r): runs_for[r] for r in resolutions},
+        "vtk_default": vtk_default,
+        "cases": cases,
+        "frames": frames,
+        "warm_frames": warm_frames,
+        "animation": animation,
+        "notes": notes,
+        "run": run.finish(("numpy", "scikit-image", "pyvista", "vtk", "implicitmesh")),
+    }
 
-    # ---------------------------------------------------------------- markdown
-    info = machine_info(("numpy", "scikit-image", "pyvista", "vtk", "implicitmesh"))
-    foreign = foreign_load(snap, cpu_snapshot())
+
+def _ours(case: dict) -> dict[tuple[str, bool], Timing]:
+    return {(o["method"], o["normals"]): Timing.from_json(o["timing"]) for o in case["ours"]}
+
+
+def _timing_rows(case: dict) -> list[tuple[str, Timing]]:
+    """Every timing of a case, in the order they were taken, with what it timed."""
+    rows = [(f"ours {o['method']}" + ("" if o["normals"] else ", normals=False"), Timing.from_json(o["timing"]))
+            for o in case["ours"]]
+    rows.append((f"numpy grid ({case['numpy_grid']})", Timing.from_json(case["numpy_grid_timing"])))
+    for normals, key in ((False, "vtk"), (True, "vtk_normals")):
+        rows.append((f"VTK flying edges{' + normals' if normals else ''} ({case['vtk_backend'][normals]})",
+                     Timing.from_json(case[key])))
+    rows.append(("skimage marching_cubes (normals always)", Timing.from_json(case["skimage"])))
+    return rows
+
+
+def render(raw: dict) -> str:
+    run = raw["run"]
+    quick = run["quick"]
+    resolutions = raw["resolutions"]
+    frames, warm_frames = raw["frames"], raw["warm_frames"]
+    rows_s, rows_r, rows_c, all_timings = [], [], [], []
+    for c in raw["cases"]:
+        N, n = c["primitives"], c["cells"]
+        case = f"{N:,} × R={c['radius']}, {n}³"
+        all_timings += [(case, what, t) for what, t in _timing_rows(c)]
+        ours = _ours(c)
+        counts = {(o["method"], o["normals"]): o["triangles"] for o in c["ours"]}
+        g = Timing.from_json(c["numpy_grid_timing"]).median
+        vt = {False: Timing.from_json(c["vtk"]), True: Timing.from_json(c["vtk_normals"])}
+        t_sk = Timing.from_json(c["skimage"])
+        pipes_nn, pipes_wn = pipelines(g, vt[False].median, vt[True].median, t_sk.median)
+        best_any = fastest({**pipes_nn, **pipes_wn})
+        best_wn = fastest(pipes_wn)
+        best_nn = fastest(pipes_nn)
+        od, odn = ours["dense", True].median, ours["dense", False].median
+        osp, ospn = ours["sparse", True].median, ours["sparse", False].median
+        rows_s.append([
+            f"{N:,}", f"{n}³",
+            fmt_s(osp), fmt_s(ospn), fmt_s(od), fmt_s(odn),
+            fmt_s(ours["tracking", True].median), fmt_s(ours["tracking", False].median),
+            fmt_s(g), fmt_s(vt[False].median), fmt_s(vt[True].median), fmt_s(t_sk.median),
+            fmt_s(pipes_nn["numpy + VTK"]), fmt_s(pipes_wn["numpy + VTK + normals"]),
+            fmt_s(pipes_wn["numpy + skimage"]),
+        ])
+        target = TARGETS.get(n)
+        strict = best_any[1] / osp
+        lfl = min(best_wn[1] / osp, best_nn[1] / ospn)
+
+        def met(r: float) -> str:
+            return "—" if target is None else ("yes" if r >= target else "no")
+
+        paired = "—"
+        if c["paired_peer_over_sparse"] is not None:
+            ratios = sorted(c["paired_peer_over_sparse"])
+            mid = ratios[len(ratios) // 2]
+            paired = f"{mid:.2f}× ({ratios[0]:.2f}–{ratios[-1]:.2f}×, {len(ratios)} rounds): {met(mid)}"
+        rows_r.append([
+            f"{N:,}", f"{n}³",
+            f"{fmt_ratio(best_any[1], osp)} ({best_any[0]})",
+            f"{fmt_ratio(best_wn[1], osp)} ({best_wn[0]})",
+            f"{fmt_ratio(best_nn[1], ospn)} ({best_nn[0]})",
+            fmt_ratio(best_any[1], od),
+            fmt_ratio(best_any[1], min(t.median for t in ours.values())),
+            "—" if target is None else f"≥ {target:g}×",
+            met(strict), met(lfl), paired,
+        ])
+        vtk_tris, sk_tris, dense_tris = c["vtk_triangles"], c["skimage_triangles"], counts["dense", True]
+        rows_c.append([
+            f"{N:,}", f"{n}³", f"{dense_tris:,}",
+            ("yes (same triangles)" if c["sparse_compared"] else "same count (not compared)") if c["sparse_same"] else "NO",
+            f"{counts['tracking', True]:,}",
+            _same(c["tracking_vs_dense"], dense_tris, counts["tracking", True]),
+            f"{vtk_tris:,}" + ("" if vtk_tris == dense_tris else f" ({vtk_tris - dense_tris:+,})"),
+            f"{sk_tris:,}" + ("" if sk_tris == dense_tris else f" ({sk_tris - dense_tris:+,})"),
+            f"{c['dense_evaluations']:,}",
+            f"{c['sparse_evaluations']:,} ({c['sparse_evaluation_percent']:.1f} %)",
+            f"{c['tracking_evaluations']:,} ({c['tracking_evaluation_percent']:.1f} %)",
+            f"{c['dense_normal_evaluations']:,}",
+            f"{c['numpy_grid_max_abs_diff']:.1e}",
+        ])
+    anim_rows = []
+    for r in raw["animation"]:
+        label, times, cpw, fl = r["label"], r["times"], r["cpu_per_wall"], r["foreign_load"]
+        med = statistics.median(times)
+        fps = 1.0 / med
+        anim_rows.append([
+            label, f"{fps:.0f}", f"{1e3 * med:.2f}", f"{1e3 * statistics.quantiles(times, n=10)[-1]:.2f}",
+            f"{statistics.median(r['triangles']):,.0f}", f"{statistics.median(r['evaluations']):,.0f}",
+            "—" if cpw is None else f"{cpw:.1f}", "—" if fl is None else f"{fl:.1f}",
+            ("yes" if fps > ANIM_FPS else "no") if label.startswith("ours") else "",
+        ])
+    notes = raw["notes"]
     paper_rows = [r for r in rows_s if r[0] == "200" and r[1] == "20³"]
     paper = ""
     if paper_rows:
         r = paper_rows[0]
         paper = (f"The paper's own scale point, 200 primitives at 20³: ours {r[2]} s sparse, {r[4]} s dense and {r[6]} s tracking "
                  "(with normals) here; Triquet et al. report 45 ms (2001 hardware).")
-    splats = "; ".join(f"{N:,} at {n}³: {v}" for (N, n), v in splat_choice.items())
-    vtks = "; ".join(f"{N:,} at {n}³{' + normals' if nn else ''}: {v}" for (N, n, nn), v in vtk_choice.items())
-    runs_txt = ", ".join(f"{runs_for[r]} at {r}³" for r in resolutions)
+    splats = "; ".join(f"{c['primitives']:,} at {c['cells']}³: {c['numpy_grid']}" for c in raw["cases"])
+    vtks = "; ".join(f"{c['primitives']:,} at {c['cells']}³{' + normals' if nn else ''}: {c['vtk_backend'][nn]}"
+                     for c in raw["cases"] for nn in (False, True))
+    runs_txt = ", ".join(f"{raw['runs'][str(r)]} at {r}³" for r in resolutions)
+    vtk_default = raw["vtk_default"]
     out = [
         "## Blob fields: dense and sparse marching cubes and surface tracking against numpy + VTK / scikit-image",
         "",
-        f"Run {started:%Y-%m-%d %H:%M %Z} with `python benchmarks/bench_blobs.py{' --quick' if quick else ''}`"
+        f"Run {run['date']} with `{run['command']}`"
         + (" (QUICK: few runs, no 256³; not representative)" if quick else "") + ". "
         f"Blob fields of issue 4: centres uniform in [-0.8, 0.8]³ (seed {SEED}), strengths 1, threshold "
         f"{THRESHOLD}, `BlobField(centers, R)`, polygonized with `polygonize(field, bounds=[[-1,-1,-1],[1,1,1]], "
@@ -576,9 +641,7 @@ def bench(a: argparse.Namespace) -> str:
         "spacing=…)` (Lewiner, which always computes normals). A peer pipeline end to end = numpy grid + "
         "contour (sum of the medians). Ours runs on rayon's thread pool (every core).",
         "",
-        machine_markdown(info),
-        f"- load average before → after: {load_before} → {loadavg()}; other processes used "
-        f"{foreign if foreign is None else round(foreign, 2)} cores on average during the run",
+        run_markdown(run),
         "",
         "### Seconds",
         "",
@@ -660,7 +723,7 @@ def bench(a: argparse.Namespace) -> str:
 
 
 def main() -> int:
-    return run_section(bench, "blobs", __doc__.split("\n")[0], quick_help="1-2 runs, 20³ and 128³ only, 30 frames")
+    return run_section("blobs", measure, render, __doc__.split("\n")[0], quick_help="1-2 runs, 20³ and 128³ only, 30 frames")
 
 
 if __name__ == "__main__":

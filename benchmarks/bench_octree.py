@@ -2,7 +2,7 @@
 our dense marching cubes, ferreus-rbf's own isosurface extraction and scipy evaluation +
 scikit-image marching cubes (a script, not a test).
 
-    python benchmarks/bench_octree.py [--quick] [--output PATH]
+    python -m benchmarks.bench_octree [--quick] [--results DIR]
 
 Every peer polygonizes the same interpolant (the 1,600 constraints our `from_mesh` places,
 d = 0.015, w = 0.75 d) over the paper's cube [-1, 1]³.
@@ -11,28 +11,21 @@ d = 0.015, w = 0.75 d) over the paper's cube [-1, 1]³.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(HERE))
-
-from _timing import (  # noqa: E402
-    run_section,
+from benchmarks import bench_rbf
+from benchmarks.timing import (
+    ROOT,
+    RunRecord,
     Timing,
-    cpu_snapshot,
-    foreign_load,
     fmt_ratio,
     fmt_s,
-    loadavg,
-    machine_info,
-    machine_markdown,
     md_table,
+    run_markdown,
+    run_section,
     timeit_median,
 )
 
@@ -44,12 +37,11 @@ def log(msg: str) -> None:
     print(f"[bench_octree] {msg}", file=sys.stderr, flush=True)
 
 
-def bench(a: argparse.Namespace) -> str:
+def measure(a: argparse.Namespace) -> dict:
     import numpy as np
     import trimesh
 
     import implicitmesh as im
-    import bench_rbf
     import ferreus_rbf
 
     quick = a.quick
@@ -60,11 +52,9 @@ def bench(a: argparse.Namespace) -> str:
     names = MESHES[:2] if quick else MESHES
     bounds = np.array([[-1.0] * 3, [1.0] * 3])
     settings, fparams = bench_rbf.ferreus_configs()
-    started = _dt.datetime.now().astimezone()
-    load_before = loadavg()
-    snap = cpu_snapshot()
+    run = RunRecord("benchmarks.bench_octree", quick)
     tmp = tempfile.TemporaryDirectory(prefix="bench_octree_")
-    rows, count_rows = [], []
+    meshes = []
     for name in names:
         m = trimesh.load(meshes_dir / f"{name}_800.ply", process=False)
         s = im.VariationalSurface.from_mesh(m.vertices, m.faces, d=0.015)
@@ -82,7 +72,6 @@ def bench(a: argparse.Namespace) -> str:
             t1 = time.perf_counter()
             im.polygonize(s, bounds=bounds, resolution=res)
             paired.append((time.perf_counter() - t1) / (t1 - t0))
-        paired.sort()
         same = im.compare(den, oct_)
         same_t = im.compare(den, trk)
         P = np.ascontiguousarray(s.constraints["points"])
@@ -91,15 +80,51 @@ def bench(a: argparse.Namespace) -> str:
         extents = np.concatenate([bounds[0], bounds[1]])
         h = 2.0 / res
         t_fer = timeit_median(lambda: f_direct.build_isosurface(extents, h, 0.0), runs_med, 1)
-        fer_tris = int(np.asarray(t_fer.result.facets).shape[0])
         data = os.path.join(tmp.name, f"{name}.npz")
         np.savez(data, points=P, values=V, targets=P[:1], lo=bounds[0], hi=bounds[1], n=res)
         log(f"{name}: scipy grid + skimage (1 run, OPENBLAS_NUM_THREADS=1)")
-        sc = bench_rbf.run_scipy(
-            str(HERE / "bench_rbf.py"), data, "grid", 1, None,
-            {"grid_runs": 1, "grid_warmup": 0, "runs": 1, "warmup": 0},
+        sc = bench_rbf.run_scipy(data, "grid", 1, None, {"grid_runs": 1, "grid_warmup": 0, "runs": 1, "warmup": 0})
+        meshes.append({
+            "mesh": name,
+            "constraints": len(s),
+            "octree": t_oct.to_json(),
+            "tracking": t_trk.to_json(),
+            "dense": t_den.to_json(),
+            "ferreus": t_fer.to_json(),
+            "scipy_skimage": sc["grid"],
+            "paired_dense_over_octree": paired,
+            "octree_evaluations": int(oct_.stats["evaluations"]),
+            "octree_evaluation_percent": float(oct_.stats["evaluation_percent"]),
+            "tracking_evaluations": int(trk.stats["evaluations"]),
+            "tracking_evaluation_percent": float(trk.stats["evaluation_percent"]),
+            "dense_evaluations": int(den.stats["evaluations"]),
+            "triangles": len(oct_.faces),
+            "octree_vs_dense": {"missing": int(same["missing"]), "extra": int(same["extra"])},
+            "tracking_vs_dense": {"missing": int(same_t["missing"]), "extra": int(same_t["extra"])},
+            "ferreus_triangles": int(np.asarray(t_fer.result.facets).shape[0]),
+        })
+    return {
+        "resolution": res,
+        "runs_fast": runs_fast,
+        "runs_med": runs_med,
+        "meshes": meshes,
+        "run": run.finish(("numpy", "scipy", "scikit-image", "ferreus_rbf", "implicitmesh")),
+    }
+
+
+def _same(cmp: dict) -> str:
+    return "yes" if cmp["missing"] == cmp["extra"] == 0 else f"no ({cmp['missing']} missing)"
+
+
+def render(raw: dict) -> str:
+    res, runs_fast, runs_med, run = raw["resolution"], raw["runs_fast"], raw["runs_med"], raw["run"]
+    rows, count_rows = [], []
+    for r in raw["meshes"]:
+        name = r["mesh"]
+        t_oct, t_trk, t_den, t_fer, t_sc = (
+            Timing.from_json(r[k]) for k in ("octree", "tracking", "dense", "ferreus", "scipy_skimage")
         )
-        t_sc = Timing.from_json(sc["grid"])
+        paired = sorted(r["paired_dense_over_octree"])
         rows.append([
             name, fmt_s(t_oct.median), fmt_s(t_trk.median), fmt_s(t_den.median), fmt_s(t_fer.median),
             fmt_s(t_sc.median), fmt_ratio(t_den.median, t_oct.median),
@@ -108,19 +133,16 @@ def bench(a: argparse.Namespace) -> str:
             fmt_ratio(t_sc.median, t_oct.median),
         ])
         count_rows.append([
-            name, f"{oct_.stats['evaluations']:,}", f"{oct_.stats['evaluation_percent']:.2f} %",
-            f"{trk.stats['evaluations']:,}", f"{trk.stats['evaluation_percent']:.2f} %",
-            f"{den.stats['evaluations']:,}", f"{len(oct_.faces):,}",
-            "yes" if same["missing"] == same["extra"] == 0 else f"no ({same['missing']} missing)",
-            "yes" if same_t["missing"] == same_t["extra"] == 0 else f"no ({same_t['missing']} missing)",
-            f"{fer_tris:,}", PAPER.get(name, ""),
+            name, f"{r['octree_evaluations']:,}", f"{r['octree_evaluation_percent']:.2f} %",
+            f"{r['tracking_evaluations']:,}", f"{r['tracking_evaluation_percent']:.2f} %",
+            f"{r['dense_evaluations']:,}", f"{r['triangles']:,}",
+            _same(r["octree_vs_dense"]), _same(r["tracking_vs_dense"]),
+            f"{r['ferreus_triangles']:,}", PAPER.get(name, ""),
         ])
-    info = machine_info(("numpy", "scipy", "scikit-image", "ferreus_rbf", "implicitmesh"))
-    foreign = foreign_load(snap, cpu_snapshot())
     out = [
         f"## Octree and tracking polygonizers on variational surfaces, {res}³ cells",
         "",
-        f"Run {started:%Y-%m-%d %H:%M %Z} with `python benchmarks/bench_octree.py{' --quick' if quick else ''}`. "
+        f"Run {run['date']} with `{run['command']}`. "
         "Each shared 800-vertex mesh fitted with `from_mesh(d=0.015)` (1,600 constraints, r³; 1,284 for the icosahedron, which has 642 vertices), polygonized "
         f"over [-1, 1]³ at {res}³ cells. Wall-clock medians in seconds after one warm-up "
         f"({runs_fast} runs for octree/tracking, {runs_med} for dense and ferreus-rbf, 1 for scipy + skimage, "
@@ -131,9 +153,7 @@ def bench(a: argparse.Namespace) -> str:
         f"`RBFInterpolator(kernel='cubic', degree=1)` on the {res + 1}³ grid with OPENBLAS_NUM_THREADS=1 (the faster "
         "setting in the RBF section), then `skimage.measure.marching_cubes`.",
         "",
-        machine_markdown(info),
-        f"- load average before → after: {load_before} → {loadavg()}; other processes used "
-        f"{foreign if foreign is None else round(foreign, 2)} cores on average during the run",
+        run_markdown(run),
         "",
         "### Seconds",
         "",
@@ -161,7 +181,7 @@ def bench(a: argparse.Namespace) -> str:
 
 
 def main() -> int:
-    return run_section(bench, "octree", __doc__)
+    return run_section("octree", measure, render, __doc__)
 
 
 if __name__ == "__main__":

@@ -3,19 +3,27 @@
 Each measurement runs in a fresh process, so that the peak resident size (VmHWM in
 /proc/self/status) is that run's.
 
-    python benchmarks/bench_partition.py scale 10000 100000      # points sampled on knot_hires
-    python benchmarks/bench_partition.py crossover 500 1000 2000  # global vs partition fit time
+    python -m benchmarks.bench_partition [--quick] [--results DIR]  # the section of BENCHMARKS.md
+    python -m benchmarks.bench_partition scale 10000 100000         # one JSON line per size
+    python -m benchmarks.bench_partition crossover 500 1000 2000    # global vs partition fit
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-MESH = Path(__file__).resolve().parent.parent / "tests" / "data" / "meshes"
+from benchmarks.timing import ROOT, RunRecord, fmt_s, md_table, run_markdown, run_section
+
+MESH = ROOT / "tests" / "data" / "meshes"
+MODEL, RESOLUTION = "knot", 256
+#: Points of the scale runs and of the global-against-partition runs (full, quick).
+SCALE = {False: (10_000, 100_000, 1_000_000), True: (10_000,)}
+CROSSOVER = {False: (300, 500, 1000, 2000, 3000), True: (500, 1000)}
 
 
 def vmhwm_mib() -> float:
@@ -86,18 +94,98 @@ def one(kind: str, n: int, model: str, resolution: int) -> dict:
     return out
 
 
-def main() -> None:
-    kind, *sizes = sys.argv[1:]
+def run_one(kind: str, n: int) -> dict:
+    """:func:`one` in a fresh process (``python -m benchmarks.bench_partition one ...``)."""
+    r = subprocess.run(
+        [sys.executable, "-m", "benchmarks.bench_partition", "one", kind, str(n), MODEL, str(RESOLUTION)],
+        capture_output=True, text=True, check=True, cwd=ROOT,
+    )
+    return json.loads(r.stdout)
+
+
+def log(msg: str) -> None:
+    print(f"[bench_partition] {msg}", file=sys.stderr, flush=True)
+
+
+def measure(a: argparse.Namespace) -> dict:
+    run = RunRecord("benchmarks.bench_partition", a.quick)
+    scale, crossover = [], []
+    for n in SCALE[a.quick]:
+        log(f"scale: {n:,} points")
+        scale.append(run_one("scale", n))
+    for n in CROSSOVER[a.quick]:
+        log(f"crossover: {n:,} points")
+        crossover.append(run_one("crossover", n))
+    return {"model": MODEL, "resolution": RESOLUTION, "scale": scale, "crossover": crossover,
+            "run": run.finish(("numpy", "scipy", "trimesh", "implicitmesh"))}
+
+
+def render(raw: dict) -> str:
+    run, model, res = raw["run"], raw["model"], raw["resolution"]
+    scale_rows = [[
+        f"{r['n']:,}", fmt_s(r["fit_s"]), f"{r['fit_peak_mib']:,.0f}", f"{r['patches']:,}",
+        f"{r['patch_size']['mean']:.0f} / {r['patch_size']['max']:,}",
+        f"{fmt_s(r['polygonize_s'])} ({r['evaluations']:,})", f"{r['triangles']:,}",
+        f"{r['chamfer_over_diagonal']:.2e} / {r['hausdorff_over_diagonal']:.1e}",
+        f"{'watertight' if r['watertight'] else 'not watertight'}, Euler characteristic {r['euler']}",
+        f"{r['peak_mib']:,.0f}",
+    ] for r in raw["scale"]]
+    crossover_rows = [[
+        f"{r['n']:,}", fmt_s(r["global_s"]), fmt_s(r["partition_s"]),
+        f"{r['global_ref_distance_over_diagonal']['mean']:.2e} / {r['global_ref_distance_over_diagonal']['max']:.1e}",
+        f"{r['partition_ref_distance_over_diagonal']['mean']:.2e} / "
+        f"{r['partition_ref_distance_over_diagonal']['max']:.1e}",
+        f"{r['vertex_distance_cells']['mean']:.3f} / {r['vertex_distance_cells']['max']:.2f}",
+    ] for r in raw["crossover"]]
+    out = [
+        "## Partition-of-unity fits at scan scale" + (" (QUICK)" if run["quick"] else ""),
+        "",
+        f"Run {run['date']} with `{run['command']}`. Points sampled on `{model}_hires` with their face normals "
+        "(`trimesh.sample.sample_surface`), fitted with `VariationalSurface.fit(points, normals, "
+        f"method=\"partition\")`, polygonized with `method=\"octree\"` at {res}³ over the default bounds; each size "
+        "in a fresh process, so that its peak resident size (VmHWM) is its own. Seconds are single runs. "
+        "Chamfer distance: the mean of the two mean nearest distances between 2·10⁵ samples of each surface; "
+        "Hausdorff: the larger of the two largest; both as fractions of the reference's bounding-box diagonal.",
+        "",
+        run_markdown(run),
+        "",
+        "### Scale",
+        "",
+        md_table(["points", "fit (s)", "peak memory after the fit (MiB)", "patches", "patch size mean / max",
+                  "polygonize (s) (evaluations)", "triangles", "Chamfer / Hausdorff (fraction of the diagonal)",
+                  "mesh", "peak memory at the end (MiB)"], scale_rows),
+        "",
+        "### Global against partition fit",
+        "",
+        "`method=\"global\"` and `method=\"partition\"` on the same points (`shapes.sample_vertices` of the "
+        "model), both polygonized at 128³ over the global fit's bounds (without normals).",
+        "",
+        md_table(["points", "global fit (s)", "partition fit (s)",
+                  "global: distance to the reference, mean / max (fraction of the diagonal)",
+                  "partition: distance to the reference, mean / max", "vertices global ↔ partition, mean / max (cells)"],
+                 crossover_rows),
+        "",
+    ]
+    return "\n".join(out)
+
+
+def main() -> int:
+    if len(sys.argv) > 1 and sys.argv[1] in ("one", "scale", "crossover"):
+        return measure_sizes(sys.argv[1], sys.argv[2:])
+    return run_section("partition", measure, render, __doc__.split("\n")[0], "10⁴ points; 500 and 1,000 for the crossover")
+
+
+def measure_sizes(kind: str, sizes: list[str]) -> int:
+    """Prints one JSON line per size: ``one`` measures in this process, ``scale`` and
+    ``crossover`` run each size in a fresh one."""
     if kind == "one":
         k, n, model, res = sizes
         print(json.dumps(one(k, int(n), model, int(res))))
-        return
+        return 0
     for n in sizes:
-        r = subprocess.run(
-            [sys.executable, __file__, "one", kind, n, "knot", "256"], capture_output=True, text=True, check=True
-        )
-        print(r.stdout.strip(), flush=True)
+        print(json.dumps(run_one(kind, int(n))), flush=True)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -1,12 +1,12 @@
 """Benchmark: variational (RBF, r³ + linear) surfaces — fit, evaluation and dense polygonization —
 against scipy's RBFInterpolator (+ skimage marching cubes) and ferreus-rbf, in one run.
 
-    python benchmarks/bench_rbf.py            # full: 10^6 points, 128³, 3-5 runs per case
-    python benchmarks/bench_rbf.py --quick    # smoke test: 10^5 points, 64³, 1-2 runs
-    python benchmarks/bench_rbf.py --output benchmarks/results/rbf.md
+    python -m benchmarks.bench_rbf            # full: 10^6 points, 128³, 3-5 runs per case
+    python -m benchmarks.bench_rbf --quick    # smoke test: 10^5 points, 64³, 1-2 runs
 
-Writes a markdown section to stdout and to ``--output`` (default ``benchmarks/results/rbf.md``);
-progress goes to stderr. The scipy cases run in subprocesses of this script (``--worker scipy``),
+Writes the raw results to ``RESULTS/rbf.json`` and the markdown section rendered from them to
+stdout and ``RESULTS/rbf.md`` (``--results RESULTS``, default ``benchmarks/results``); progress goes
+to stderr. The scipy cases run in subprocesses of this module (``--worker scipy``),
 once with ``OPENBLAS_NUM_THREADS=1`` and once with the OpenBLAS default, because the variable must
 be set before numpy is imported (threadpoolctl is not installed); the faster setting is reported.
 
@@ -25,23 +25,20 @@ import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-
-from _timing import (  # noqa: E402  (no numpy at import time: workers set OPENBLAS_NUM_THREADS first)
+from benchmarks.timing import (  # no numpy at import time: workers set OPENBLAS_NUM_THREADS first
+    RunRecord,
     Timing,
-    cpu_snapshot,
-    foreign_load,
+    fmt_cpu_per_wall as _cpw,
+    fmt_foreign_load as _fl,
     fmt_ratio,
     fmt_s,
-    loadavg,
-    machine_info,
     machine_markdown,
     md_table,
     openblas_threads,
+    record_section,
     run_worker,
+    section_parser,
     timeit_median,
 )
 
@@ -118,13 +115,14 @@ def scipy_worker(a: argparse.Namespace) -> int:
     return 0
 
 
-def run_scipy(script: str, data: str, tasks: str, threads: int | None, values_out: str | None, reps: dict) -> dict:
+def run_scipy(data: str, tasks: str, threads: int | None, values_out: str | None, reps: dict) -> dict:
+    """Runs :func:`scipy_worker` in a subprocess (``python -m benchmarks.bench_rbf --worker scipy``)."""
     args = ["--worker", "scipy", "--data", data, "--tasks", tasks]
     for k, v in reps.items():
         args += [f"--{k.replace('_', '-')}", str(v)]
     if values_out:
         args += ["--values-out", values_out]
-    return run_worker(script, args, threads)
+    return run_worker("benchmarks.bench_rbf", args, threads)
 
 
 # --------------------------------------------------------------------------------------------
@@ -155,7 +153,7 @@ def ferreus_configs():
 # --------------------------------------------------------------------------------------------
 
 
-def bench(a: argparse.Namespace) -> str:
+def measure(a: argparse.Namespace) -> dict:
     import numpy as np
 
     import implicitmesh
@@ -171,12 +169,9 @@ def bench(a: argparse.Namespace) -> str:
     R_FAST = 2 if quick else 5  # runs for cases under ~1 s
     R_MED = 1 if quick else 3  # runs for cases of a few seconds
     R_GRID = 1 if quick else 2  # runs of the slow scipy grid pipeline (no warm-up)
-    script = str(Path(__file__).resolve())
-    load_before = loadavg()
-    snap_before = cpu_snapshot()
+    run = RunRecord("benchmarks.bench_rbf", quick)
     core_built = _mtime(implicitmesh._core.__file__)  # before the run: the build being measured
-    started = _dt.datetime.now().astimezone()
-    log(f"load average before: {load_before}")
+    log(f"load average before: {run.load_before}")
 
     vertices, faces = load_model("knot")
     surface = VariationalSurface.from_mesh(vertices, faces)
@@ -219,7 +214,6 @@ def bench(a: argparse.Namespace) -> str:
         log(f"fit + evaluate {n_points:,}: scipy ({label}) in a subprocess")
         vals = os.path.join(tmp.name, f"scipy_values_{threads}.npy")
         scipy_runs[label] = run_scipy(
-            script,
             data,
             "fit,eval",
             threads,
@@ -227,9 +221,7 @@ def bench(a: argparse.Namespace) -> str:
             {"runs": R_FAST, "warmup": 1, "eval_runs": R_MED, "eval_warmup": 1},
         )
         scipy_values[label] = vals
-    sc_fit = {k: Timing.from_json(v["fit"]) for k, v in scipy_runs.items()}
     sc_eval = {k: Timing.from_json(v["eval"]) for k, v in scipy_runs.items()}
-    best_fit = min(sc_fit, key=lambda k: sc_fit[k].median)
     best_eval = min(sc_eval, key=lambda k: sc_eval[k].median)
 
     # ---------------------------------------------------------------- 2. evaluation
@@ -272,9 +264,8 @@ def bench(a: argparse.Namespace) -> str:
     grid_threads = dict(THREAD_CONFIGS_INV)[grid_label]
     log(f"polygonize {res}³: scipy grid + skimage marching_cubes ({grid_label}), {R_GRID} run(s)")
     sc_grid = run_scipy(
-        script, data, "grid", grid_threads, None, {"grid_runs": R_GRID, "grid_warmup": 0, "runs": 1, "warmup": 0}
+        data, "grid", grid_threads, None, {"grid_runs": R_GRID, "grid_warmup": 0, "runs": 1, "warmup": 0}
     )
-    t_sc_grid = Timing.from_json(sc_grid["grid"])
 
     h_cells = (hi - lo) / res
     h_iso = float(np.prod(h_cells) ** (1.0 / 3.0))  # same cell volume → same number of cells
@@ -296,16 +287,101 @@ def bench(a: argparse.Namespace) -> str:
     f_iso2 = isosurfacing.build_isosurface(P, extents, h_iso, 0.0, counting)
     f_iso2_tris = int(np.asarray(f_iso2.facets).shape[0])
 
-    load_after = loadavg()
-    run_foreign = foreign_load(snap_before, cpu_snapshot())
     if _mtime(implicitmesh._core.__file__) != core_built:
         warnings.append("implicitmesh's extension was rebuilt during this run (another engineer?): "
                         "numbers are for the build loaded at the start.")
-    log(f"load average after: {load_after}; other processes used {run_foreign} cores on average")
     tmp.cleanup()
+    raw = {
+        "points": n_points,
+        "resolution": res,
+        "vertices": len(vertices),
+        "constraints": len(P),
+        "implicitmesh_version": implicitmesh.__version__,
+        "extension_built": core_built,
+        "fit": {
+            "ours_from_mesh": t_from_mesh.to_json(),
+            "ours_from_mesh_residual": float(surface.residual),
+            "ours_interpolate": t_interp.to_json(),
+            "ours_interpolate_residual": ours_fit_resid,
+            "ferreus": {k: t.to_json() for k, t in ferreus_fit.items()},
+            "ferreus_residual": ferreus_resid,
+        },
+        "scipy": scipy_runs,
+        "evaluation": {
+            "ours": t_eval.to_json(),
+            "ferreus_direct": t_f_direct.to_json(),
+            "ferreus_fmm": t_f_fmm.to_json(),
+            "ferreus_fmm_targets": t_f_fmm_targets.to_json(),
+            "ferreus_fmm_build": t_f_fmm_build.to_json(),
+            "scipy_max_abs": scale,
+            "diff_scipy": diff_scipy,
+            "diff_ferreus_direct": diff_f_direct,
+            "diff_ferreus_fmm": diff_f_fmm,
+            "diff_ferreus_fmm_targets": diff_f_fmm_targets,
+            "diff_from_mesh_interpolate": same_as_from_mesh,
+        },
+        "polygonization": {
+            "ours": t_poly.to_json(),
+            "ours_evaluations": int(mesh.stats["evaluations"]),
+            "ours_normal_evaluations": int(mesh.stats["normal_evaluations"]),
+            "ours_triangles": len(mesh.faces),
+            "ours_vertices": len(mesh.vertices),
+            "ours_no_normals": t_poly_nn.to_json(),
+            "ours_no_normals_evaluations": int(t_poly_nn.result.stats["evaluations"]),
+            "ours_no_normals_triangles": len(t_poly_nn.result.faces),
+            "ours_no_normals_vertices": len(t_poly_nn.result.vertices),
+            "scipy_threads": grid_label,
+            "scipy_skimage": sc_grid,
+            "lo": lo.tolist(),
+            "hi": hi.tolist(),
+            "ferreus_step": h_iso,
+            "ferreus": t_f_iso.to_json(),
+            "ferreus_triangles": f_iso_tris,
+            "ferreus_vertices": f_iso_verts,
+            "ferreus_counted_evaluations": counter["points"],
+            "ferreus_counted_batches": counter["calls"],
+            "ferreus_counted_triangles": f_iso2_tris,
+        },
+        "warnings": warnings,
+        "run": run.finish(("numpy", "scipy", "scikit-image", "ferreus_rbf", "implicitmesh")),
+    }
+    log(f"load average after: {raw['run']['loadavg_after']}; "
+        f"other processes used {raw['run']['foreign_load']} cores on average")
+    return raw
 
-    # ---------------------------------------------------------------- markdown
-    info = machine_info(("numpy", "scipy", "scikit-image", "ferreus_rbf", "implicitmesh"))
+
+def render(raw: dict) -> str:
+    run = raw["run"]
+    quick = run["quick"]
+    n_points, res = raw["points"], raw["resolution"]
+    n_vertices, n_constraints = raw["vertices"], raw["constraints"]
+    fit, ev, po = raw["fit"], raw["evaluation"], raw["polygonization"]
+    scipy_runs = raw["scipy"]
+    warnings = raw["warnings"]
+    t_from_mesh = Timing.from_json(fit["ours_from_mesh"])
+    t_interp = Timing.from_json(fit["ours_interpolate"])
+    ferreus_fit = {k: Timing.from_json(v) for k, v in fit["ferreus"].items()}
+    ferreus_resid = fit["ferreus_residual"]
+    sc_fit = {k: Timing.from_json(v["fit"]) for k, v in scipy_runs.items()}
+    sc_eval = {k: Timing.from_json(v["eval"]) for k, v in scipy_runs.items()}
+    best_fit = min(sc_fit, key=lambda k: sc_fit[k].median)
+    best_eval = min(sc_eval, key=lambda k: sc_eval[k].median)
+    t_eval = Timing.from_json(ev["ours"])
+    t_f_direct = Timing.from_json(ev["ferreus_direct"])
+    t_f_fmm = Timing.from_json(ev["ferreus_fmm"])
+    t_f_fmm_targets = Timing.from_json(ev["ferreus_fmm_targets"])
+    t_f_fmm_build = Timing.from_json(ev["ferreus_fmm_build"])
+    scale, diff_scipy = ev["scipy_max_abs"], ev["diff_scipy"]
+    rel_scipy = diff_scipy / scale
+    t_poly = Timing.from_json(po["ours"])
+    t_poly_nn = Timing.from_json(po["ours_no_normals"])
+    grid_label = po["scipy_threads"]
+    sc_grid = po["scipy_skimage"]
+    t_sc_grid = Timing.from_json(sc_grid["grid"])
+    t_f_iso = Timing.from_json(po["ferreus"])
+    lo, hi, h_iso = po["lo"], po["hi"], po["ferreus_step"]
+    h_cells = [(b - a) / res for a, b in zip(lo, hi)]
+
     threads_note = {
         label: f"numpy {r['openblas_threads'].get('numpy', '?')} / scipy {r['openblas_threads'].get('scipy', '?')} threads"
         for label, r in scipy_runs.items()
@@ -314,34 +390,35 @@ def bench(a: argparse.Namespace) -> str:
     L.append(f"## Variational (RBF) surfaces: fit, evaluation, dense polygonization{' (QUICK)' if quick else ''}")
     L.append("")
     L.append(
-        f"Run {started:%Y-%m-%d %H:%M %Z} with `{_command()}`. "
-        f"Problem: bundled `knot` model, {len(vertices)} vertices, `VariationalSurface.from_mesh` → "
-        f"{len(P):,} constraints (r³ kernel, linear polynomial); every peer interpolates the same "
-        f"{len(P):,} points and values. Times are wall-clock medians in seconds after one untimed "
+        f"Run {run['date']} with `{run['command']}`. "
+        f"Problem: bundled `knot` model, {n_vertices} vertices, `VariationalSurface.from_mesh` → "
+        f"{n_constraints:,} constraints (r³ kernel, linear polynomial); every peer interpolates the same "
+        f"{n_constraints:,} points and values. Times are wall-clock medians in seconds after one untimed "
         "warm-up run unless stated; *runs* = timed runs; *CPU/wall* ≈ busy threads; "
         "ratio = peer / ours (above 1: ours is faster)."
     )
     L.append("")
-    L.append(machine_markdown(info, {
-        "implicitmesh": f"{implicitmesh.__version__} (Rust core, its own threads; OpenBLAS not used; "
-        f"extension built {core_built})",
+    run_foreign = run["foreign_load"]
+    L.append(machine_markdown(run["machine"], {
+        "implicitmesh": f"{raw['implicitmesh_version']} (Rust core, its own threads; OpenBLAS not used; "
+        f"extension built {raw['extension_built']})",
         "scipy runs (subprocesses)": "; ".join(f"{k}: {v}" for k, v in threads_note.items()),
-        "load average (1/5/15 min) before → after": f"{load_before} → {load_after}",
+        "load average (1/5/15 min) before → after": f"{tuple(run['loadavg_before'])} → {tuple(run['loadavg_after'])}",
         "other processes during the run": "—" if run_foreign is None else
-        f"{run_foreign:.2f} of {os.cpu_count()} cores on average (machine busy time from /proc/stat minus this "
+        f"{run_foreign:.2f} of {run['machine']['cores']} cores on average (machine busy time from /proc/stat minus this "
         "run's own CPU time; column *other load* gives the same per case, over its timed runs)",
     }))
     L.append("")
 
     # 1. fit
-    L.append(f"### 1. Fit of {len(P):,} constraints")
+    L.append(f"### 1. Fit of {n_constraints:,} constraints")
     L.append("")
     fi, fm = t_interp.median, t_from_mesh.median
     rows = [
         ["ours `from_mesh` (normals + constraint placement + solve)", fmt_s(fm), t_from_mesh.runs,
-         _cpw(t_from_mesh), _fl(t_from_mesh), "—", "—", f"{surface.residual:.1e}"],
+         _cpw(t_from_mesh), _fl(t_from_mesh), "—", "—", f"{fit['ours_from_mesh_residual']:.1e}"],
         ["ours `interpolate(points, values)`", fmt_s(fi), t_interp.runs, _cpw(t_interp), _fl(t_interp), "—", "—",
-         f"{ours_fit_resid:.1e}"],
+         f"{fit['ours_interpolate_residual']:.1e}"],
     ]
     for label in sc_fit:
         t = sc_fit[label]
@@ -359,7 +436,7 @@ def bench(a: argparse.Namespace) -> str:
     L.append("")
 
     # 2. evaluation
-    L.append(f"### 2. Evaluation of {n_points:,} random points in [-1, 1]³, {len(P):,} centres")
+    L.append(f"### 2. Evaluation of {n_points:,} random points in [-1, 1]³, {n_constraints:,} centres")
     L.append("")
     te = t_eval.median
     rows = [["ours `surface.evaluate`", fmt_s(te), t_eval.runs, _cpw(t_eval), _fl(t_eval), "—", "0 (reference)"]]
@@ -370,12 +447,12 @@ def bench(a: argparse.Namespace) -> str:
         rows.append([f"scipy `RBFInterpolator.__call__`, {label}{mark}", fmt_s(t.median), t.runs, _cpw(t), _fl(t),
                      fmt_ratio(t.median, te), d])
     rows.append(["ferreus-rbf direct, one-shot `evaluate`", fmt_s(t_f_direct.median), t_f_direct.runs,
-                 _cpw(t_f_direct), _fl(t_f_direct), fmt_ratio(t_f_direct.median, te), f"{diff_f_direct:.1e}"])
+                 _cpw(t_f_direct), _fl(t_f_direct), fmt_ratio(t_f_direct.median, te), f"{ev['diff_ferreus_direct']:.1e}"])
     rows.append(["ferreus-rbf FMM, one-shot `evaluate` (builds the FMM tree)", fmt_s(t_f_fmm.median), t_f_fmm.runs,
-                 _cpw(t_f_fmm), _fl(t_f_fmm), fmt_ratio(t_f_fmm.median, te), f"{diff_f_fmm:.1e}"])
+                 _cpw(t_f_fmm), _fl(t_f_fmm), fmt_ratio(t_f_fmm.median, te), f"{ev['diff_ferreus_fmm']:.1e}"])
     rows.append(["ferreus-rbf FMM, `evaluate_targets` with a prebuilt evaluator", fmt_s(t_f_fmm_targets.median),
                  t_f_fmm_targets.runs, _cpw(t_f_fmm_targets), _fl(t_f_fmm_targets), fmt_ratio(t_f_fmm_targets.median, te),
-                 f"{diff_f_fmm_targets:.1e}"])
+                 f"{ev['diff_ferreus_fmm_targets']:.1e}"])
     rows.append(["(ferreus-rbf FMM `build_evaluator` alone, no warm-up)", fmt_s(t_f_fmm_build.median),
                  t_f_fmm_build.runs, _cpw(t_f_fmm_build), _fl(t_f_fmm_build), "", ""])
     L.append(md_table(["case", "s", "runs", "CPU/wall", "other load", "ratio peer/ours", "max abs diff vs ours interpolate"], rows))
@@ -384,7 +461,7 @@ def bench(a: argparse.Namespace) -> str:
     L.append(
         f"Agreement with scipy on the same interpolation problem (ours = `interpolate`): max |Δ| = "
         f"{diff_scipy:.2e}, {rel_scipy:.1e} relative to max |f| = {scale:.3g} (tolerance {REL_TOL:g}): {verdict}. "
-        f"`from_mesh` and `interpolate` surfaces differ by {same_as_from_mesh:.1e} at these points."
+        f"`from_mesh` and `interpolate` surfaces differ by {ev['diff_from_mesh_interpolate']:.1e} at these points."
     )
     L.append("")
 
@@ -396,11 +473,11 @@ def bench(a: argparse.Namespace) -> str:
     ge, gm = sc_grid["grid_eval_times"], sc_grid["grid_mc_times"]
     rows = [
         ["ours `polygonize(surface, resolution=%d, method='dense')` (with normals)" % res, fmt_s(tp), t_poly.runs,
-         _cpw(t_poly), _fl(t_poly), "—", f"{mesh.stats['evaluations']:,} (+{mesh.stats['normal_evaluations']:,} gradients)",
-         f"{len(mesh.faces):,}", f"{len(mesh.vertices):,}"],
+         _cpw(t_poly), _fl(t_poly), "—", f"{po['ours_evaluations']:,} (+{po['ours_normal_evaluations']:,} gradients)",
+         f"{po['ours_triangles']:,}", f"{po['ours_vertices']:,}"],
         ["ours, `normals=False`", fmt_s(t_poly_nn.median), t_poly_nn.runs, _cpw(t_poly_nn), _fl(t_poly_nn),
-         fmt_ratio(t_poly_nn.median, tp) + " (of ours with normals)", f"{t_poly_nn.result.stats['evaluations']:,}",
-         f"{len(t_poly_nn.result.faces):,}", f"{len(t_poly_nn.result.vertices):,}"],
+         fmt_ratio(t_poly_nn.median, tp) + " (of ours with normals)", f"{po['ours_no_normals_evaluations']:,}",
+         f"{po['ours_no_normals_triangles']:,}", f"{po['ours_no_normals_vertices']:,}"],
         [f"scipy grid evaluation + skimage `marching_cubes` ({grid_label}; no warm-up)", fmt_s(t_sc_grid.median),
          t_sc_grid.runs, _cpw(t_sc_grid), _fl(t_sc_grid), fmt_ratio(t_sc_grid.median, tp), f"{sc_grid['grid_evaluations']:,}",
          f"{sc_grid['grid_triangles']:,}", f"{sc_grid['grid_vertices']:,}"],
@@ -408,7 +485,8 @@ def bench(a: argparse.Namespace) -> str:
         ["  of which skimage marching_cubes (Lewiner)", fmt_s(_median(gm)), len(gm), "", "", "", "", ""],
         [f"ferreus-rbf `build_isosurface(extents, resolution={h_iso:.5f}, isovalue=0.0)` (marching tetrahedra, "
          "seeded)", fmt_s(t_f_iso.median), t_f_iso.runs, _cpw(t_f_iso), _fl(t_f_iso), fmt_ratio(t_f_iso.median, tp),
-         f"{counter['points']:,} ({counter['calls']} batches)†", f"{f_iso_tris:,}", f"{f_iso_verts:,}"],
+         f"{po['ferreus_counted_evaluations']:,} ({po['ferreus_counted_batches']} batches)†",
+         f"{po['ferreus_triangles']:,}", f"{po['ferreus_vertices']:,}"],
     ]
     L.append(md_table(["case", "s", "runs", "CPU/wall", "other load", "ratio peer/ours", "field evaluations (exact)",
                        "triangles", "vertices"], rows))
@@ -420,7 +498,7 @@ def bench(a: argparse.Namespace) -> str:
         "of cells in the box). Its extractor is seeded and follows the surface, so it evaluates far fewer "
         "points than a dense lattice: its evaluation count is not comparable to dense marching cubes. "
         f"† counted with `ferreus_rbf.isosurfacing.build_isosurface(points, extents, {h_iso:.5f}, 0.0, fn)` "
-        f"seeded with the {len(P):,} source points and a counting `fn` (same mesh size: {f_iso2_tris:,} "
+        f"seeded with the {n_constraints:,} source points and a counting `fn` (same mesh size: {po['ferreus_counted_triangles']:,} "
         "triangles); includes its central-difference gradient evaluations."
     )
     L.append("")
@@ -431,17 +509,6 @@ def bench(a: argparse.Namespace) -> str:
 
 
 THREAD_CONFIGS_INV = tuple((label, threads) for threads, label in THREAD_CONFIGS)
-
-
-def _command() -> str:
-    """This run's command line, with the script path relative to the repository root."""
-    argv = list(sys.argv)
-    try:
-        argv[0] = str(Path(argv[0]).resolve().relative_to(HERE.parent))
-    except ValueError:
-        pass
-    out = [a if not a.startswith(str(HERE.parent) + os.sep) else os.path.relpath(a, HERE.parent) for a in argv]
-    return " ".join(["python", *out])
 
 
 def _mtime(path: str) -> str:
@@ -457,19 +524,8 @@ def _median(xs):
     return statistics.median(xs) if xs else None
 
 
-def _fl(t: Timing) -> str:
-    return "—" if t.foreign_load is None else f"{t.foreign_load:.1f}"
-
-
-def _cpw(t: Timing) -> str:
-    c = t.cpu_per_wall
-    return "—" if c is None else f"{c:.1f}"
-
-
 def parse(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="smoke test: 10^5 points, 64³, fewer runs")
-    p.add_argument("--output", default=str(HERE / "results" / "rbf.md"), help="markdown file to write")
+    p = section_parser(__doc__.split("\n")[0], "smoke test: 10^5 points, 64³, fewer runs")
     p.add_argument("--points", type=int, default=None, help="evaluation points (default 10^6, quick 10^5)")
     p.add_argument("--resolution", type=int, default=None, help="polygonization cells per axis (default 128, quick 64)")
     # worker mode (internal)
@@ -491,13 +547,7 @@ def main(argv=None) -> int:
     a = parse(argv)
     if a.worker == "scipy":
         return scipy_worker(a)
-    md = bench(a)
-    out = Path(a.output)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(md + "\n")
-    sys.stdout.write(md + "\n")
-    log(f"wrote {out}")
-    return 0
+    return record_section("rbf", measure, render, a)
 
 
 if __name__ == "__main__":

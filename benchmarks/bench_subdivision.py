@@ -2,7 +2,7 @@
 level 2 against our own marching cubes (dense, octree, tracking) at the same triangle count, in one
 run (a script, not a test).
 
-    python benchmarks/bench_subdivision.py [--quick] [--output PATH]
+    python -m benchmarks.bench_subdivision [--quick] [--results DIR]
 
 Every method works on the same surface: `VariationalSurface.from_mesh(d=0.015)` of the mesh
 (1,600 constraints, r³). Marching cubes runs over the surface's default bounds at the resolution
@@ -12,25 +12,18 @@ whose triangle count is closest to subdivision level 2 (chosen once, before timi
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import statistics
 import sys
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(HERE))
-
-from _timing import (  # noqa: E402
-    run_section,
-    cpu_snapshot,
-    foreign_load,
+from benchmarks.timing import (
+    ROOT,
+    RunRecord,
+    Timing,
     fmt_ratio,
     fmt_s,
-    loadavg,
-    machine_info,
-    machine_markdown,
     md_table,
+    run_markdown,
+    run_section,
     timeit_median,
 )
 
@@ -54,7 +47,7 @@ def closest_resolution(im, surface, triangles: int) -> int:
     return min(counts, key=lambda r: abs(counts[r] - triangles))
 
 
-def bench(a: argparse.Namespace) -> str:
+def measure(a: argparse.Namespace) -> dict:
     import numpy as np
     import trimesh
 
@@ -65,10 +58,8 @@ def bench(a: argparse.Namespace) -> str:
     top = 2 if quick else 3
     names = MESHES[:1] if quick else MESHES
     meshes_dir = ROOT / "tests" / "data" / "meshes"
-    started = _dt.datetime.now().astimezone()
-    load_before = loadavg()
-    snap = cpu_snapshot()
-    level_rows, newton_rows, mc_rows, quality_rows, eval_rows = [], [], [], [], []
+    run = RunRecord("benchmarks.bench_subdivision", quick)
+    meshes = []
     for name in names:
         m = trimesh.load(meshes_dir / f"{name}_800.ply", process=False)
         v, f = np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
@@ -82,17 +73,6 @@ def bench(a: argparse.Namespace) -> str:
         for _ in range(runs):
             for k, lv in enumerate(im.subdivide(v, f, levels=top, surface=s)):
                 per_level[k].append(lv.stats["seconds"])
-        for k in range(1, top + 1):
-            st = levels[k].stats
-            level_rows.append([
-                name, k, f"{len(levels[k].faces):,}", f"{st['projected']:,}",
-                fmt_s(statistics.median(per_level[k])),
-                fmt_s(sum(statistics.median(per_level[j]) for j in range(k + 1))),
-            ])
-            newton_rows.append([
-                name, k, f"{st['iterations_mean']:.3f}", st["iterations_max"], st["fallbacks"], st["not_converged"],
-                f"{st['evaluations']:,}", st["batches"], f"{st['max_abs_value']:.1e}",
-            ])
         # Level 2 in one call (fit excluded, as in Jin's Table 1) against marching cubes.
         t_sub2 = timeit_median(lambda: im.subdivide(v, f, levels=2, surface=s), runs, 1)
         n2 = len(t_sub2.result[2].faces)
@@ -101,32 +81,75 @@ def bench(a: argparse.Namespace) -> str:
         mc = {}
         for method in METHODS:
             mc[method] = timeit_median(lambda: im.polygonize(s, resolution=res, method=method), runs, 1)
+        st_t = mc["tracking"].result.stats
+        meshes.append({
+            "mesh": name,
+            "fit": t_fit.to_json(),
+            "level_seconds": per_level,
+            "levels": [{"triangles": len(lv.faces), **{k: lv.stats[k] for k in LEVEL_STATS}} for lv in levels],
+            "subdivision_level_2": t_sub2.to_json(),
+            "level_2_triangles": n2,
+            "level_2_evaluations": [int(lv.stats["evaluations"]) for lv in t_sub2.result],
+            "mc_resolution": res,
+            "mc_triangles": len(mc["dense"].result.faces),
+            "mc": {k: t.to_json() for k, t in mc.items()},
+            "tracking_evaluations": int(st_t["evaluations"]),
+            "tracking_normal_evaluations": int(st_t["normal_evaluations"]),
+            "quality_subdivision": _angles(t_sub2.result[2].quality()),
+            "quality_mc": _angles(mc["dense"].result.quality()),
+        })
+    return {"runs": runs, "top": top, "meshes": meshes, "run": run.finish(("numpy", "implicitmesh"))}
+
+
+#: The statistics of a subdivision level kept in the raw results.
+LEVEL_STATS = ("projected", "iterations_mean", "iterations_max", "fallbacks", "not_converged", "evaluations",
+               "batches", "max_abs_value")
+
+
+def _angles(quality: dict) -> dict:
+    return {k: float(quality[k]) for k in ("min_angle_mean", "min_angle_p5")}
+
+
+def render(raw: dict) -> str:
+    runs, top, run = raw["runs"], raw["top"], raw["run"]
+    level_rows, newton_rows, mc_rows, quality_rows, eval_rows = [], [], [], [], []
+    for r in raw["meshes"]:
+        name, per_level = r["mesh"], r["level_seconds"]
+        for k in range(1, top + 1):
+            st = r["levels"][k]
+            level_rows.append([
+                name, k, f"{st['triangles']:,}", f"{st['projected']:,}",
+                fmt_s(statistics.median(per_level[k])),
+                fmt_s(sum(statistics.median(per_level[j]) for j in range(k + 1))),
+            ])
+            newton_rows.append([
+                name, k, f"{st['iterations_mean']:.3f}", st["iterations_max"], st["fallbacks"], st["not_converged"],
+                f"{st['evaluations']:,}", st["batches"], f"{st['max_abs_value']:.1e}",
+            ])
+        t_sub2 = Timing.from_json(r["subdivision_level_2"])
+        mc = {k: Timing.from_json(t) for k, t in r["mc"].items()}
         fastest = min(METHODS, key=lambda k: mc[k].median)
         mc_rows.append([
-            name, f"{n2:,}", fmt_s(t_sub2.median), res, f"{len(mc['dense'].result.faces):,}",
+            name, f"{r['level_2_triangles']:,}", fmt_s(t_sub2.median), r["mc_resolution"], f"{r['mc_triangles']:,}",
             *(fmt_s(mc[k].median) for k in METHODS), fastest,
             fmt_ratio(mc[fastest].median, t_sub2.median), PAPER.get(name, ""),
         ])
         # Exact field work of the same two calls: subdivision's value-and-gradient evaluations of
         # levels 0-2 (control normals, then Newton) against tracking's values and normal gradients.
-        sub_ev = [lv.stats["evaluations"] for lv in t_sub2.result]
-        st_t = mc["tracking"].result.stats
+        sub_ev = r["level_2_evaluations"]
+        te, tn = r["tracking_evaluations"], r["tracking_normal_evaluations"]
         eval_rows.append([
-            name, " + ".join(f"{e:,}" for e in sub_ev), f"{sum(sub_ev):,}",
-            f"{st_t['evaluations']:,}", f"{st_t['normal_evaluations']:,}",
-            f"{st_t['evaluations'] + st_t['normal_evaluations']:,}",
+            name, " + ".join(f"{e:,}" for e in sub_ev), f"{sum(sub_ev):,}", f"{te:,}", f"{tn:,}", f"{te + tn:,}",
         ])
-        qs, qm = t_sub2.result[2].quality(), mc["dense"].result.quality()
+        qs, qm = r["quality_subdivision"], r["quality_mc"]
         quality_rows.append([
             name, f"{qs['min_angle_mean']:.1f}°", f"{qs['min_angle_p5']:.1f}°",
-            f"{qm['min_angle_mean']:.1f}°", f"{qm['min_angle_p5']:.1f}°", fmt_s(t_fit.median),
+            f"{qm['min_angle_mean']:.1f}°", f"{qm['min_angle_p5']:.1f}°", fmt_s(Timing.from_json(r["fit"]).median),
         ])
-    info = machine_info(("numpy", "implicitmesh"))
-    foreign = foreign_load(snap, cpu_snapshot())
     out = [
         "## Subdivision polygonizer (Jin et al.) against our marching cubes",
         "",
-        f"Run {started:%Y-%m-%d %H:%M %Z} with `python benchmarks/bench_subdivision.py{' --quick' if quick else ''}`. "
+        f"Run {run['date']} with `{run['command']}`. "
         "Each shared 800-vertex mesh (1,600 faces) fitted with `from_mesh(d=0.015)` (1,600 constraints, r³), then "
         f"`subdivide(levels=...)`; wall-clock medians in seconds of {runs} runs after one warm-up. Seconds per level "
         "are the core's own timing of each level (split, batched Newton projection, normals) in calls that run to "
@@ -134,9 +157,7 @@ def bench(a: argparse.Namespace) -> str:
         "`polygonize(surface, resolution=N, method=...)` over the surface's default bounds, N chosen so that the "
         "triangle count is closest to subdivision level 2 (dense, octree and tracking give the same mesh).",
         "",
-        machine_markdown(info),
-        f"- load average before → after: {load_before} → {loadavg()}; other processes used "
-        f"{foreign if foreign is None else round(foreign, 2)} cores on average during the run",
+        run_markdown(run),
         "",
         "### Seconds per level",
         "",
@@ -176,7 +197,7 @@ def bench(a: argparse.Namespace) -> str:
 
 
 def main() -> int:
-    return run_section(bench, "subdivision", __doc__)
+    return run_section("subdivision", measure, render, __doc__)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
-"""Small helpers shared by the ``bench_*.py`` scripts: timing, machine facts, markdown tables and
-running a peer in a subprocess under another BLAS thread setting.
+"""Helpers shared by the ``benchmarks.bench_*`` modules: timing, machine facts, the record of a
+run, markdown tables, running a peer in a subprocess under another BLAS thread setting, and the
+command line of a section (measure, store the raw results as JSON, render the markdown from them).
 
 Nothing here imports numpy at module level, so a subprocess can set ``OPENBLAS_NUM_THREADS``
 before numpy (and so OpenBLAS) is loaded.
@@ -7,7 +8,9 @@ before numpy (and so OpenBLAS) is loaded.
 
 from __future__ import annotations
 
+import argparse
 import ctypes
+import datetime as _dt
 import glob
 import json
 import os
@@ -18,9 +21,17 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
+#: The repository root (the parent of the ``benchmarks`` package).
+ROOT = Path(__file__).resolve().parent.parent
+#: Where the sections keep their raw results (NAME.json) and markdown (NAME.md) by default.
+RESULTS = ROOT / "benchmarks" / "results"
+
 __all__ = [
+    "ROOT",
+    "RESULTS",
     "Timing",
     "timeit_median",
     "cpu_snapshot",
@@ -33,8 +44,18 @@ __all__ = [
     "md_table",
     "fmt_s",
     "fmt_ratio",
+    "fmt_cpu_per_wall",
+    "fmt_foreign_load",
     "run_worker",
     "blas_env",
+    "command_line",
+    "RunRecord",
+    "run_markdown",
+    "section_parser",
+    "results_dir",
+    "save_raw",
+    "load_raw",
+    "record_section",
     "run_section",
 ]
 
@@ -264,30 +285,131 @@ def blas_env(threads: int | None) -> dict[str, str]:
     return env
 
 
-def run_worker(script: str, args: Sequence[str], threads: int | None, timeout: float | None = None) -> dict:
-    """Runs ``python script *args --json-out FILE`` in a subprocess with the given OpenBLAS thread
-    setting and returns the JSON it wrote. The worker's stderr passes through (progress)."""
+def run_worker(module: str, args: Sequence[str], threads: int | None, timeout: float | None = None) -> dict:
+    """Runs ``python -m module *args --json-out FILE`` from the repository root in a subprocess with
+    the given OpenBLAS thread setting and returns the JSON it wrote. The worker's stderr passes
+    through (progress)."""
     with tempfile.TemporaryDirectory(prefix="bench_") as tmp:
         out = os.path.join(tmp, "result.json")
-        cmd = [sys.executable, script, *args, "--json-out", out]
-        subprocess.run(cmd, env=blas_env(threads), check=True, timeout=timeout, stdout=sys.stderr)
+        cmd = [sys.executable, "-m", module, *args, "--json-out", out]
+        subprocess.run(cmd, env=blas_env(threads), check=True, timeout=timeout, stdout=sys.stderr, cwd=ROOT)
         with open(out) as f:
             return json.load(f)
 
 
-def run_section(bench: Callable[[Any], str], name: str, description: str, quick_help: str | None = None) -> int:
-    """The ``main`` of a ``bench_NAME.py``: parses ``--quick`` and ``--output`` (default
-    ``benchmarks/results/NAME.md``), runs ``bench(args)``, prints its markdown section and writes
-    it to the output."""
-    import argparse
-    from pathlib import Path
+def fmt_cpu_per_wall(t: Timing | None) -> str:
+    """A table cell: the timing's CPU seconds per wall second, one decimal."""
+    c = None if t is None else t.cpu_per_wall
+    return "—" if c is None else f"{c:.1f}"
 
+
+def fmt_foreign_load(t: Timing | None) -> str:
+    """A table cell: the cores other processes kept busy during the timing, one decimal."""
+    return "—" if t is None or t.foreign_load is None else f"{t.foreign_load:.1f}"
+
+
+def command_line(module: str) -> str:
+    """This process's command as ``python -m module ARGS``, with paths under the repository root
+    made relative to it and without ``--results DIR`` (where the results go, not what they are)."""
+    args: list[str] = []
+    skip = False
+    for x in sys.argv[1:]:
+        if skip or x.startswith("--results="):
+            skip = False
+            continue
+        if x == "--results":
+            skip = True
+            continue
+        args.append(os.path.relpath(x, ROOT) if x.startswith(str(ROOT) + os.sep) else x)
+    return " ".join(["python", "-m", module, *args])
+
+
+class RunRecord:
+    """The facts every section states about its run: start date, command, quick flag, machine,
+    load averages and the other processes' CPU use. Created when the run starts; :meth:`finish`
+    returns them as a JSON-serialisable dict."""
+
+    def __init__(self, module: str, quick: bool):
+        self.command = command_line(module)
+        self.quick = bool(quick)
+        self.started = _dt.datetime.now().astimezone()
+        self.load_before = loadavg()
+        self.snapshot = cpu_snapshot()
+
+    def finish(self, packages: Sequence[str]) -> dict[str, Any]:
+        info = machine_info(packages)
+        foreign = foreign_load(self.snapshot, cpu_snapshot())
+        return {
+            "date": f"{self.started:%Y-%m-%d %H:%M %Z}",
+            "timestamp": self.started.isoformat(),
+            "command": self.command,
+            "quick": self.quick,
+            "machine": info,
+            "loadavg_before": list(self.load_before),
+            "loadavg_after": list(loadavg()),
+            "foreign_load": foreign,
+        }
+
+
+def run_markdown(run: dict[str, Any]) -> str:
+    """The machine bullet list of a :class:`RunRecord` and its load line."""
+    foreign = run["foreign_load"]
+    return "\n".join([
+        machine_markdown(run["machine"]),
+        f"- load average before → after: {tuple(run['loadavg_before'])} → {tuple(run['loadavg_after'])}; "
+        f"other processes used {foreign if foreign is None else round(foreign, 2)} cores on average during the run",
+    ])
+
+
+def section_parser(description: str, quick_help: str | None = None) -> argparse.ArgumentParser:
+    """The command line of a ``benchmarks.bench_NAME`` module: ``--quick`` and ``--results DIR``."""
     p = argparse.ArgumentParser(description=description)
-    p.add_argument("--quick", action="store_true", help=quick_help)
-    p.add_argument("--output", default=str(Path(__file__).resolve().parent / "results" / f"{name}.md"))
-    a = p.parse_args()
-    md = bench(a)
-    print(md)
-    Path(a.output).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.output).write_text(md)
+    p.add_argument("--quick", action="store_true", help=quick_help or "smoke test: fewer cases and runs")
+    p.add_argument("--results", default=None, metavar="DIR",
+                   help="where NAME.json (raw results) and NAME.md go (default benchmarks/results; "
+                        "with --quick a new temporary directory)")
+    return p
+
+
+def results_dir(results: str | None, quick: bool) -> Path:
+    """``results`` as an absolute path; by default ``benchmarks/results``, or a new temporary
+    directory for a quick run (quick results never replace the stored ones by accident)."""
+    if results:
+        path = Path(results).resolve()
+    elif quick:
+        path = Path(tempfile.mkdtemp(prefix="benchmarks_quick_"))
+    else:
+        path = RESULTS
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def save_raw(results: Path, name: str, raw: dict[str, Any]) -> Path:
+    """Writes ``raw`` to ``results/NAME.json``."""
+    path = results / f"{name}.json"
+    path.write_text(json.dumps(raw, indent=1, ensure_ascii=False) + "\n")
+    return path
+
+
+def load_raw(results: Path, name: str) -> dict[str, Any] | None:
+    """The raw results in ``results/NAME.json``, or None when there are none."""
+    path = results / f"{name}.json"
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def record_section(name: str, measure: Callable[[Any], dict], render: Callable[[dict], str], args: Any) -> int:
+    """Runs ``measure(args)``, writes the raw results to ``RESULTS/NAME.json``, renders the markdown
+    from that file into ``RESULTS/NAME.md`` and prints it."""
+    results = results_dir(args.results, args.quick)
+    save_raw(results, name, measure(args))
+    md = render(load_raw(results, name))
+    (results / f"{name}.md").write_text(md)
+    sys.stdout.write(md)
+    print(f"[{name}] wrote {results / name}.json and .md", file=sys.stderr, flush=True)
     return 0
+
+
+def run_section(name: str, measure: Callable[[Any], dict], render: Callable[[dict], str], description: str,
+                quick_help: str | None = None) -> int:
+    """The ``main`` of a ``benchmarks.bench_NAME`` module without options of its own."""
+    return record_section(name, measure, render, section_parser(description, quick_help).parse_args())
