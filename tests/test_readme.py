@@ -18,5 +18,7 @@ def test_readme_tour_runs(tmp_path, monkeypatch):
     assert scope["surface"].evaluate(scope["vertices"]).__abs__().max() < 1e-9
     assert scope["mesh"].to_trimesh().is_watertight
     assert (tmp_path / "knot.ply").is_file()
+    back = scope["im"].load(tmp_path / "knot_fit.npz")
+    assert (back.evaluate(scope["vertices"]) == scope["surface"].evaluate(scope["vertices"])).all()
     assert [len(level.faces) for level in scope["levels"]] == [1600, 6400, 25600]
     assert len(scope["frame"].faces) > 0

@@ -12,7 +12,8 @@ or ``"tracking"`` (Triquet et al.); :class:`Tessellator` keeps the tracking cach
 for animation. Mesh refinement: :func:`subdivide` (1-to-4 with Newton projection onto the
 field, Jin et al.), :func:`butterfly` and :func:`blend`.
 Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are;
-:func:`compare` counts the triangles two meshes do not share.
+:func:`compare` counts the triangles two meshes do not share. Fitted fields pickle, and
+:func:`save` and :func:`load` keep them in ``.npz`` files.
 """
 
 from ._core import BlobField, VariationalSurface, __version__
@@ -20,5 +21,6 @@ from .mesh import Mesh, compare
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
 from .subdivision import blend, butterfly, subdivide
+from .io import load, save
 
-__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "subdivide", "butterfly", "blend", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "subdivide", "butterfly", "blend", "save", "load", "__version__"]

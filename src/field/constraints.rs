@@ -36,7 +36,7 @@ impl Default for ConstraintSettings {
 
 /// Constraint points and values: the first `boundary` entries are the data points (value 0), the
 /// rest the normal constraints, in the same order.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Constraints {
     pub points: Vec<DVec3>,
     pub values: Vec<f64>,

@@ -5,6 +5,11 @@
 //! largest half-side is 1), which keeps the system's entries of order one whatever the units of
 //! the data; the interpolant is similarity-equivariant, so this changes nothing but the rounding.
 
+mod parts;
+
+pub(crate) use parts::bad_state;
+pub use parts::SurfaceParts;
+
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::{
     block_gradients, block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel,

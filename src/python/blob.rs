@@ -174,6 +174,27 @@ impl PyBlobField {
         let half = DVec3::splat(0.5 * 1.1 * (hi - lo).max_element());
         points_to_py(py, vec![c - half, c + half])
     }
+    /// Pickling: the constructor's arguments, which rebuild the same field.
+    #[allow(clippy::type_complexity)]
+    fn __getnewargs_ex__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        (Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>, f64),
+        Bound<'py, pyo3::types::PyDict>,
+    )> {
+        let kwargs = pyo3::types::PyDict::new(py);
+        kwargs.set_item("voxel_size", self.inner.settings().voxel_size)?;
+        Ok((
+            (
+                self.centers(py)?,
+                self.radii(py),
+                self.strengths(py),
+                self.threshold(),
+            ),
+            kwargs,
+        ))
+    }
     fn __len__(&self) -> usize {
         self.inner.centers().len()
     }

@@ -8,6 +8,7 @@ mod errors;
 mod field;
 mod interrupt;
 mod polygonize;
+mod state;
 mod subdivision;
 mod variational;
 

@@ -222,7 +222,8 @@ impl PyVariationalSurface {
     /// progress : bool or callable, optional
     ///     ``True``: show the constraints fitted so far (a tqdm bar when tqdm is installed, else
     ///     a line on standard error); a callable gets that count (an int) about every 50 ms. The
-    ///     partition fit counts patch by patch; the global fit reports once, at the end.
+    ///     partition fit counts patch by patch; the global fit counts the columns of its system
+    ///     factorized, in steps of 2048.
     ///
     /// Returns
     /// -------
@@ -231,7 +232,8 @@ impl PyVariationalSurface {
     /// Raises
     /// ------
     /// KeyboardInterrupt
-    ///     On Ctrl-C: the partition fit stops between patches; the global fit when it is done.
+    ///     On Ctrl-C: the partition fit stops between patches, the global fit between steps of
+    ///     its factorization.
     /// ValueError
     ///     For wrong shapes, NaN/inf, fewer than 4 points, coplanar or duplicate points,
     ///     zero-length normals, a singular system, a system over the memory limit or an unknown
@@ -517,6 +519,48 @@ impl PyVariationalSurface {
         let c = (lo + hi) * 0.5;
         let half = DVec3::splat(0.6 * (hi - lo).max_element());
         points_to_py(py, vec![c - half, c + half])
+    }
+
+    /// The fitted surface as a dict of numpy arrays and numbers, which
+    /// :meth:`from_state` turns back into the same surface (it evaluates to the same bits).
+    /// ``pickle`` and :func:`implicitmesh.save` use it.
+    ///
+    /// Returns
+    /// -------
+    /// dict
+    ///     ``"format"`` (int), ``"method"`` (``"global"`` or ``"partition"``), the constraints
+    ///     (``"constraint_points"`` (M, 3) float64, ...) and the fit's numbers.
+    fn to_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        super::state::state(py, &self.inner)
+    }
+
+    /// The surface :meth:`to_state` gave, without fitting again.
+    ///
+    /// Parameters
+    /// ----------
+    /// state : dict
+    ///
+    /// Raises
+    /// ------
+    /// ValueError
+    ///     For a dict that :meth:`to_state` did not make (missing keys, lengths that disagree,
+    ///     non-finite numbers, another format version).
+    #[staticmethod]
+    fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
+        Ok(PyVariationalSurface {
+            inner: super::state::from_state(state)?,
+        })
+    }
+
+    /// Pickling: :meth:`from_state` of :meth:`to_state`.
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyDict>,))> {
+        let from_state = py
+            .get_type::<PyVariationalSurface>()
+            .getattr("from_state")?;
+        Ok((from_state, (self.to_state(py)?,)))
     }
 
     fn __len__(&self) -> usize {

@@ -17,7 +17,10 @@
 pub mod blend;
 pub mod coarse;
 pub mod octree;
+mod parts;
 pub mod patches;
+
+pub use parts::{PartitionParts, PatchParts};
 
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::Kernel;
@@ -162,9 +165,9 @@ impl PartitionSurface {
         Self::solve(c, settings)
     }
 
-    fn solve(c: Constraints, settings: &PartitionSettings) -> Result<Self> {
-        // The cube: centred on the data's bounding box, covering the default polygonization
-        // bounds (half-side 0.6 × the data's largest side) and every constraint.
+    /// The cube, centred on the data's bounding box, covering the default polygonization bounds
+    /// (half-side 0.6 × the data's largest side) and every constraint: (centre, half-side).
+    fn cube(c: &Constraints) -> (DVec3, f64) {
         let (lo, hi) = bounding_box(&c.points[..c.boundary]);
         let centre = (lo + hi) * 0.5;
         let reach = c
@@ -172,10 +175,16 @@ impl PartitionSurface {
             .iter()
             .map(|p| (*p - centre).abs().max_element())
             .fold(0.6 * (hi - lo).max_element(), f64::max);
-        let half = reach * (1.0 + 1e-9);
+        (centre, reach * (1.0 + 1e-9))
+    }
+
+    /// The octree of the constraints: split until each leaf holds at most `max_per_leaf` and
+    /// the ball of its patch at most `max_patch` of them.
+    fn tree(c: &Constraints, settings: &PartitionSettings) -> Octree {
+        let (centre, half) = Self::cube(c);
         // A first octree counts the constraints in the balls of the final one's nodes.
         let counts = Octree::new(&c.points, centre, half, settings.max_per_leaf);
-        let tree = Octree::build(&c.points, centre, half, |n| {
+        Octree::build(&c.points, centre, half, |n| {
             (n.end - n.start) as usize > settings.max_per_leaf
                 || counts.more_within_than(
                     &c.points,
@@ -183,7 +192,12 @@ impl PartitionSurface {
                     settings.overlap * n.half_diagonal(),
                     settings.max_patch,
                 )
-        });
+        })
+    }
+
+    fn solve(c: Constraints, settings: &PartitionSettings) -> Result<Self> {
+        let (centre, half) = Self::cube(&c);
+        let tree = Self::tree(&c, settings);
         let levels = coarse::levels(
             &c.points,
             c.boundary,

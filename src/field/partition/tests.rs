@@ -190,3 +190,25 @@ fn refuses_bad_settings_and_memory() {
         Err(Error::TooMuchMemory { .. })
     ));
 }
+
+/// The parts give back a surface that evaluates to the same bits, with the same octree and
+/// cover; parts no fit makes are refused.
+#[test]
+fn parts_give_back_the_same_surface() {
+    let s = torus_surface();
+    let back = PartitionSurface::from_parts(s.parts()).unwrap();
+    assert_eq!(back.parts(), s.parts());
+    assert_eq!((&back.cover_start, &back.cover), (&s.cover_start, &s.cover));
+    let q = random_points(5000, -1.0, 1.0, 9);
+    let (mut a, mut b) = (vec![0.0; q.len()], vec![0.0; q.len()]);
+    s.values(&q, &mut a);
+    back.values(&q, &mut b);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a), bits(&b));
+    let mut bad = s.parts();
+    bad.patches[3].radius = -1.0;
+    assert!(PartitionSurface::from_parts(bad).is_err());
+    let mut bad = s.parts();
+    bad.constraints.values.pop();
+    assert!(PartitionSurface::from_parts(bad).is_err());
+}

@@ -1,0 +1,292 @@
+//! Saved states of fitted surfaces: a [`Fitted`] as a dict of numpy arrays and numbers, and
+//! back, through the core's parts ([`SurfaceParts`], [`PartitionParts`]). Pickling and
+//! `implicitmesh.save`/`load` use it.
+
+use super::convert::{points, points_to_py, values, values_to_py};
+use super::errors::value_error;
+use super::variational::Fitted;
+use crate::field::constraints::Constraints;
+use crate::field::kernel::Kernel;
+use crate::field::partition::{PartitionParts, PartitionSettings, PartitionSurface, PatchParts};
+use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
+use glam::DVec3;
+use numpy::PyArray1;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::Arc;
+
+/// The version of the layout below; states of other versions are refused.
+const FORMAT: i64 = 1;
+
+fn bad(what: impl std::fmt::Display) -> PyErr {
+    value_error("state", format!("not a saved surface: {what}"))
+}
+
+fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
+    d.get_item(key)?.ok_or_else(|| bad(format!("no {key:?}")))
+}
+
+fn number<T: for<'a, 'py> FromPyObject<'a, 'py>>(d: &Bound<'_, PyDict>, key: &str) -> PyResult<T> {
+    item(d, key)?
+        .extract()
+        .map_err(|_| bad(format!("{key:?} is not a number of the right kind")))
+}
+
+fn points_of(d: &Bound<'_, PyDict>, key: &'static str) -> PyResult<Vec<DVec3>> {
+    points(&item(d, key)?, key)
+}
+
+fn values_of(d: &Bound<'_, PyDict>, key: &'static str) -> PyResult<Vec<f64>> {
+    values(&item(d, key)?, key)
+}
+
+fn counts_of(d: &Bound<'_, PyDict>, key: &'static str) -> PyResult<Vec<usize>> {
+    let v: Vec<i64> = item(d, key)?
+        .extract()
+        .map_err(|_| bad(format!("{key:?} is not a list of integers")))?;
+    v.into_iter()
+        .map(|x| usize::try_from(x).map_err(|_| bad(format!("{key:?} holds {x}"))))
+        .collect()
+}
+
+fn four(v: Vec<f64>, key: &str) -> PyResult<[f64; 4]> {
+    v.try_into()
+        .map_err(|_| bad(format!("{key:?} needs 4 numbers")))
+}
+
+fn counts_to_py(py: Python<'_>, v: impl IntoIterator<Item = usize>) -> Bound<'_, PyAny> {
+    PyArray1::from_vec(py, v.into_iter().map(|x| x as i64).collect()).into_any()
+}
+
+fn put_constraints(py: Python<'_>, d: &Bound<'_, PyDict>, c: &Constraints) -> PyResult<()> {
+    d.set_item("constraint_points", points_to_py(py, c.points.clone())?)?;
+    d.set_item("constraint_values", values_to_py(py, c.values.clone()))?;
+    d.set_item("constraint_offsets", values_to_py(py, c.offsets.clone()))?;
+    d.set_item("constraint_boundary", c.boundary)
+}
+
+fn constraints_of(d: &Bound<'_, PyDict>) -> PyResult<Constraints> {
+    Ok(Constraints {
+        points: points_of(d, "constraint_points")?,
+        values: values_of(d, "constraint_values")?,
+        offsets: values_of(d, "constraint_offsets")?,
+        boundary: number(d, "constraint_boundary")?,
+    })
+}
+
+/// The state of a fitted surface.
+pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("format", FORMAT)?;
+    match fitted {
+        Fitted::Global(s) => {
+            let p = s.parts();
+            d.set_item("method", "global")?;
+            put_constraints(py, &d, &p.constraints)?;
+            d.set_item("kernel", p.kernel.name())?;
+            d.set_item("centers", points_to_py(py, p.centers)?)?;
+            d.set_item("weights", values_to_py(py, p.weights))?;
+            d.set_item("polynomial", values_to_py(py, p.polynomial.to_vec()))?;
+            d.set_item("shift", values_to_py(py, p.shift.to_array().to_vec()))?;
+            d.set_item("scale", p.scale)?;
+            d.set_item(
+                "normalized_centers",
+                points_to_py(py, p.normalized_centers)?,
+            )?;
+            d.set_item("normalized_weights", values_to_py(py, p.normalized_weights))?;
+            let np = p.normalized_polynomial.to_vec();
+            d.set_item("normalized_polynomial", values_to_py(py, np))?;
+            d.set_item("residual", p.residual)?;
+            d.set_item("factorization", p.factorization)?;
+        }
+        Fitted::Partition(s) => {
+            let p = s.parts();
+            d.set_item("method", "partition")?;
+            put_constraints(py, &d, &p.constraints)?;
+            let st = &p.settings;
+            d.set_item("kernel", st.fit.kernel.name())?;
+            d.set_item("smoothing", st.fit.smoothing)?;
+            d.set_item("memory_limit", st.fit.memory_limit)?;
+            d.set_item("max_per_leaf", st.max_per_leaf)?;
+            d.set_item("overlap", st.overlap)?;
+            d.set_item("max_patch", st.max_patch)?;
+            d.set_item("min_points", st.min_points)?;
+            d.set_item("residual", p.residual)?;
+            put_patches(py, &d, &p.patches)?;
+        }
+    }
+    Ok(d)
+}
+
+/// The patches, flattened: per patch its ball, counts and fit's numbers; their normalised
+/// centres and weights one after another (`patch_start` says where each patch's begin).
+fn put_patches(py: Python<'_>, d: &Bound<'_, PyDict>, patches: &[PatchParts]) -> PyResult<()> {
+    let fits = || patches.iter().map(|q| &q.fit);
+    let flat = |f: &dyn Fn(&SurfaceParts) -> Vec<f64>| fits().flat_map(f).collect::<Vec<f64>>();
+    let mut start = vec![0usize];
+    for f in fits() {
+        start.push(start.last().unwrap() + f.normalized_weights.len());
+    }
+    d.set_item("patch_start", counts_to_py(py, start))?;
+    let centre = patches.iter().map(|q| q.centre).collect();
+    d.set_item("patch_centre", points_to_py(py, centre)?)?;
+    let radius = patches.iter().map(|q| q.radius).collect();
+    d.set_item("patch_radius", values_to_py(py, radius))?;
+    d.set_item(
+        "patch_inside",
+        counts_to_py(py, patches.iter().map(|q| q.inside)),
+    )?;
+    d.set_item(
+        "patch_size",
+        counts_to_py(py, patches.iter().map(|q| q.size)),
+    )?;
+    let nc = fits()
+        .flat_map(|f| f.normalized_centers.iter().copied())
+        .collect();
+    d.set_item("patch_normalized_centers", points_to_py(py, nc)?)?;
+    let nw = flat(&|f| f.normalized_weights.clone());
+    d.set_item("patch_normalized_weights", values_to_py(py, nw))?;
+    let np = flat(&|f| f.normalized_polynomial.to_vec());
+    d.set_item("patch_normalized_polynomial", values_to_py(py, np))?;
+    d.set_item(
+        "patch_polynomial",
+        values_to_py(py, flat(&|f| f.polynomial.to_vec())),
+    )?;
+    d.set_item(
+        "patch_shift",
+        values_to_py(py, flat(&|f| f.shift.to_array().to_vec())),
+    )?;
+    d.set_item("patch_scale", values_to_py(py, flat(&|f| vec![f.scale])))?;
+    d.set_item(
+        "patch_residual",
+        values_to_py(py, flat(&|f| vec![f.residual])),
+    )?;
+    let cholesky = fits().map(|f| (f.factorization == "cholesky") as usize);
+    d.set_item("patch_cholesky", counts_to_py(py, cholesky))
+}
+
+fn patches_of(d: &Bound<'_, PyDict>, kernel: Kernel) -> PyResult<Vec<PatchParts>> {
+    let start = counts_of(d, "patch_start")?;
+    let centre = points_of(d, "patch_centre")?;
+    let radius = values_of(d, "patch_radius")?;
+    let inside = counts_of(d, "patch_inside")?;
+    let size = counts_of(d, "patch_size")?;
+    let nc = points_of(d, "patch_normalized_centers")?;
+    let nw = values_of(d, "patch_normalized_weights")?;
+    let np = values_of(d, "patch_normalized_polynomial")?;
+    let poly = values_of(d, "patch_polynomial")?;
+    let shift = values_of(d, "patch_shift")?;
+    let scale = values_of(d, "patch_scale")?;
+    let residual = values_of(d, "patch_residual")?;
+    let cholesky = counts_of(d, "patch_cholesky")?;
+    let n = centre.len();
+    let lengths_agree = start.len() == n + 1
+        && [
+            radius.len(),
+            inside.len(),
+            size.len(),
+            scale.len(),
+            residual.len(),
+        ]
+        .iter()
+        .chain(&[cholesky.len()])
+        .all(|&l| l == n)
+        && np.len() == 4 * n
+        && poly.len() == 4 * n
+        && shift.len() == 3 * n
+        && start.windows(2).all(|w| w[0] <= w[1])
+        && start[0] == 0
+        && start[n] == nc.len()
+        && nw.len() == nc.len();
+    if !lengths_agree {
+        return Err(bad("the patches' arrays differ in length"));
+    }
+    (0..n)
+        .map(|k| {
+            let run = start[k]..start[k + 1];
+            Ok(PatchParts {
+                centre: centre[k],
+                radius: radius[k],
+                inside: inside[k],
+                size: size[k],
+                fit: SurfaceParts {
+                    kernel,
+                    polynomial: four(poly[4 * k..4 * k + 4].to_vec(), "patch_polynomial")?,
+                    shift: DVec3::from_slice(&shift[3 * k..3 * k + 3]),
+                    scale: scale[k],
+                    normalized_centers: nc[run.clone()].to_vec(),
+                    normalized_weights: nw[run].to_vec(),
+                    normalized_polynomial: four(np[4 * k..4 * k + 4].to_vec(), "patch_polynomial")?,
+                    residual: residual[k],
+                    factorization: if cholesky[k] == 1 { "cholesky" } else { "lblt" }.into(),
+                    ..Default::default()
+                },
+            })
+        })
+        .collect()
+}
+
+/// The fitted surface of a state [`state`] made.
+pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
+    let format: i64 = number(d, "format")?;
+    if format != FORMAT {
+        return Err(bad(format!(
+            "format {format}; this version reads format {FORMAT}"
+        )));
+    }
+    let method: String = number(d, "method")?;
+    let kernel_name: String = number(d, "kernel")?;
+    let kernel = Kernel::parse(&kernel_name).map_err(|_| bad(format!("kernel {kernel_name:?}")))?;
+    let constraints = constraints_of(d)?;
+    let residual: f64 = number(d, "residual")?;
+    match method.as_str() {
+        "global" => {
+            let parts = SurfaceParts {
+                kernel,
+                centers: points_of(d, "centers")?,
+                weights: values_of(d, "weights")?,
+                polynomial: four(values_of(d, "polynomial")?, "polynomial")?,
+                shift: DVec3::from_array(
+                    values_of(d, "shift")?
+                        .try_into()
+                        .map_err(|_| bad("\"shift\" needs 3 numbers"))?,
+                ),
+                scale: number(d, "scale")?,
+                normalized_centers: points_of(d, "normalized_centers")?,
+                normalized_weights: values_of(d, "normalized_weights")?,
+                normalized_polynomial: four(
+                    values_of(d, "normalized_polynomial")?,
+                    "normalized_polynomial",
+                )?,
+                constraints,
+                residual,
+                factorization: number(d, "factorization")?,
+            };
+            Ok(Fitted::Global(Arc::new(VariationalSurface::from_parts(
+                parts,
+            )?)))
+        }
+        "partition" => {
+            let settings = PartitionSettings {
+                max_per_leaf: number(d, "max_per_leaf")?,
+                overlap: number(d, "overlap")?,
+                max_patch: number(d, "max_patch")?,
+                min_points: number(d, "min_points")?,
+                fit: FitSettings {
+                    kernel,
+                    smoothing: number(d, "smoothing")?,
+                    memory_limit: number(d, "memory_limit")?,
+                },
+            };
+            let parts = PartitionParts {
+                settings,
+                constraints,
+                patches: patches_of(d, kernel)?,
+                residual,
+            };
+            let s = PartitionSurface::from_parts(parts)?;
+            Ok(Fitted::Partition(Arc::new(s)))
+        }
+        other => Err(bad(format!("method {other:?}"))),
+    }
+}
