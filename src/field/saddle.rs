@@ -66,7 +66,8 @@ fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) 
     }
 }
 
-/// Φ + sI, column-major, [`COLUMNS_PER_STEP`] columns at a time.
+/// Φ + sI, column-major: the lower triangle computed [`COLUMNS_PER_STEP`] columns at a time,
+/// then copied to the upper (|c_i − c_j| and |c_j − c_i| are the same number).
 fn assemble(
     points: &[DVec3],
     phi: &(impl Fn(f64) -> f64 + Sync),
@@ -80,13 +81,41 @@ fn assemble(
         for_columns(step, n, par, |k, col| {
             let j = s * COLUMNS_PER_STEP + k;
             let cj = points[j];
-            for (i, x) in col.iter_mut().enumerate() {
+            for (i, x) in col.iter_mut().enumerate().skip(j) {
                 *x = phi((points[i] - cj).length());
             }
             col[j] += smoothing;
         });
     }
+    cancel::check()?;
+    mirror_lower(&mut a, n, par);
     Ok(a)
+}
+
+/// Copies the strict lower triangle of the column-major `n × n` matrix `a` to its upper one.
+fn mirror_lower(a: &mut [f64], n: usize, par: Par) {
+    /// The matrix's storage, shared by the columns' tasks.
+    #[derive(Clone, Copy)]
+    struct Storage(*mut f64);
+    // SAFETY: the tasks below touch disjoint elements (see there).
+    unsafe impl Send for Storage {}
+    unsafe impl Sync for Storage {}
+    assert_eq!(a.len(), n * n);
+    let m = Storage(a.as_mut_ptr());
+    let column = move |j: usize| {
+        let m = m;
+        for i in 0..j {
+            // SAFETY: both indices are below n² = a.len(). Column j's task writes only the
+            // upper elements (i, j), i < j, and reads only lower ones (j, i), j > i: no element
+            // is written by two tasks or read by one while another writes it.
+            unsafe { *m.0.add(j * n + i) = *m.0.add(i * n + j) };
+        }
+    };
+    if matches!(par, Par::Seq) {
+        (0..n).for_each(column);
+    } else {
+        (0..n).into_par_iter().with_min_len(16).for_each(column);
+    }
 }
 
 /// Cholesky factorization in place of the lower triangle of `a` (faer's, which cannot be
@@ -317,9 +346,13 @@ impl SaddleSolver {
         let vrows: Vec<[f64; 4]> = (0..n)
             .map(|q| [col(0)[q], col(1)[q], col(2)[q], col(3)[q]])
             .collect();
+        // Only what is read afterwards: the first four rows (`top`) and the lower triangle
+        // (the Cholesky factorization's input).
         for_columns(&mut a, n, par, |j, c| {
             let (vj, zj) = (vrows[j], z[j]);
-            for (i, x) in c.iter_mut().enumerate() {
+            let rows = (0..4.min(j)).chain(j..n);
+            for i in rows {
+                let x = &mut c[i];
                 let (vi, zi) = (&vrows[i], &z[i]);
                 *x -= vi[0] * zj[0]
                     + vi[1] * zj[1]
