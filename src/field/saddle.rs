@@ -76,15 +76,24 @@ fn assemble(
 ) -> Result<Vec<f64>> {
     let n = points.len();
     let mut a = vec![0.0f64; n * n];
+    // The coordinates by axis, so that a column's loop reads contiguous slices.
+    let (xs, ys, zs): (Vec<f64>, Vec<f64>, Vec<f64>) = (
+        points.iter().map(|p| p.x).collect(),
+        points.iter().map(|p| p.y).collect(),
+        points.iter().map(|p| p.z).collect(),
+    );
     for (s, step) in a.chunks_mut(n * COLUMNS_PER_STEP).enumerate() {
         cancel::check()?;
         for_columns(step, n, par, |k, col| {
             let j = s * COLUMNS_PER_STEP + k;
             let cj = points[j];
-            for (i, x) in col.iter_mut().enumerate().skip(j) {
-                *x = phi((points[i] - cj).length());
+            let (x, y, z, col) = (&xs[j..], &ys[j..], &zs[j..], &mut col[j..]);
+            for (t, out) in col.iter_mut().enumerate() {
+                // |p_i − c_j| as DVec3::length computes it.
+                let (dx, dy, dz) = (x[t] - cj.x, y[t] - cj.y, z[t] - cj.z);
+                *out = phi((dx * dx + dy * dy + dz * dz).sqrt());
             }
-            col[j] += smoothing;
+            col[0] += smoothing;
         });
     }
     cancel::check()?;
@@ -295,10 +304,14 @@ impl SaddleSolver {
         }
         // QᵀAQ = A − V Zᵀ − Z Vᵀ with W = AV, S = Tᵀ(VᵀW)T, Z = WT − ½VS: one pass to read A
         // (W) and one to update it.
+        // The four dot products of a column with V in one pass, each summed in index order
+        // from −0.0 (as `Iterator::sum`).
         let wcol = |c: &[f64]| {
-            let mut o = [0.0; 4];
-            for (k, ok) in o.iter_mut().enumerate() {
-                *ok = c.iter().zip(col(k)).map(|(x, y)| x * y).sum();
+            let mut o = [-0.0f64; 4];
+            for (q, x) in c.iter().enumerate() {
+                for (k, ok) in o.iter_mut().enumerate() {
+                    *ok += x * v[k * n + q];
+                }
             }
             o
         };
@@ -343,29 +356,34 @@ impl SaddleSolver {
                 o
             })
             .collect();
-        let vrows: Vec<[f64; 4]> = (0..n)
-            .map(|q| [col(0)[q], col(1)[q], col(2)[q], col(3)[q]])
-            .collect();
+        // V and Z by columns, so that the update below runs down contiguous slices.
+        let zcols: [Vec<f64>; 4] = std::array::from_fn(|k| z.iter().map(|zq| zq[k]).collect());
         // Only what is read afterwards: the first four rows (`top`) and the lower triangle
         // (the Cholesky factorization's input).
         for_columns(&mut a, n, par, |j, c| {
-            let (vj, zj) = (vrows[j], z[j]);
-            let rows = (0..4.min(j)).chain(j..n);
-            for i in rows {
-                let x = &mut c[i];
-                let (vi, zi) = (&vrows[i], &z[i]);
-                *x -= vi[0] * zj[0]
-                    + vi[1] * zj[1]
-                    + vi[2] * zj[2]
-                    + vi[3] * zj[3]
-                    + zi[0] * vj[0]
-                    + zi[1] * vj[1]
-                    + zi[2] * vj[2]
-                    + zi[3] * vj[3];
-                if sign < 0.0 && i >= 4 && j >= 4 {
-                    *x = -*x;
+            let vj: [f64; 4] = std::array::from_fn(|k| col(k)[j]);
+            let zj = z[j];
+            let update = |rows: std::ops::Range<usize>, c: &mut [f64], negate: bool| {
+                let vk: [&[f64]; 4] = std::array::from_fn(|k| &col(k)[rows.clone()]);
+                let zk: [&[f64]; 4] = std::array::from_fn(|k| &zcols[k][rows.clone()]);
+                let c = &mut c[rows];
+                for (t, x) in c.iter_mut().enumerate() {
+                    *x -= vk[0][t] * zj[0]
+                        + vk[1][t] * zj[1]
+                        + vk[2][t] * zj[2]
+                        + vk[3][t] * zj[3]
+                        + zk[0][t] * vj[0]
+                        + zk[1][t] * vj[1]
+                        + zk[2][t] * vj[2]
+                        + zk[3][t] * vj[3];
+                    if negate {
+                        *x = -*x;
+                    }
                 }
-            }
+            };
+            update(0..4.min(j), c, false);
+            // The trailing block (rows and columns from 4 on) changes sign for sign < 0.
+            update(j..n, c, sign < 0.0 && j >= 4);
         });
         let top: Vec<f64> = (0..n)
             .flat_map(|j| (0..4).map(move |i| (i, j)))

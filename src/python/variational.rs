@@ -112,19 +112,17 @@ fn run(
     method: Method,
     constraints: usize,
     settings: rbf::FitSettings,
+    options: Option<&Bound<'_, PyDict>>,
     global: impl FnOnce(&rbf::FitSettings) -> Result<VariationalSurface> + Send,
     partition: impl FnOnce(&partition::PartitionSettings) -> Result<PartitionSurface> + Send,
 ) -> PyResult<PyVariationalSurface> {
+    let ps = partition_settings(options, settings)?;
     let use_partition = match method {
         Method::Global => false,
         Method::Partition => true,
         Method::Auto => constraints >= AUTO_PARTITION_CONSTRAINTS,
     };
     let inner = if use_partition {
-        let ps = partition::PartitionSettings {
-            fit: settings,
-            ..Default::default()
-        };
         let (report, end) = reporter(py, progress, "fit (partition)")?;
         let fitted = super::interrupt::run(py, report.as_ref(), false, move || partition(&ps));
         end.call0()?;
@@ -136,6 +134,44 @@ fn run(
         Fitted::Global(Arc::new(fitted?))
     };
     Ok(PyVariationalSurface { inner })
+}
+
+/// The partition fit's settings: the defaults, with the keys of `options` (a dict) in place.
+fn partition_settings(
+    options: Option<&Bound<'_, PyDict>>,
+    fit: rbf::FitSettings,
+) -> PyResult<partition::PartitionSettings> {
+    let mut s = partition::PartitionSettings {
+        fit,
+        ..Default::default()
+    };
+    let Some(options) = options else {
+        return Ok(s);
+    };
+    for (key, value) in options.iter() {
+        let key: String = key
+            .extract()
+            .map_err(|_| value_error("partition_options", "keys must be strings"))?;
+        let bad = |what: &str| {
+            value_error(
+                "partition_options",
+                format!("{key:?} must be {what}, got {value}"),
+            )
+        };
+        match key.as_str() {
+            "max_per_leaf" => s.max_per_leaf = value.extract().map_err(|_| bad("an int"))?,
+            "max_patch" => s.max_patch = value.extract().map_err(|_| bad("an int"))?,
+            "min_points" => s.min_points = value.extract().map_err(|_| bad("an int"))?,
+            "overlap" => s.overlap = value.extract().map_err(|_| bad("a float"))?,
+            _ => {
+                return Err(value_error(
+                    "partition_options",
+                    format!("unknown key {key:?}; use \"max_per_leaf\", \"max_patch\", \"min_points\" or \"overlap\""),
+                ))
+            }
+        }
+    }
+    Ok(s)
 }
 
 /// A variational implicit surface f(x) = Σ λ_j φ(‖x − c_j‖) + a + b·x fitted to constraints;
@@ -239,7 +275,7 @@ impl PyVariationalSurface {
     ///     zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None))]
+    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
@@ -252,6 +288,7 @@ impl PyVariationalSurface {
         memory_limit: Option<u64>,
         method: &str,
         progress: Option<&Bound<'_, PyAny>>,
+        partition_options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let m = parse_method(method)?;
         let p = self::points(points, "points")?;
@@ -275,6 +312,7 @@ impl PyVariationalSurface {
             m,
             count,
             s,
+            partition_options,
             |s| VariationalSurface::fit(&p, &n, &pl, s),
             |s| PartitionSurface::fit(&p, &n, &pl, s),
         )
@@ -302,7 +340,7 @@ impl PyVariationalSurface {
     /// ValueError
     ///     For out-of-range or repeated indices, unused vertices, and everything :meth:`fit` refuses.
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None))]
+    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_mesh(
         py: Python<'_>,
@@ -315,6 +353,7 @@ impl PyVariationalSurface {
         memory_limit: Option<u64>,
         method: &str,
         progress: Option<&Bound<'_, PyAny>>,
+        partition_options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let m = parse_method(method)?;
         let v = points(vertices, "vertices")?;
@@ -328,6 +367,7 @@ impl PyVariationalSurface {
             m,
             count,
             s,
+            partition_options,
             |s| VariationalSurface::from_mesh(&v, &f, &pl, s),
             |s| PartitionSurface::from_mesh(&v, &f, &pl, s),
         )
@@ -346,7 +386,7 @@ impl PyVariationalSurface {
     /// -------
     /// VariationalSurface
     #[staticmethod]
-    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None))]
+    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None))]
     fn interpolate(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
@@ -356,6 +396,7 @@ impl PyVariationalSurface {
         memory_limit: Option<u64>,
         method: &str,
         progress: Option<&Bound<'_, PyAny>>,
+        partition_options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let m = parse_method(method)?;
         let p = self::points(points, "points")?;
@@ -368,6 +409,7 @@ impl PyVariationalSurface {
             m,
             count,
             s,
+            partition_options,
             |s| VariationalSurface::interpolate(&p, &v, s),
             |s| PartitionSurface::interpolate(&p, &v, s),
         )
