@@ -36,8 +36,8 @@ impl Token {
     pub fn stopped(&self) -> bool {
         self.0.stop.load(Relaxed)
     }
-    /// Units of work the call reported done (field values and gradients computed, or
-    /// constraints fitted).
+    /// Units of work the call reported done (field values and gradients computed, constraints
+    /// fitted, or vertices a subdivision placed).
     pub fn done(&self) -> u64 {
         self.0.done.load(Relaxed)
     }

@@ -20,8 +20,10 @@
 //!   [`field::BlockField`] (a blob field) cannot rule out by bounds;
 //!   [`polygonize::block_tracking`]: tracking's walk over those blocks, for animation (the cells
 //!   cell-by-cell tracking reaches, a block of 7³ cells evaluated and flooded at once).
-//! - [`polygonize::subdivision`]: 1-to-4 subdivision of a control mesh with Newton projection,
-//!   the modified butterfly scheme and their blend (Jin et al.).
+//!
+//! Mesh refinement, beside the polygonizers: [`subdivision`] splits a control mesh 1-to-4 with
+//! Newton projection onto any field ([`subdivision::subdivide`]), or with the modified
+//! butterfly scheme, and blends the two (Jin et al.).
 //!
 //! The Python package `implicitmesh` wraps this crate (feature `python`, built by maturin); the
 //! core itself knows nothing of Python.
@@ -48,6 +50,7 @@ pub mod memory;
 pub mod mesh;
 pub mod polygonize;
 pub(crate) mod simd;
+pub mod subdivision;
 
 #[cfg(feature = "python")]
 mod python;

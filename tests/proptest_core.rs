@@ -9,7 +9,8 @@ use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::field::{constraints, Field};
 use implicitmesh::lattice::Lattice;
 use implicitmesh::mesh::Mesh;
-use implicitmesh::polygonize::{dense, octree, sparse, subdivision, Settings};
+use implicitmesh::polygonize::{dense, octree, sparse, Settings};
+use implicitmesh::subdivision;
 use proptest::prelude::*;
 
 /// Any float, the special values often.

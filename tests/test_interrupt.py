@@ -94,6 +94,23 @@ def test_ctrl_c_stops_subdivision():
         timer.cancel()
 
 
+def test_ctrl_c_stops_a_subdivision_reporting_progress(surface):
+    control = im.polygonize(surface, bounds=BOX, resolution=24)
+    counts: list[int] = []
+    timer = interrupt_after(1.5)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            # Level 5 has 2.5 million new vertices against 3,000 centres: seconds of Newton steps.
+            im.subdivide(control.vertices, control.faces, levels=5, surface=surface, progress=counts.append)
+    finally:
+        timer.cancel()
+    assert counts, "no progress was reported before the interrupt"
+    assert counts == sorted(counts)
+    assert counts[-1] < len(control.faces) * 4**5
+    levels = im.subdivide(control.vertices, control.faces, levels=1, surface=surface)
+    assert levels[1].to_trimesh().is_watertight
+
+
 @pytest.fixture(scope="module")
 def scan():
     """2·10⁴ points with normals on a sphere: a partition fit of a few seconds."""

@@ -245,6 +245,41 @@ def test_zero_levels_is_control_mesh(icosahedron):
     assert m.stats["projected"] == 0
 
 
+# --- Progress ---------------------------------------------------------------------------------------
+
+
+def test_progress_counts_the_vertices_placed(icosahedron):
+    v, f, s = icosahedron
+    counts: list[int] = []
+    levels = subdivide(v, f, levels=4, surface=s, progress=counts.append)
+    assert counts and counts == sorted(counts)
+    assert counts[-1] == len(levels[-1].vertices)
+    # The fallback's vertices count too, and a callable field reports once, at the end.
+    counts.clear()
+    sphere = implicitmesh.shapes.Sphere(radius=float(np.linalg.norm(v, axis=1).mean()))
+    levels = subdivide(v, f, levels=3, surface=sphere, max_steps=1, progress=counts.append)
+    assert levels[1].stats["fallbacks"] > 0
+    assert counts == [len(levels[-1].vertices)]
+    counts.clear()
+    levels = butterfly(v, f, levels=3, progress=counts.append)
+    assert counts and counts == sorted(counts) and counts[-1] == len(levels[-1].vertices)
+
+
+def test_progress_true_writes_a_line_or_a_bar(icosahedron, capsys):
+    from implicitmesh.subdivision import _vertex_total
+
+    v, f, s = icosahedron
+    levels = subdivide(v, f, levels=2, surface=s, progress=True)
+    assert _vertex_total(f, v, 2) == len(levels[-1].vertices)
+    butterfly(v, f, levels=2, progress=True)
+    err = capsys.readouterr().err
+    assert "subdivide" in err and "butterfly" in err
+    with pytest.raises(ValueError, match="progress"):
+        subdivide(v, f, levels=1, surface=s, progress="yes")
+    with pytest.raises(ValueError, match="progress"):
+        butterfly(v, f, levels=1, progress=1)
+
+
 # --- Any field: blobs, analytic shapes, Python callables -----------------------------------------
 
 

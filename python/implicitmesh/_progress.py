@@ -9,8 +9,9 @@ from typing import Any, Callable
 
 
 class Progress:
-    """A reporter for one call: call it with the count of field evaluations done so far, then
-    :meth:`close` it. ``total`` (optional) is the count expected at the end."""
+    """A reporter for one call: call it with the count of work done so far (in ``unit``: field
+    evaluations, or vertices for subdivision), then :meth:`close` it. ``total`` (optional) is the
+    count expected at the end."""
 
     def __init__(self, what: str, total: int | None = None, unit: str = "evaluations") -> None:
         self.what, self.total, self.unit, self.start = what, total, unit, time.perf_counter()

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _core
 from ._core import BlobField, VariationalSurface
+from ._progress import reporter
 from .mesh import Mesh
 
 __all__ = ["subdivide", "butterfly", "blend"]
@@ -34,6 +35,24 @@ def _check_levels(levels: Any) -> int:
     return levels
 
 
+def _vertex_total(faces: Any, vertices: Any, levels: int) -> int | None:
+    """Vertices of level ``levels`` (the count the progress reaches): level k + 1 adds one vertex
+    per edge of level k, whose edges are twice its own plus three per face. None when the mesh is
+    not an (F, 3) index array (the call then refuses it)."""
+    try:
+        f = np.asarray(faces)
+        n = len(vertices)
+        if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
+            return None
+    except (TypeError, ValueError):
+        return None
+    pairs = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    e, t = len(np.unique(pairs, axis=0)), len(f)
+    for _ in range(levels):
+        n, e, t = n + e, 2 * e + 3 * t, 4 * t
+    return n
+
+
 def subdivide(
     vertices: Any,
     faces: Any,
@@ -46,6 +65,7 @@ def subdivide(
     tolerance: float | None = None,
     max_steps: int | None = None,
     step: float | None = None,
+    progress: Any = None,
 ) -> list[Mesh]:
     """Subdivides a control mesh onto an implicit surface (Jin et al. 2003).
 
@@ -87,6 +107,15 @@ def subdivide(
     step : float, optional
         Callables only: the central-difference step for gradients (default 1e-6 × the largest
         side of the control mesh's bounding box).
+    progress : bool or callable, optional
+        ``True``: show the vertices placed so far, of the vertex count of the finest level, while
+        the call runs (a tqdm bar when tqdm is installed, else a line on standard error); a
+        callable is called with that count (an int) about every 50 ms from the calling thread,
+        and once at the end with the finest level's vertex count. A vertex counts once its
+        position is final: the control vertices once their normals are evaluated, a new vertex
+        once Newton (or the fallback) has placed it. With a callable as ``surface`` the work runs
+        on the calling thread, and the count is reported once, at the end. Default None (no
+        report).
 
     Returns
     -------
@@ -107,8 +136,11 @@ def subdivide(
         oriented faces, ``levels`` outside [0, 8] or too large for memory, a bad ``tolerance``,
         ``max_steps`` or ``step``, a ``surface`` that is not a field, ``d``/``w``/``kernel``
         given with ``surface``, a callable returning the wrong shape or NaN, and everything
-        :meth:`VariationalSurface.from_mesh` refuses. An exception raised by the callable
-        propagates as it is.
+        :meth:`VariationalSurface.from_mesh` refuses, and a ``progress`` that is neither a bool
+        nor callable. An exception raised by the callable (or by ``progress``) propagates as it
+        is.
+    KeyboardInterrupt
+        On Ctrl-C (or Jupyter's interrupt) while the call runs: the work stops at its next batch.
     """
     levels = _check_levels(levels)
     if max_steps is not None:
@@ -133,14 +165,17 @@ def subdivide(
             )
         if step is not None and isinstance(surface, (VariationalSurface, BlobField)):
             raise ValueError("step: applies to a callable surface only (this field has exact gradients)")
+    report, end = reporter(progress, "subdivide", _vertex_total(faces, vertices, levels) if progress is True else None, "vertices")
     try:
-        out = _core.subdivide(surface, vertices, faces, levels, tolerance=tolerance, max_steps=max_steps, step=step)
+        out = _core.subdivide(surface, vertices, faces, levels, tolerance=tolerance, max_steps=max_steps, step=step, progress=report)
     except ValueError as e:
         # The core names a callable's bad output "field"; here that argument is `surface`.
         msg = str(e)
         if msg.startswith("field:"):
             raise ValueError("surface:" + msg[len("field:") :]) from None
         raise
+    finally:
+        end()
     meshes = []
     for v, f, n, stats in out:
         stats["triangles"] = len(f)
@@ -150,7 +185,7 @@ def subdivide(
     return meshes
 
 
-def butterfly(vertices: Any, faces: Any, *, levels: int = 2, w: float = 0.0) -> list[Mesh]:
+def butterfly(vertices: Any, faces: Any, *, levels: int = 2, w: float = 0.0, progress: Any = None) -> list[Mesh]:
     """Modified butterfly subdivision (Zorin, Schröder & Sweldens 1996) of a triangle mesh.
 
     Interpolating: old vertices stay; each edge gets one new vertex from the 10-point stencil
@@ -173,6 +208,9 @@ def butterfly(vertices: Any, faces: Any, *, levels: int = 2, w: float = 0.0) -> 
         0 to 8 (default 2).
     w : float
         Tension (default 0: the classic butterfly; 1/16 is Dyn et al.'s choice).
+    progress : bool or callable, optional
+        As for :func:`subdivide`: ``True`` shows the vertices placed so far, a callable gets
+        that count; it ends at the finest level's vertex count. Default None (no report).
 
     Returns
     -------
@@ -182,12 +220,19 @@ def butterfly(vertices: Any, faces: Any, *, levels: int = 2, w: float = 0.0) -> 
     Raises
     ------
     ValueError
-        For bad shapes or indices, non-manifold meshes, ``levels`` outside [0, 8], non-finite w.
+        For bad shapes or indices, non-manifold meshes, ``levels`` outside [0, 8], non-finite w,
+        a ``progress`` that is neither a bool nor callable.
+    KeyboardInterrupt
+        On Ctrl-C (or Jupyter's interrupt) while the call runs: the work stops at its next level.
     """
     levels = _check_levels(levels)
     if isinstance(w, bool) or not isinstance(w, numbers.Real) or not np.isfinite(w):
         raise ValueError(f"w: must be a finite number, got {w!r}")
-    out = _core.butterfly(vertices, faces, levels, float(w))
+    report, end = reporter(progress, "butterfly", _vertex_total(faces, vertices, levels) if progress is True else None, "vertices")
+    try:
+        out = _core.butterfly(vertices, faces, levels, float(w), progress=report)
+    finally:
+        end()
     return [Mesh(v, f, n, {"level": k, "triangles": len(f), "vertices": len(v), "method": "butterfly"}) for k, (v, f, n) in enumerate(out)]
 
 

@@ -8,6 +8,7 @@
 pub mod analytic;
 pub mod blob;
 pub mod constraints;
+pub mod differences;
 pub mod grid;
 pub mod kernel;
 pub mod partition;
@@ -18,6 +19,8 @@ pub mod voxels;
 use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;
+
+pub use differences::Differences;
 
 /// Points per rayon task in the default batched implementations.
 pub const PAR_CHUNK: usize = 512;
@@ -63,6 +66,19 @@ pub trait Field: Sync {
                     *oi = self.gradient(*pi);
                 }
             });
+    }
+
+    /// Values and gradients at many points. The default calls [`Field::values`], then
+    /// [`Field::gradients`]; fields that compute both at once override it.
+    fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
+        self.values(points, values);
+        self.gradients(points, gradients);
+    }
+
+    /// Field values that one point of [`Field::values_gradients`] costs, as evaluation counts
+    /// report them: 1 by default, 7 for central differences of values ([`Differences`]).
+    fn values_per_value_gradient(&self) -> u64 {
+        1
     }
 
     /// Values at every lattice point of the z-planes `z0..z1`, x fastest, then y, then z; the
@@ -176,6 +192,12 @@ impl<F: Field + ?Sized> Field for &F {
     }
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         (**self).gradients(points, out)
+    }
+    fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
+        (**self).values_gradients(points, values, gradients)
+    }
+    fn values_per_value_gradient(&self) -> u64 {
+        (**self).values_per_value_gradient()
     }
     fn lattice_values(
         &self,

@@ -315,7 +315,7 @@ impl VariationalSurface {
 
     /// Values, and gradients when `gradients` is given, at points in the caller's coordinates,
     /// on the calling thread (for callers that split the work themselves). The bits are those of
-    /// [`Field::values`] and [`VariationalSurface::values_gradients`].
+    /// [`Field::values`] and [`Field::values_gradients`].
     pub(crate) fn eval_on_this_thread(
         &self,
         points: &[DVec3],
@@ -341,12 +341,6 @@ impl VariationalSurface {
                 }
             }
         }
-    }
-
-    /// Values and gradients at many points (gradients in the caller's coordinates).
-    pub fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
-        assert_eq!(points.len(), values.len());
-        self.sums_gradients(points, Some(values), gradients);
     }
 
     /// Gradients at many points, and the values too when `values` is given (the gradients are
@@ -512,6 +506,13 @@ impl Field for VariationalSurface {
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         self.sums_gradients(points, None, out);
+    }
+
+    /// Values and gradients from one pass of the kernel sums (gradients in the caller's
+    /// coordinates, the same bits as [`Field::gradients`]).
+    fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
+        assert_eq!(points.len(), values.len());
+        self.sums_gradients(points, Some(values), gradients);
     }
 }
 

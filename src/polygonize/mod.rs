@@ -10,7 +10,6 @@ pub mod cell;
 pub mod dense;
 pub mod octree;
 pub mod sparse;
-pub mod subdivision;
 pub mod table;
 pub mod tracking;
 

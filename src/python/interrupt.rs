@@ -14,7 +14,7 @@ use std::time::Duration;
 const POLL: Duration = Duration::from_millis(50);
 
 /// Runs `work` so that Ctrl-C stops it; `progress`, when given, is called with the count of
-/// field evaluations done so far at every poll. With `on_caller` (a Python callable as the
+/// work done so far ([`Token::done`]) at every poll. With `on_caller` (a Python callable as the
 /// field, which users may expect on their own thread), the work runs on the calling thread
 /// instead: Python raises KeyboardInterrupt inside the callable, which stops the work as any
 /// exception of the callable does, and `progress` is called once, at the end.

@@ -1,25 +1,28 @@
-//! `_core.subdivide` and `_core.butterfly`: argument checks, the GIL released around the core's
-//! subdivision, one (vertices, faces, normals[, stats]) tuple per level out. The field may be any
-//! the binding accepts (see [`FieldArg`]): a callable gets difference gradients.
+//! `_core.subdivide` and `_core.butterfly`: arguments converted (their ranges are the core's to
+//! check), the GIL released around the core's subdivision, one (vertices, faces, normals[,
+//! stats]) tuple per level out. The field may be any the binding accepts (see [`FieldArg`]): a
+//! callable is wrapped in [`Differences`] for its gradients.
 
 use super::convert::{points, points_to_py, triangles, triangles_to_py};
 use super::errors::value_error;
 use super::field::FieldArg;
 use super::interrupt::run;
-use super::variational::Fitted;
+use crate::field::Differences;
 use crate::mesh::Mesh;
-use crate::polygonize::subdivision::{self, Settings, SubdivisionStats, MAX_LEVELS};
+use crate::subdivision::{self, LevelStats, SubdivisionSettings};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 
-fn parse_levels(levels: i64) -> PyResult<usize> {
-    if levels < 0 || levels > MAX_LEVELS as i64 {
-        return Err(value_error(
-            "levels",
-            format!("must be between 0 and {MAX_LEVELS}, got {levels}"),
-        ));
-    }
-    Ok(levels as usize)
+/// `value` as an unsigned count of type `T`; the error names the argument.
+fn unsigned<T: TryFrom<i64>>(name: &str, value: i64) -> PyResult<T> {
+    T::try_from(value).map_err(|_| {
+        let reason = if value < 0 {
+            "must not be negative"
+        } else {
+            "is too large"
+        };
+        value_error(name, format!("{reason}, got {value}"))
+    })
 }
 
 fn control_mesh(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Mesh> {
@@ -30,7 +33,7 @@ fn control_mesh(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResu
     })
 }
 
-fn stats_to_py<'py>(py: Python<'py>, s: &SubdivisionStats) -> PyResult<Bound<'py, PyDict>> {
+fn stats_to_py<'py>(py: Python<'py>, s: &LevelStats) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("level", s.level)?;
     d.set_item("projected", s.projected)?;
@@ -49,7 +52,7 @@ fn stats_to_py<'py>(py: Python<'py>, s: &SubdivisionStats) -> PyResult<Bound<'py
 fn mesh_tuple<'py>(
     py: Python<'py>,
     m: Mesh,
-    stats: Option<&SubdivisionStats>,
+    stats: Option<&LevelStats>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let f = triangles_to_py(py, &m.triangles)?;
     let v = points_to_py(py, m.vertices)?;
@@ -63,9 +66,9 @@ fn mesh_tuple<'py>(
 /// Subdivides a control mesh onto the zero set of a field (a VariationalSurface, a BlobField or
 /// a callable, whose gradients are then taken by central differences with step ``step``, default
 /// 1e-6 × the control mesh's largest side); one tuple ``(vertices, faces, normals, stats)`` per
-/// level 0..levels.
+/// level 0..levels. ``progress``, when given, is called with the count of vertices placed.
 #[pyfunction]
-#[pyo3(signature = (field, vertices, faces, levels, *, tolerance=None, max_steps=None, step=None))]
+#[pyo3(signature = (field, vertices, faces, levels, *, tolerance=None, max_steps=None, step=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn subdivide<'py>(
     py: Python<'py>,
@@ -76,56 +79,37 @@ pub fn subdivide<'py>(
     tolerance: Option<f64>,
     max_steps: Option<i64>,
     step: Option<f64>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
     let field = FieldArg::extract(field)?;
-    let levels = parse_levels(levels)?;
+    let levels = unsigned("levels", levels)?;
     let control = control_mesh(vertices, faces)?;
-    let mut settings = Settings::default();
-    if let Some(t) = tolerance {
-        settings.tolerance = t;
+    let defaults = SubdivisionSettings::default();
+    let settings = SubdivisionSettings {
+        tolerance: tolerance.unwrap_or(defaults.tolerance),
+        max_iterations: match max_steps {
+            Some(m) => unsigned("max_steps", m)?,
+            None => defaults.max_iterations,
+        },
+        ..defaults
+    };
+    if step.is_some() && !field.is_callable() {
+        return Err(value_error(
+            "step",
+            "applies to callables only (the other fields have exact gradients)",
+        ));
     }
-    if let Some(m) = max_steps {
-        if !(1..=10_000).contains(&m) {
-            return Err(value_error(
-                "max_steps",
-                format!("must be between 1 and 10000, got {m}"),
-            ));
-        }
-        settings.max_iterations = m as u32;
-    }
-    if let Some(h) = step {
-        if !(h.is_finite() && h > 0.0) {
-            return Err(value_error(
-                "step",
-                format!("must be finite and positive, got {h}"),
-            ));
-        }
-        if !field.is_callable() {
-            return Err(value_error(
-                "step",
-                "applies to callables only (the other fields have exact gradients)",
-            ));
-        }
-    }
-    let result = match &field {
-        FieldArg::Variational(Fitted::Global(s)) => {
-            let s = s.clone();
-            run(py, None, false, move || {
-                subdivision::subdivide_surface(&s, &control, levels, &settings)
-            })
-        }
-        FieldArg::Variational(Fitted::Partition(_)) | FieldArg::Blob(_) => {
-            let f = field.as_field();
-            run(py, None, false, || {
-                subdivision::subdivide(f, &control, levels, &settings)
-            })
-        }
-        FieldArg::Callable(_) => {
-            let f = field.as_field();
-            run(py, None, true, || {
-                subdivision::subdivide_by_differences(f, &control, levels, &settings, step)
-            })
-        }
+    let f = field.as_field();
+    let result = if field.is_callable() {
+        let step = step.unwrap_or_else(|| subdivision::difference_step(&control));
+        let values_only = Differences::new(f, step)?;
+        run(py, progress, true, || {
+            subdivision::subdivide(&values_only, &control, levels, &settings)
+        })
+    } else {
+        run(py, progress, false, || {
+            subdivision::subdivide(f, &control, levels, &settings)
+        })
     };
     if let Some(e) = field.take_error() {
         return Err(e);
@@ -138,19 +122,20 @@ pub fn subdivide<'py>(
 }
 
 /// Modified butterfly subdivision with tension ``w``; one tuple ``(vertices, faces, normals)``
-/// per level 0..levels.
+/// per level 0..levels. ``progress``, when given, is called with the count of vertices placed.
 #[pyfunction]
-#[pyo3(signature = (vertices, faces, levels, w))]
+#[pyo3(signature = (vertices, faces, levels, w, *, progress=None))]
 pub fn butterfly<'py>(
     py: Python<'py>,
     vertices: &Bound<'py, PyAny>,
     faces: &Bound<'py, PyAny>,
     levels: i64,
     w: f64,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let levels = parse_levels(levels)?;
+    let levels = unsigned("levels", levels)?;
     let control = control_mesh(vertices, faces)?;
-    let result = run(py, None, false, move || {
+    let result = run(py, progress, false, move || {
         subdivision::butterfly(&control, levels, w)
     })?;
     let out = PyList::empty(py);
