@@ -14,6 +14,8 @@
 //! indices: the marks of a brick fill five cache lines, which stay hot while its cells are
 //! visited, and the eight corners of a cell are claimed with two word operations.
 
+use super::bits::for_each_set_bit;
+
 /// Lattice points per brick side.
 pub const SIDE: u32 = 8;
 const LOCAL: usize = (SIDE * SIDE * SIDE) as usize;
@@ -187,15 +189,14 @@ impl Bricks {
             let (w, shift) = (l >> 6, l & 63);
             for (dz, word) in [(0, w), (1, w + 1)] {
                 let cell = 0x303u64 << shift;
-                let mut new = cell & !bits[word];
+                let new = cell & !bits[word];
                 bits[word] |= cell;
-                while new != 0 {
-                    let bit = new.trailing_zeros() as usize;
-                    new &= new - 1;
+                for_each_set_bit(new, |bit| {
+                    let bit = bit as usize;
                     let (dx, dy) = ((bit - shift) & 1, (bit - shift) >> 3);
                     let k = dx | dy << 1 | dz << 2;
                     claimed(corner(o, k), Slot::new(b, l + CORNER_OFFSETS[k]));
-                }
+                });
             }
         } else {
             for k in 0..8 {

@@ -26,6 +26,13 @@
 //!
 //! The output does not depend on the number of threads.
 //!
+//! Tracking block by block ([`super::tracking`]) walks the same blocks and makes its mesh the
+//! same way, through a small crate-private API: [`start_blocks`] (memory check, case table,
+//! the field's block data), [`evaluate_block`] (an [`Active`] block with its vertices in a
+//! [`BlockOutput`]), [`Active::restricted`] (a block reached in part),
+//! [`triangulate_blocks`] and [`finish_normals`] (the mesh), [`blocks_not_ruled_out`] and
+//! [`block_signs`] (the search for components no seed reaches), and [`bounds_error`].
+//!
 //! ```
 //! use glam::DVec3;
 //! use implicitmesh::field::blob::{BlobField, PerPrimitive, BlobSettings};
@@ -397,17 +404,13 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-    let grid = block_grid(lattice);
-    check_memory(
-        grid.len() as u64 * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
-        settings.memory_limit,
-    )?;
+    let start = start_blocks(field, lattice, settings)?;
     let mut ws = WORKSPACES
         .lock()
         .ok()
         .and_then(|mut w| w.pop())
         .unwrap_or_default();
-    let r = run(field, lattice, settings, &grid, &mut ws);
+    let r = run(field, lattice, settings, start, &mut ws);
     if ws.bytes() <= KEEP_BYTES {
         if let Ok(mut pool) = WORKSPACES.lock() {
             if pool.len() < 2 {
@@ -418,15 +421,29 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     r
 }
 
-fn run<F: BlockField + ?Sized, I: TriangleIndex>(
+/// What a polygonization over the blocks of a lattice starts from ([`start_blocks`]).
+pub(crate) struct BlockStart<B> {
+    pub(crate) grid: BlockGrid,
+    pub(crate) cases: &'static BlockCases,
+    /// The field's data for its blocks ([`BlockField::blocks`]).
+    pub(crate) blocks: B,
+    /// The lattice's points, and the time making `blocks` took.
+    pub(crate) stats: Stats,
+}
+
+/// Starts a polygonization of `field` over the blocks of `lattice`: refuses a lattice whose
+/// output could exceed `settings.memory_limit`, then makes the field's data for its blocks.
+pub(crate) fn start_blocks<F: BlockField + ?Sized>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
-    grid: &BlockGrid,
-    ws: &mut Workspace,
-) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-    let table = CaseTable::get(settings.ambiguity);
-    let cases = BlockCases::get(table);
+) -> Result<BlockStart<F::Blocks>> {
+    let grid = block_grid(lattice);
+    check_memory(
+        grid.len() as u64 * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
+        settings.memory_limit,
+    )?;
+    let cases = BlockCases::get(CaseTable::get(settings.ambiguity));
     let mut stats = Stats {
         lattice_points: lattice.num_points(),
         ..Default::default()
@@ -435,6 +452,28 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     let t = Instant::now();
     let blocks = field.blocks(lattice, grid.dims);
     stats.add_time("blocks", t);
+    Ok(BlockStart {
+        grid,
+        cases,
+        blocks,
+        stats,
+    })
+}
+
+fn run<F: BlockField + ?Sized, I: TriangleIndex>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+    start: BlockStart<F::Blocks>,
+    ws: &mut Workspace,
+) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
+    let BlockStart {
+        grid,
+        cases,
+        blocks,
+        mut stats,
+    } = start;
+    let grid = &grid;
 
     // Pass 1: values, signs, owned vertices (and normals) per block.
     crate::cancel::check()?;

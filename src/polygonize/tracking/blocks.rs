@@ -38,12 +38,10 @@ use crate::lattice::Lattice;
 use crate::mesh::Mesh;
 use crate::polygonize::bits::{crossed_layer_cells, mixed, plane_mask, ALL_CELLS, COLUMN_0, ROW_0};
 use crate::polygonize::sparse::{
-    block_grid, blocks_not_ruled_out, bounds_error, evaluate_block, finish_normals,
-    triangulate_blocks, Active, BlockCases, BlockGrid, BlockOutput, TriangleIndex,
+    block_grid, blocks_not_ruled_out, bounds_error, evaluate_block, finish_normals, start_blocks,
+    triangulate_blocks, Active, BlockCases, BlockGrid, BlockOutput, BlockStart, TriangleIndex,
 };
-use crate::polygonize::{
-    check_memory, estimate_triangles, gather, CaseTable, Stats, BYTES_PER_TRIANGLE,
-};
+use crate::polygonize::{gather, Stats};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -499,24 +497,16 @@ impl BlockTracking {
         lattice: &Lattice,
         settings: &TrackingSettings,
     ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-        let grid = block_grid(lattice);
-        let common = &settings.common;
-        check_memory(
-            grid.len() as u64 * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
-            common.memory_limit,
-        )?;
-        let cases = BlockCases::get(CaseTable::get(common.ambiguity));
-        let mut stats = Stats {
-            lattice_points: lattice.num_points(),
-            ..Default::default()
-        };
-        crate::cancel::check()?;
-        let t = Instant::now();
-        let blocks = field.blocks(lattice, grid.dims);
-        stats.add_time("blocks", t);
+        let BlockStart {
+            cases,
+            blocks,
+            mut stats,
+            ..
+        } = start_blocks(field, lattice, &settings.common)?;
         self.walk((field, &blocks), lattice, settings, cases, &mut stats)?;
         crate::cancel::check()?;
-        let (mesh, triangles) = self.assemble(lattice, cases, common.normals, &mut stats)?;
+        let normals = settings.common.normals;
+        let (mesh, triangles) = self.assemble(lattice, cases, normals, &mut stats)?;
         Ok((mesh, triangles, stats))
     }
 
