@@ -4,7 +4,7 @@
 use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
 use implicitmesh::lattice::Lattice;
-use implicitmesh::polygonize::tracking::Components;
+use implicitmesh::polygonize::tracking::{Components, TrackingSettings};
 use implicitmesh::polygonize::{dense, sparse, tracking, Settings};
 use std::time::Instant;
 
@@ -48,6 +48,13 @@ fn main() {
     let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [res; 3]).unwrap();
     let settings = Settings::default();
     let mut tess = tracking::Tessellator::new();
+    // Every component, the walks from the centres going up to the lattice's side.
+    let tracking_settings = TrackingSettings {
+        starts: centers.clone(),
+        max_walk: res,
+        components: Components::All,
+        ..Default::default()
+    };
     let mut times = vec![];
     // Fastest time of each phase over the runs.
     let mut phases: Vec<(&'static str, f64)> = Vec::new();
@@ -56,21 +63,13 @@ fn main() {
         let (tris, stats) = match method {
             "tracking" => {
                 let (m, s) = tess
-                    .polygonize_all(&field, &lattice, &centers, res, &[], &settings)
+                    .polygonize_bounded(&field, &lattice, &tracking_settings)
                     .unwrap();
                 (m.triangles.len(), s)
             }
             "blocks" => {
                 let (_, t, s) = tess
-                    .polygonize_blocks::<_, u32>(
-                        &field,
-                        &lattice,
-                        &centers,
-                        res,
-                        &[],
-                        &settings,
-                        Components::All,
-                    )
+                    .polygonize_blocks::<_, u32>(&field, &lattice, &tracking_settings)
                     .unwrap();
                 (t.len(), s)
             }

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import _thread
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -81,6 +82,38 @@ def test_an_exception_from_the_progress_callback_stops_the_call(surface):
 
     with pytest.raises(RuntimeError, match="stop here"):
         im.polygonize(surface, bounds=BOX, resolution=600, progress=boom)
+
+
+@pytest.fixture(scope="module")
+def many_blobs():
+    """2·10⁴ small blobs filling the box: at 800³ cells, tens of seconds of tracking."""
+    rng = np.random.default_rng(1)
+    return im.BlobField(rng.uniform(-0.9, 0.9, (20000, 3)), 0.03)
+
+
+@pytest.mark.parametrize("call", ["polygonize", "blocks", "cells"])
+def test_ctrl_c_stops_tracking_on_blobs(many_blobs, call):
+    # polygonize(method="tracking") and the Tessellator cell by cell and block by block (whose
+    # waves of blocks and bounds of blocks are checked batch by batch): the call ends with
+    # KeyboardInterrupt soon after the interrupt, and the next call works.
+    counts: list[int] = []
+    run = {
+        "polygonize": lambda **kw: im.polygonize(many_blobs, method="tracking", **kw),
+        "blocks": lambda **kw: im.Tessellator().polygonize(many_blobs, **kw),
+        "cells": lambda **kw: im.Tessellator().polygonize(many_blobs, blocks=False, **kw),
+    }[call]
+    timer = interrupt_after(1.5)
+    start = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run(bounds=BOX, resolution=800, progress=counts.append)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 6.0
+    if call == "blocks":
+        assert counts, "no progress was reported before the interrupt"
+    mesh = run(bounds=BOX, resolution=16)
+    assert len(mesh.faces) > 0
 
 
 def test_ctrl_c_stops_subdivision():

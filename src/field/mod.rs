@@ -478,6 +478,30 @@ pub(crate) mod testing {
         .unwrap()
     }
 
+    /// Random blob clusters to polygonize, as (blobs, radius, cells per axis over [-1, 1]³,
+    /// seed): from one blob at 7³ cells to 500 small ones, on lattices cut in partial blocks.
+    pub const BLOB_CASES: [(usize, f64, u32, u64); 6] = [
+        (200, 0.25, 64, 1),
+        (60, 0.12, 37, 2),
+        (500, 0.08, 50, 3),
+        (5, 0.6, 22, 4),
+        (1, 0.3, 7, 5),
+        (30, 0.2, 8, 6),
+    ];
+
+    /// Calls `f` with the field ([`random_blobs`]) and the lattice (cubic over [-1, 1]³) of
+    /// each of `cases` (as in [`BLOB_CASES`]).
+    pub fn for_each_blob_case(
+        cases: &[(usize, f64, u32, u64)],
+        mut f: impl FnMut(super::blob::BlobField, &crate::lattice::Lattice),
+    ) {
+        for &(n, r, res, seed) in cases {
+            let lo = DVec3::splat(-1.0);
+            let l = crate::lattice::Lattice::cubic(lo, -lo, res).unwrap();
+            f(random_blobs(n, r, seed), &l);
+        }
+    }
+
     /// Deterministic pseudo-random points in a box (xorshift), for tests.
     pub fn random_points(n: usize, lo: f64, hi: f64, seed: u64) -> Vec<DVec3> {
         let mut s = seed.max(1);

@@ -6,15 +6,69 @@
 //! bytes, when it is handed out again), bricks are recycled from call to call, and memory grows
 //! with the number of bricks the surface touches, not with the lattice.
 //!
+//! The bricks of the tracking caches and the blocks of [`super::sparse`] lie on the lattice
+//! alike: a [`Grid`] numbers them (x fastest) and locates a lattice point or cell in them.
+//!
 //! Within a brick, the marks (value claimed, cell queued, edge vertex made) are bit sets, one
 //! 64-bit word per z-plane of the brick (bit `x + 8y`), kept apart from the values and vertex
 //! indices: the marks of a brick fill five cache lines, which stay hot while its cells are
 //! visited, and the eight corners of a cell are claimed with two word operations.
 
+use super::bits::for_each_set_bit;
+
 /// Lattice points per brick side.
 pub const SIDE: u32 = 8;
 const LOCAL: usize = (SIDE * SIDE * SIDE) as usize;
 const NONE: u32 = u32::MAX;
+
+/// The bricks (or blocks) of a lattice, `SIDE` lattice steps per axis each, numbered x fastest:
+/// a brick's index and position, and the brick and local coordinates of a lattice point or
+/// cell.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Grid<const SIDE: u32> {
+    /// Bricks per axis.
+    pub(crate) dims: [u32; 3],
+}
+
+impl<const SIDE: u32> Grid<SIDE> {
+    /// The bricks covering `extent` lattice points (or cells) per axis.
+    pub(crate) fn new(extent: [u32; 3]) -> Self {
+        Grid {
+            dims: extent.map(|e| e.div_ceil(SIDE)),
+        }
+    }
+
+    /// Number of bricks.
+    pub(crate) fn len(&self) -> usize {
+        self.dims.iter().map(|&d| d as usize).product()
+    }
+
+    /// Index of the brick at position `b`.
+    #[inline(always)]
+    pub(crate) fn index(&self, b: [u32; 3]) -> usize {
+        let d = self.dims.map(|v| v as usize);
+        b[0] as usize + d[0] * (b[1] as usize + d[1] * b[2] as usize)
+    }
+
+    /// Position of the brick with index `i`.
+    #[inline(always)]
+    pub(crate) fn position(&self, i: u32) -> [u32; 3] {
+        let d = self.dims;
+        [i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1])]
+    }
+
+    /// The lattice coordinates of the lower corner of the brick at position `b`.
+    #[inline(always)]
+    pub(crate) fn origin(&self, b: [u32; 3]) -> [u32; 3] {
+        b.map(|v| v * SIDE)
+    }
+
+    /// Index of the brick holding `p`, and `p`'s coordinates within it.
+    #[inline(always)]
+    pub(crate) fn locate(&self, p: [u32; 3]) -> (usize, [u32; 3]) {
+        (self.index(p.map(|v| v / SIDE)), p.map(|v| v % SIDE))
+    }
+}
 
 /// One brick of 8³ lattice points.
 #[derive(Clone)]
@@ -66,8 +120,8 @@ const CORNER_OFFSETS: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
 #[derive(Default)]
 pub struct Bricks {
     stamp: u32,
-    /// Bricks per axis for the current lattice.
-    dims: [u32; 3],
+    /// The bricks of the current lattice.
+    grid: Grid<SIDE>,
     /// Brick position → (stamp, pool index).
     table: Vec<(u32, u32)>,
     pool: Vec<Box<Brick>>,
@@ -84,12 +138,11 @@ impl Bricks {
             self.table.iter_mut().for_each(|e| e.0 = 0);
             self.stamp = 1;
         }
-        let dims = points.map(|p| p.div_ceil(SIDE));
-        if dims != self.dims {
-            self.dims = dims;
-            let n = dims.iter().map(|&d| d as usize).product();
+        let grid = Grid::new(points);
+        if grid != self.grid {
+            self.grid = grid;
             self.table.clear();
-            self.table.resize(n, (0, NONE));
+            self.table.resize(grid.len(), (0, NONE));
         }
         self.used = 0;
     }
@@ -110,11 +163,8 @@ impl Bricks {
     /// in this call) and `p`'s index within it.
     #[inline]
     fn brick(&mut self, p: [u32; 3]) -> (usize, usize) {
-        let b = [p[0] / SIDE, p[1] / SIDE, p[2] / SIDE];
-        let t = b[0] as usize
-            + self.dims[0] as usize * (b[1] as usize + self.dims[1] as usize * b[2] as usize);
-        let l = (p[0] % SIDE) as usize
-            + SIDE as usize * ((p[1] % SIDE) as usize + SIDE as usize * (p[2] % SIDE) as usize);
+        let (t, l) = self.grid.locate(p);
+        let l = (l[0] + SIDE * (l[1] + SIDE * l[2])) as usize;
         let e = &mut self.table[t];
         if e.0 != self.stamp {
             if self.used == self.pool.len() {
@@ -139,15 +189,14 @@ impl Bricks {
             let (w, shift) = (l >> 6, l & 63);
             for (dz, word) in [(0, w), (1, w + 1)] {
                 let cell = 0x303u64 << shift;
-                let mut new = cell & !bits[word];
+                let new = cell & !bits[word];
                 bits[word] |= cell;
-                while new != 0 {
-                    let bit = new.trailing_zeros() as usize;
-                    new &= new - 1;
+                for_each_set_bit(new, |bit| {
+                    let bit = bit as usize;
                     let (dx, dy) = ((bit - shift) & 1, (bit - shift) >> 3);
                     let k = dx | dy << 1 | dz << 2;
                     claimed(corner(o, k), Slot::new(b, l + CORNER_OFFSETS[k]));
-                }
+                });
             }
         } else {
             for k in 0..8 {

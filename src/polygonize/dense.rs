@@ -16,6 +16,7 @@
 //! triangle order included) does not depend on the number of threads. The working memory grows
 //! with one group of planes, not with the lattice.
 
+use super::bits::{for_each_set_bit, sign_word};
 use super::{
     check_memory, compute_normals, estimate_triangles, gather, CaseTable, Settings, Stats,
 };
@@ -93,10 +94,7 @@ impl Bits {
 fn row_bits(row: &[f64], out: &mut [u64]) -> u8 {
     let mut inside = 0u32;
     for (o, chunk) in out.iter_mut().zip(row.chunks(64)) {
-        let mut w = 0u64;
-        for (b, v) in chunk.iter().enumerate() {
-            w |= ((*v < 0.0) as u64) << b;
-        }
+        let w = sign_word(chunk);
         inside += w.count_ones();
         *o = w;
     }
@@ -119,11 +117,7 @@ fn may_cross(a: u8, b: u8) -> bool {
 #[inline(always)]
 fn for_each_bit(words: usize, mut mask: impl FnMut(usize) -> u64, mut f: impl FnMut(usize)) {
     for w in 0..words {
-        let mut m = mask(w);
-        while m != 0 {
-            f(w * 64 + m.trailing_zeros() as usize);
-            m &= m - 1;
-        }
+        for_each_set_bit(mask(w), |b| f(w * 64 + b as usize));
     }
 }
 

@@ -4,7 +4,7 @@
 //! ([`cell`]), so they produce the same triangles wherever they find the surface: the dense
 //! polygonizer is the reference the others are tested against.
 
-pub mod block_tracking;
+pub(crate) mod bits;
 pub mod bricks;
 pub mod cell;
 pub mod dense;

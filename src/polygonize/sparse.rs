@@ -26,6 +26,13 @@
 //!
 //! The output does not depend on the number of threads.
 //!
+//! Tracking block by block ([`super::tracking`]) walks the same blocks and makes its mesh the
+//! same way, through a small crate-private API: [`start_blocks`] (memory check, case table,
+//! the field's block data), [`evaluate_block`] (an [`Active`] block with its vertices in a
+//! [`BlockOutput`]), [`Active::restricted`] (a block reached in part),
+//! [`triangulate_blocks`] and [`finish_normals`] (the mesh), [`blocks_not_ruled_out`] and
+//! [`block_signs`] (the search for components no seed reaches), and [`bounds_error`].
+//!
 //! ```
 //! use glam::DVec3;
 //! use implicitmesh::field::blob::{BlobField, PerPrimitive, BlobSettings};
@@ -49,6 +56,11 @@
 //! assert!(stats.evaluations < stats.lattice_points / 2);
 //! ```
 
+use super::bits::{
+    crossed_cells, crossed_edges, for_each_set_bit, plane_mask, plane_words, ALL_CELLS, COLUMN_0,
+    ROW_0,
+};
+use super::bricks::Grid;
 use super::{
     check_memory, estimate_triangles, fill_vanishing_normals, gather, normalize, CaseTable,
     Settings, Stats, BYTES_PER_TRIANGLE,
@@ -62,39 +74,84 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// Cells per block side.
-pub(super) const STEP: u32 = BLOCK_POINTS as u32 - 1;
+const STEP: u32 = BLOCK_POINTS as u32 - 1;
 /// Blocks per task of the first pass (most blocks are skipped after a few bounds).
 const BLOCKS_PER_TASK: usize = 64;
 /// Evaluated blocks per task of the second pass.
 const ACTIVE_PER_TASK: usize = 16;
 /// No evaluated block here.
-pub(super) const NONE: u32 = u32::MAX;
+const NONE: u32 = u32::MAX;
 
-/// An evaluated block: what the second pass needs of it.
+/// The blocks of a lattice: 7³ cells each, numbered x fastest.
+pub(crate) type BlockGrid = Grid<STEP>;
+
+/// The blocks of `lattice`.
+pub(crate) fn block_grid(lattice: &Lattice) -> BlockGrid {
+    Grid::new(lattice.cells)
+}
+
+/// An evaluated block with points of both signs ([`evaluate_block`]): what triangulating it
+/// needs.
 #[derive(Clone, Copy)]
-pub(super) struct Active {
-    pub(super) block: [u32; 3],
+pub(crate) struct Active {
+    pub(crate) block: [u32; 3],
     /// Points per axis (2..=8).
-    pub(super) n: [u8; 3],
+    pub(crate) n: [u8; 3],
     /// Whether the block is the last along each axis (it then owns its upper faces).
-    pub(super) last: [bool; 3],
+    pub(crate) last: [bool; 3],
     /// Signs per z-plane: bit `i + 8j` of word `k` set when point (i, j, k) is inside.
-    pub(super) signs: [u64; 8],
+    pub(crate) signs: [u64; 8],
     /// Crossed edges the block owns, per axis and z-plane of their lower end (word `8a + k`).
-    pub(super) edges: [u64; 24],
+    edges: [u64; 24],
     /// Vertices of the block before word `w` of `edges`.
-    pub(super) before: [u16; 24],
-    /// Index of the block's first vertex (global after the first pass's prefix sum).
-    pub(super) base: u32,
+    before: [u16; 24],
+    /// Index of the block's first vertex: in its [`BlockOutput`], then in the mesh (set by the
+    /// caller, before [`triangulate_blocks`]).
+    pub(crate) base: u32,
     /// Triangles of the block's crossed cells.
-    pub(super) triangles: u32,
+    triangles: u32,
 }
 
 impl Active {
     /// Vertices of the block (on the crossed edges it owns).
     #[inline]
-    pub(super) fn vertices(&self) -> usize {
+    pub(crate) fn vertices(&self) -> usize {
         self.before[23] as usize + self.edges[23].count_ones() as usize
+    }
+
+    /// The block with only its cells in `reach` (bit `i + 8j` of word `k` for cell (i, j, k);
+    /// a walk reached them, and no cell outside them): their triangles, and only the crossed
+    /// edges they use. Calls `keep(v)`, in order, for each vertex kept (`v` counts the block's
+    /// vertices from 0); the result's `base` is to be set by the caller.
+    pub(crate) fn restricted(
+        &self,
+        cases: &BlockCases,
+        reach: &[u64; 8],
+        mut keep: impl FnMut(usize),
+    ) -> Active {
+        let used = used_edges(self, reach);
+        let mut v = 0;
+        for (&e, &u) in self.edges.iter().zip(&used) {
+            let mut m = e;
+            while m != 0 {
+                if u & m & m.wrapping_neg() != 0 {
+                    keep(v);
+                }
+                m &= m - 1;
+                v += 1;
+            }
+        }
+        let mut a = Active {
+            triangles: cases.count(self, reach),
+            edges: used,
+            ..*self
+        };
+        let mut count = 0u16;
+        for (b, e) in a.before.iter_mut().zip(&used) {
+            *b = count;
+            count += e.count_ones() as u16;
+        }
+        a
     }
 
     /// Index of the vertex on the owned crossed edge along `axis` from local point `l`.
@@ -107,26 +164,21 @@ impl Active {
     }
 }
 
-/// Bits `i + 8j` for `i < x` and `j < y` (a block's 8 × 8 plane).
-#[inline]
-pub(super) fn plane_mask(x: u32, y: u32) -> u64 {
-    let row = if x >= 8 { 0xff } else { (1u64 << x) - 1 };
-    (0..y.min(8)).fold(0, |m, j| m | row << (8 * j))
-}
-
-/// The vertices (and normals) of evaluated blocks, as one task makes them.
+/// The vertices (and normals) of evaluated blocks, as one task makes them
+/// ([`evaluate_block`]), and the points evaluated.
 #[derive(Default)]
-pub(super) struct BlockOutput {
-    pub(super) vertices: Vec<DVec3>,
-    pub(super) normals: Vec<DVec3>,
-    pub(super) evaluations: u64,
+pub(crate) struct BlockOutput {
+    pub(crate) vertices: Vec<DVec3>,
+    pub(crate) normals: Vec<DVec3>,
+    pub(crate) evaluations: u64,
     /// A normal is zero (the gradient vanishes) or not finite.
-    pub(super) zero_normal: bool,
-    pub(super) bad_normal: bool,
+    zero_normal: bool,
+    bad_normal: bool,
 }
 
 impl BlockOutput {
-    pub(super) fn clear(&mut self) {
+    /// Empties it for the next task (capacities are kept).
+    pub(crate) fn clear(&mut self) {
         self.vertices.clear();
         self.normals.clear();
         self.evaluations = 0;
@@ -134,23 +186,24 @@ impl BlockOutput {
         self.bad_normal = false;
     }
 
-    pub(super) fn capacity_bytes(&self) -> usize {
+    /// Bytes held (capacities).
+    pub(crate) fn capacity_bytes(&self) -> usize {
         (self.vertices.capacity() + self.normals.capacity()) * 24
     }
 }
 
-/// Evaluates block `b` of a lattice with `dims` blocks per axis. When its points have both
-/// signs, appends the vertices of the crossed edges it owns (and their normals) to `out` and
-/// returns the block with `base` its first vertex in `out`; otherwise None.
+/// Evaluates block `b` of a lattice whose blocks are `grid`. When its points have both signs,
+/// appends the vertices of the crossed edges it owns (and their normals) to `out` and returns
+/// the block with `base` its first vertex in `out` and the triangles of all its crossed cells
+/// (`cases`); otherwise None.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub(super) fn evaluate_block<F: BlockField + ?Sized>(
-    field: &F,
-    blocks: &F::Blocks,
+pub(crate) fn evaluate_block<F: BlockField + ?Sized>(
+    (field, blocks): (&F, &F::Blocks),
     lattice: &Lattice,
-    dims: [u32; 3],
+    grid: &BlockGrid,
     b: [u32; 3],
-    normals: bool,
+    (cases, normals): (&BlockCases, bool),
     values: &mut [f64; 512],
     out: &mut BlockOutput,
 ) -> Option<Active> {
@@ -161,7 +214,7 @@ pub(super) fn evaluate_block<F: BlockField + ?Sized>(
     }
     out.evaluations += (n[0] * n[1] * n[2]) as u64;
     let first = out.vertices.len();
-    let active = block_vertices(lattice, b, lo, n, dims, values, &mut out.vertices);
+    let active = block_vertices(lattice, b, lo, n, grid.dims, values, &mut out.vertices);
     // One sign on every point after all (the bounds were not tight enough): no cell or edge of
     // the block is crossed, and no neighbour needs it.
     if one_sign(&active.signs, n) {
@@ -178,25 +231,17 @@ pub(super) fn evaluate_block<F: BlockField + ?Sized>(
     }
     Some(Active {
         base: first as u32,
+        triangles: cases.count(&active, &ALL_CELLS),
         ..active
     })
 }
 
 /// Block `b` of `lattice`: its lattice points, 8 per axis (fewer at the lattice's upper sides).
-pub(super) fn block_at(lattice: &Lattice, b: [u32; 3]) -> Block {
+fn block_at(lattice: &Lattice, b: [u32; 3]) -> Block {
     let points = lattice.points_per_axis();
     let lo = b.map(|v| v * STEP);
     let n: [u32; 3] = std::array::from_fn(|a| (points[a] - lo[a]).min(STEP + 1));
     Block { index: b, lo, n }
-}
-
-/// The coordinates of the block with index `i` (x fastest) on a lattice of `dims` blocks.
-pub(super) fn block_coords(i: u32, dims: [u32; 3]) -> [u32; 3] {
-    [
-        i % dims[0],
-        (i / dims[0]) % dims[1],
-        i / (dims[0] * dims[1]),
-    ]
 }
 
 /// Whether a block's sign words (`n` points per axis, bits beyond them clear) have one sign.
@@ -209,38 +254,47 @@ fn one_sign(signs: &[u64; 8], n: [u32; 3]) -> bool {
 /// The blocks of `lattice` that `field`'s bounds cannot rule out ([`BlockField::block_sign`]:
 /// the blocks [`polygonize`] evaluates, and every crossed cell lies in one), among those
 /// `consider` accepts, as block indices (x fastest) in ascending order into `out`. The blocks
-/// are bounded in parallel; `marks` is scratch.
-pub(super) fn blocks_not_ruled_out<F: BlockField + ?Sized>(
-    field: &F,
-    blocks: &F::Blocks,
+/// are bounded in parallel, [`BOUNDED_PER_BATCH`] between checks for an interrupt; `marks` is
+/// scratch.
+pub(crate) fn blocks_not_ruled_out<F: BlockField + ?Sized>(
+    (field, blocks): (&F, &F::Blocks),
     lattice: &Lattice,
     consider: impl Fn(u32) -> bool + Sync,
     marks: &mut Vec<bool>,
     out: &mut Vec<u32>,
-) {
-    let dims = block_dims(lattice);
-    let num_blocks = dims.iter().map(|&d| d as usize).product::<usize>();
-    (0..num_blocks as u32)
-        .into_par_iter()
-        .with_min_len(BLOCKS_PER_TASK)
-        .map(|i| {
-            let block = block_at(lattice, block_coords(i, dims));
-            consider(i) && field.block_sign(blocks, lattice, &block) == BlockSign::Mixed
-        })
-        .collect_into_vec(marks);
+) -> Result<()> {
+    let grid = block_grid(lattice);
+    let num_blocks = grid.len() as u32;
+    marks.clear();
+    for first in (0..num_blocks).step_by(BOUNDED_PER_BATCH) {
+        crate::cancel::check()?;
+        let end = num_blocks.min(first.saturating_add(BOUNDED_PER_BATCH as u32));
+        marks.par_extend(
+            (first..end)
+                .into_par_iter()
+                .with_min_len(BLOCKS_PER_TASK)
+                .map(|i| {
+                    let block = block_at(lattice, grid.position(i));
+                    consider(i) && field.block_sign(blocks, lattice, &block) == BlockSign::Mixed
+                }),
+        );
+    }
     out.clear();
-    out.extend((0..num_blocks as u32).filter(|&i| marks[i as usize]));
+    out.extend((0..num_blocks).filter(|&i| marks[i as usize]));
+    Ok(())
 }
 
+/// Blocks bounded in parallel by [`blocks_not_ruled_out`] between checks for an interrupt.
+const BOUNDED_PER_BATCH: usize = 1 << 16;
+
 /// A block's sign words ([`Active::signs`]) and its points per axis.
-pub(super) type BlockSigns = ([u64; 8], [u8; 3]);
+pub(crate) type BlockSigns = ([u64; 8], [u8; 3]);
 
 /// The sign words of block `b` and its points per axis when its values have both signs; None
 /// when the field's bounds or its values give one sign. Adds the points evaluated to
 /// `evaluations`.
-pub(super) fn block_signs<F: BlockField + ?Sized>(
-    field: &F,
-    blocks: &F::Blocks,
+pub(crate) fn block_signs<F: BlockField + ?Sized>(
+    (field, blocks): (&F, &F::Blocks),
     lattice: &Lattice,
     b: [u32; 3],
     values: &mut [f64; 512],
@@ -260,7 +314,7 @@ pub(super) fn block_signs<F: BlockField + ?Sized>(
 /// when point (i, j, k) is inside). Points beyond the lattice hold 0.0 (outside); their bits
 /// are masked off.
 fn sign_words(values: &[f64; 512], n: [u32; 3]) -> [u64; 8] {
-    let mut signs = inside_bits(values, n[2] as usize);
+    let mut signs = plane_words(values, n[2] as usize);
     let points = plane_mask(n[0], n[1]);
     for s in signs.iter_mut() {
         *s &= points;
@@ -298,11 +352,6 @@ impl Workspace {
             + self.active.capacity() * std::mem::size_of::<Active>()
             + self.map.capacity() * 4
     }
-}
-
-/// Blocks per axis of a lattice.
-pub fn block_dims(lattice: &Lattice) -> [u32; 3] {
-    lattice.cells.map(|c| c.div_ceil(STEP))
 }
 
 /// Polygonizes `field` over the blocks of `lattice` it cannot rule out; the mesh equals
@@ -355,18 +404,13 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-    let dims = block_dims(lattice);
-    let num_blocks = dims.iter().map(|&d| d as u64).product::<u64>();
-    check_memory(
-        num_blocks * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
-        settings.memory_limit,
-    )?;
+    let start = start_blocks(field, lattice, settings)?;
     let mut ws = WORKSPACES
         .lock()
         .ok()
         .and_then(|mut w| w.pop())
         .unwrap_or_default();
-    let r = run(field, lattice, settings, dims, &mut ws);
+    let r = run(field, lattice, settings, start, &mut ws);
     if ws.bytes() <= KEEP_BYTES {
         if let Ok(mut pool) = WORKSPACES.lock() {
             if pool.len() < 2 {
@@ -377,28 +421,64 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     r
 }
 
-fn run<F: BlockField + ?Sized, I: TriangleIndex>(
+/// What a polygonization over the blocks of a lattice starts from ([`start_blocks`]).
+pub(crate) struct BlockStart<B> {
+    pub(crate) grid: BlockGrid,
+    pub(crate) cases: &'static BlockCases,
+    /// The field's data for its blocks ([`BlockField::blocks`]).
+    pub(crate) blocks: B,
+    /// The lattice's points, and the time making `blocks` took.
+    pub(crate) stats: Stats,
+}
+
+/// Starts a polygonization of `field` over the blocks of `lattice`: refuses a lattice whose
+/// output could exceed `settings.memory_limit`, then makes the field's data for its blocks.
+pub(crate) fn start_blocks<F: BlockField + ?Sized>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
-    dims: [u32; 3],
-    ws: &mut Workspace,
-) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-    let table = CaseTable::get(settings.ambiguity);
-    let cases = BlockCases::get(table);
+) -> Result<BlockStart<F::Blocks>> {
+    let grid = block_grid(lattice);
+    check_memory(
+        grid.len() as u64 * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
+        settings.memory_limit,
+    )?;
+    let cases = BlockCases::get(CaseTable::get(settings.ambiguity));
     let mut stats = Stats {
         lattice_points: lattice.num_points(),
         ..Default::default()
     };
     crate::cancel::check()?;
     let t = Instant::now();
-    let blocks = field.blocks(lattice, dims);
+    let blocks = field.blocks(lattice, grid.dims);
     stats.add_time("blocks", t);
+    Ok(BlockStart {
+        grid,
+        cases,
+        blocks,
+        stats,
+    })
+}
+
+fn run<F: BlockField + ?Sized, I: TriangleIndex>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+    start: BlockStart<F::Blocks>,
+    ws: &mut Workspace,
+) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
+    let BlockStart {
+        grid,
+        cases,
+        blocks,
+        mut stats,
+    } = start;
+    let grid = &grid;
 
     // Pass 1: values, signs, owned vertices (and normals) per block.
     crate::cancel::check()?;
     let t = Instant::now();
-    let num_blocks = dims.iter().map(|&d| d as usize).product::<usize>();
+    let num_blocks = grid.len();
     // Up to BLOCKS_PER_TASK blocks per task, fewer on small lattices (parallel work there too).
     let per_task = (num_blocks / 64).clamp(1, BLOCKS_PER_TASK);
     let tasks = num_blocks.div_ceil(per_task);
@@ -413,20 +493,11 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
             let mut values = [0.0f64; 512];
             let end = ((task + 1) * per_task).min(num_blocks);
             for index in task * per_task..end {
-                let i = index as u32;
-                let b = [
-                    i % dims[0],
-                    (i / dims[0]) % dims[1],
-                    i / (dims[0] * dims[1]),
-                ];
-                let out = &mut part.out;
-                if let Some(a) =
-                    evaluate_block(field, &blocks, lattice, dims, b, normals, &mut values, out)
-                {
-                    part.active.push(Active {
-                        triangles: cases.count(&a, &ALL_CELLS),
-                        ..a
-                    });
+                let b = grid.position(index as u32);
+                let (out, how) = (&mut part.out, (cases, normals));
+                let fb = (field, &blocks);
+                if let Some(a) = evaluate_block(fb, lattice, grid, b, how, &mut values, out) {
+                    part.active.push(a);
                 }
             }
         });
@@ -437,8 +508,7 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     let mut vertices = 0usize;
     for part in &ws.parts {
         for a in &part.active {
-            let i = a.block[0] + dims[0] * (a.block[1] + dims[1] * a.block[2]);
-            ws.map[i as usize] = ws.active.len() as u32;
+            ws.map[grid.index(a.block)] = ws.active.len() as u32;
             let base = u32::try_from(vertices + a.base as usize)
                 .map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
             ws.active.push(Active { base, ..*a });
@@ -459,7 +529,7 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     crate::cancel::check()?;
     let t = Instant::now();
     let (triangles, crossed) =
-        triangulate_blocks::<I, false>(cases, &ws.active, None, &ws.map, dims)?;
+        triangulate_blocks::<I, false>(cases, &ws.active, None, &ws.map, grid)?;
     stats.cells_crossed = crossed;
     stats.add_time("triangulate", t);
     if normals {
@@ -473,7 +543,7 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
 }
 
 /// The vertices (and normals) of `outputs`, in order, as one mesh without triangles.
-pub(super) fn gather_outputs(outputs: &[&BlockOutput], normals: bool) -> Mesh {
+fn gather_outputs(outputs: &[&BlockOutput], normals: bool) -> Mesh {
     let mut mesh = Mesh {
         vertices: gather(&outputs.iter().map(|p| &p.vertices[..]).collect::<Vec<_>>()),
         ..Default::default()
@@ -486,13 +556,14 @@ pub(super) fn gather_outputs(outputs: &[&BlockOutput], normals: bool) -> Mesh {
 
 /// Triangles of the evaluated blocks `active` (with their cells in `reach`, or all crossed
 /// cells), in block order, in parallel, straight into one buffer; and the number of cells.
-/// `map` gives each block's position in `active` (see [`triangulate_block`] for `TRACKED`).
-pub(super) fn triangulate_blocks<I: TriangleIndex, const TRACKED: bool>(
+/// `map` gives each block's position in `active` by its index in `grid` (`u32::MAX`: none; see
+/// [`triangulate_block`] for `TRACKED`).
+pub(crate) fn triangulate_blocks<I: TriangleIndex, const TRACKED: bool>(
     cases: &BlockCases,
     active: &[Active],
     reach: Option<&[[u64; 8]]>,
     map: &[u32],
-    dims: [u32; 3],
+    grid: &BlockGrid,
 ) -> Result<(Vec<[I; 3]>, u64)> {
     let chunks: Vec<(usize, &[Active])> = active
         .chunks(ACTIVE_PER_TASK)
@@ -524,7 +595,7 @@ pub(super) fn triangulate_blocks<I: TriangleIndex, const TRACKED: bool>(
                     cells,
                     active,
                     map,
-                    dims,
+                    grid,
                     &mut ids,
                     &mut out[at..end],
                 )?;
@@ -541,7 +612,7 @@ pub(super) fn triangulate_blocks<I: TriangleIndex, const TRACKED: bool>(
 }
 
 /// The error of a [`BlockField`] whose bounds ruled out a block that the surface crosses.
-pub(super) fn bounds_error() -> Error {
+pub(crate) fn bounds_error() -> Error {
     Error::invalid(
         "field",
         "its block bounds ruled out a block that the surface crosses",
@@ -550,7 +621,7 @@ pub(super) fn bounds_error() -> Error {
 
 /// Checks the normals the blocks made (an error at the first non-finite one) and fills those
 /// where the gradient vanished with the mean normal of the vertex's triangles.
-pub(super) fn finish_normals<I: TriangleIndex>(
+pub(crate) fn finish_normals<I: TriangleIndex>(
     mesh: &mut Mesh,
     triangles: &[[I; 3]],
     outputs: &[&BlockOutput],
@@ -576,75 +647,8 @@ pub(super) fn finish_normals<I: TriangleIndex>(
     Ok(())
 }
 
-/// Bit `i + 8j` of word `k` set when `values[i + 8j + 64k] < 0`, for the first `planes` planes.
-#[inline]
-fn inside_bits(values: &[f64; 512], planes: usize) -> [u64; 8] {
-    inside_bits_with(crate::simd::Isa::detect(), values, planes)
-}
-
-/// [`inside_bits`] with the vector path of `isa`, which the CPU must have.
-#[inline]
-fn inside_bits_with(isa: crate::simd::Isa, values: &[f64; 512], planes: usize) -> [u64; 8] {
-    #[cfg(target_arch = "x86_64")]
-    match isa {
-        // SAFETY: the caller passes an instruction set the CPU has.
-        crate::simd::Isa::Avx512 => return unsafe { inside_bits_avx512(values, planes) },
-        // SAFETY: as above.
-        crate::simd::Isa::Avx2 => return unsafe { inside_bits_avx2(values, planes) },
-        crate::simd::Isa::Generic => {}
-    }
-    let _ = isa; // (only x86-64 has vector paths)
-    let mut signs = [0u64; 8];
-    for (k, s) in signs.iter_mut().enumerate().take(planes) {
-        for (j, row) in values[64 * k..64 * k + 64].chunks_exact(8).enumerate() {
-            let mut byte = 0u64;
-            for (i, v) in row.iter().enumerate() {
-                byte |= ((*v < 0.0) as u64) << i;
-            }
-            *s |= byte << (8 * j);
-        }
-    }
-    signs
-}
-
-/// [`inside_bits`] `V::LANES` values at a time.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn inside_bits_lanes<V: crate::simd::lanes::F64s>(
-    values: &[f64; 512],
-    planes: usize,
-) -> [u64; 8] {
-    let zero = unsafe { V::splat(0.0) };
-    let mut signs = [0u64; 8];
-    for (k, s) in signs.iter_mut().enumerate().take(planes) {
-        for (q, v) in values[64 * k..64 * k + 64]
-            .chunks_exact(V::LANES)
-            .enumerate()
-        {
-            // SAFETY: the caller runs where V's feature is; a chunk holds V::LANES values.
-            let m = unsafe { V::load(v).lt(zero) } as u64;
-            *s |= m << (V::LANES * q);
-        }
-    }
-    signs
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-fn inside_bits_avx512(values: &[f64; 512], planes: usize) -> [u64; 8] {
-    // SAFETY: AVX-512F is enabled here.
-    unsafe { inside_bits_lanes::<std::arch::x86_64::__m512d>(values, planes) }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn inside_bits_avx2(values: &[f64; 512], planes: usize) -> [u64; 8] {
-    // SAFETY: AVX2 is enabled here.
-    unsafe { inside_bits_lanes::<std::arch::x86_64::__m256d>(values, planes) }
-}
-
 /// Signs and owned crossed edges of an evaluated block; appends its vertices in rank order.
-pub(super) fn block_vertices(
+fn block_vertices(
     lattice: &Lattice,
     b: [u32; 3],
     lo: [u32; 3],
@@ -662,11 +666,10 @@ pub(super) fn block_vertices(
     let y_mask = plane_mask(own[0], n[1] - 1);
     let z_mask = plane_mask(own[0], own[1]);
     for k in 0..own[2].min(n[2]) as usize {
-        let w = signs[k];
-        edges[k] = (w ^ (w >> 1)) & x_mask;
-        edges[8 + k] = (w ^ (w >> 8)) & y_mask;
+        edges[k] = crossed_edges(&signs, k, 0) & x_mask;
+        edges[8 + k] = crossed_edges(&signs, k, 1) & y_mask;
         if k + 1 < n[2] as usize {
-            edges[16 + k] = (w ^ signs[k + 1]) & z_mask;
+            edges[16 + k] = crossed_edges(&signs, k, 2) & z_mask;
         }
     }
     let mut before = [0u16; 24];
@@ -686,10 +689,8 @@ pub(super) fn block_vertices(
     const STRIDE: [usize; 3] = [1, 8, 64];
     for (w, &e) in edges.iter().enumerate() {
         let (axis, k) = (w / 8, w % 8);
-        let mut m = e;
-        while m != 0 {
-            let bit = m.trailing_zeros() as usize;
-            m &= m - 1;
+        for_each_set_bit(e, |bit| {
+            let bit = bit as usize;
             let (i, j) = (bit & 7, bit >> 3);
             let idx = bit + 64 * k;
             let pa = DVec3::new(coords[0][i], coords[1][j], coords[2][k]);
@@ -704,7 +705,7 @@ pub(super) fn block_vertices(
                 values[idx],
                 values[idx + STRIDE[axis]],
             ));
-        }
+        });
     }
     Active {
         block: b,
@@ -716,6 +717,30 @@ pub(super) fn block_vertices(
         base: 0,
         triangles: 0,
     }
+}
+
+/// The crossed edges `a` owns that its cells in `reach` use: those whose vertices the mesh
+/// keeps. The four cells around a crossed edge are joined through crossed faces (each face
+/// holding the edge has corners of both signs), so the walk reaches all or none of them, and
+/// one in the block (the nearest, as the block's upper faces have no cells beyond) decides.
+fn used_edges(a: &Active, reach: &[u64; 8]) -> [u64; 24] {
+    let [nx, ny, nz] = a.n.map(|v| v as usize);
+    // Bits of the last column (x) and row (y) of cells, moved onto the points beyond them (the
+    // column's whole, for the row's moved bits too).
+    let column = COLUMN_0 << (nx - 2);
+    let row = ROW_0 << (8 * (ny - 2));
+    let up_y = |r: u64| r | ((r & row) << 8);
+    let up_x = |r: u64| r | ((r & column) << 1);
+    let mut used = [0u64; 24];
+    for k in 0..nz {
+        let r = reach[k.min(nz - 2)];
+        used[k] = a.edges[k] & up_y(r);
+        used[8 + k] = a.edges[8 + k] & up_x(r);
+        if k + 1 < nz {
+            used[16 + k] = a.edges[16 + k] & up_x(up_y(reach[k]));
+        }
+    }
+    used
 }
 
 /// Offset of each cell edge's entry in a block's vertex table (`axis · 512 + x + 8y + 64z` of
@@ -736,11 +761,11 @@ const EDGE_ENTRY: [usize; 12] = {
 
 /// Entries of a block's vertex table: 3 axes × 512 (a power of two, so that indices masked
 /// with `IDS - 1` need no bounds check; the largest index used is 1535).
-pub(super) const IDS: usize = 2048;
+const IDS: usize = 2048;
 
 /// A case table with each triangle corner's edge replaced by its [`EDGE_ENTRY`] offset: the
 /// triangles of a cell are read straight from the block's vertex table.
-pub(super) struct BlockCases {
+pub(crate) struct BlockCases {
     /// Triangles of case c are `entries[offsets[c]..offsets[c + 1]]`.
     offsets: [u16; 257],
     entries: Vec<[u16; 3]>,
@@ -749,7 +774,7 @@ pub(super) struct BlockCases {
 impl BlockCases {
     /// Triangles of a block's crossed cells in `reach` (bit `i + 8j` of word `k` for cell
     /// (i, j, k); [`ALL_CELLS`] for all).
-    pub(super) fn count(&self, a: &Active, reach: &[u64; 8]) -> u32 {
+    pub(crate) fn count(&self, a: &Active, reach: &[u64; 8]) -> u32 {
         let mut n = 0;
         crossed_cells(&a.signs, a.n, reach, |_, case| {
             n += (self.offsets[case + 1] - self.offsets[case]) as u32
@@ -757,7 +782,8 @@ impl BlockCases {
         n
     }
 
-    pub(super) fn get(table: &CaseTable) -> &'static BlockCases {
+    /// The block case table of `table`.
+    pub(crate) fn get(table: &CaseTable) -> &'static BlockCases {
         static SEPARATE: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
         static JOIN: std::sync::OnceLock<BlockCases> = std::sync::OnceLock::new();
         let cell = match table.ambiguity() {
@@ -781,48 +807,6 @@ impl BlockCases {
     }
 }
 
-/// The cells of the layer between planes of signs `lo` and `hi` whose corners have both signs
-/// (bit `i + 8j` for the cell with lower corner (i, j); bits beyond the block's cells are to be
-/// masked off).
-#[inline(always)]
-pub(super) fn crossed_layer_cells(lo: u64, hi: u64) -> u64 {
-    let (mut any, mut all) = (0u64, !0u64);
-    for s in [0, 1, 8, 9] {
-        any |= (lo >> s) | (hi >> s);
-        all &= (lo >> s) & (hi >> s);
-    }
-    any & !all
-}
-
-/// Every cell of a block, as a `reach` mask of [`crossed_cells`].
-pub(super) const ALL_CELLS: [u64; 8] = [!0; 8];
-
-/// Calls `f(cell, case)` for each crossed cell in `reach` (bit `i + 8j` of word `k` for cell
-/// (i, j, k)) of a block with `signs` and `n` points per axis (`cell` = x + 8y + 64z of its
-/// lower corner), eight cells of a row at a time.
-#[inline(always)]
-pub(super) fn crossed_cells(
-    signs: &[u64; 8],
-    n: [u8; 3],
-    reach: &[u64; 8],
-    mut f: impl FnMut(usize, usize),
-) {
-    let cells = plane_mask(n[0] as u32 - 1, n[1] as u32 - 1);
-    for k in 0..n[2] as usize - 1 {
-        let (lo, hi) = (signs[k], signs[k + 1]);
-        let mut m = crossed_layer_cells(lo, hi) & cells & reach[k];
-        while m != 0 {
-            let c = m.trailing_zeros();
-            m &= m - 1;
-            let case = (((lo >> c) & 3)
-                | ((lo >> (c + 8)) & 3) << 2
-                | ((hi >> c) & 3) << 4
-                | ((hi >> (c + 8)) & 3) << 6) as usize;
-            f(64 * k + c as usize, case);
-        }
-    }
-}
-
 /// Triangulates the crossed cells of block `a` in `reach` (see [`crossed_cells`]) into `out`
 /// (room for exactly their triangles); returns the number of cells. None when a crossed edge
 /// lies in a block the field ruled out, which a correct [`BlockField`] never does; with
@@ -837,20 +821,17 @@ pub(super) fn triangulate_block<I: TriangleIndex, const TRACKED: bool>(
     reach: &[u64; 8],
     active: &[Active],
     map: &[u32],
-    dims: [u32; 3],
+    grid: &BlockGrid,
     ids: &mut [u32; IDS],
     out: &mut [std::mem::MaybeUninit<[I; 3]>],
 ) -> Option<u64> {
     let [nx, ny, nz] = a.n.map(|v| v as u32);
     let mut next = a.base;
     for (w, &e) in a.edges.iter().enumerate() {
-        let mut m = e;
-        while m != 0 {
-            let bit = m.trailing_zeros() as usize;
-            m &= m - 1;
-            ids[((w / 8) * 512 + (w % 8) * 64 + bit) & (IDS - 1)] = next;
+        for_each_set_bit(e, |bit| {
+            ids[((w / 8) * 512 + (w % 8) * 64 + bit as usize) & (IDS - 1)] = next;
             next += 1;
-        }
+        });
     }
     // Crossed edges of the block that a neighbour owns (lower end on an upper face). (A block
     // that tracking reached in part owns only the edges of its reached cells: its other crossed
@@ -862,12 +843,9 @@ pub(super) fn triangulate_block<I: TriangleIndex, const TRACKED: bool>(
     ];
     for axis in 0..3 {
         for k in 0..nz as usize {
-            let w = a.signs[k];
             let crossed = match axis {
-                0 => w ^ (w >> 1),
-                1 => w ^ (w >> 8),
-                _ if k + 1 < nz as usize => w ^ a.signs[k + 1],
-                _ => 0,
+                2 if k + 1 == nz as usize => 0,
+                _ => crossed_edges(&a.signs, k, axis),
             } & masks[axis];
             let mut m = crossed & !a.edges[axis * 8 + k];
             while m != 0 {
@@ -881,7 +859,7 @@ pub(super) fn triangulate_block<I: TriangleIndex, const TRACKED: bool>(
                         l[d] = 0;
                     }
                 }
-                let i = map[(b[0] + dims[0] * (b[1] + dims[1] * b[2])) as usize];
+                let i = map[grid.index(b)];
                 let id = &mut ids[(axis * 512 + k * 64 + bit as usize) & (IDS - 1)];
                 match active.get(i as usize) {
                     Some(owner) => *id = owner.vertex(axis, l),
@@ -925,30 +903,8 @@ mod tests {
     use crate::field::blob::BlobField;
     use crate::field::testing::random_blobs as blobs;
     use crate::field::testing::{canonical_triangles, vertex_normal_bits, Lying};
+    use crate::field::testing::{for_each_blob_case, BLOB_CASES};
     use crate::polygonize::Ambiguity;
-
-    /// Every vector path gives the plain loop's sign words.
-    #[test]
-    fn inside_bits_agree_on_every_vector_path() {
-        let mut values = [0.0; 512];
-        for (i, v) in values.iter_mut().enumerate() {
-            // Negative, positive, ±0 and NaN (never inside) in an irregular pattern.
-            *v = match (i * 7919) % 11 {
-                0 => -0.0,
-                1 => 0.0,
-                2 => f64::NAN,
-                k => (k as f64 - 6.5) * (1.0 + i as f64),
-            };
-        }
-        for planes in [0, 1, 5, 8] {
-            let want = inside_bits_with(crate::simd::Isa::Generic, &values, planes);
-            assert_eq!(want[planes..], [0; 8][planes..]);
-            assert!(planes == 0 || want[0] != 0);
-            for isa in crate::simd::Isa::available() {
-                assert_eq!(inside_bits_with(isa, &values, planes), want, "{isa:?}");
-            }
-        }
-    }
 
     /// Triangles, order-free and bit-exact.
     fn canonical(m: &Mesh) -> Vec<[[u64; 3]; 3]> {
@@ -973,21 +929,12 @@ mod tests {
 
     #[test]
     fn equals_dense_on_random_blobs() {
-        for (n, r, res, seed) in [
-            (200, 0.25, 64, 1),
-            (60, 0.12, 37, 2),
-            (500, 0.08, 50, 3),
-            (5, 0.6, 22, 4),
-            (1, 0.3, 7, 5),
-            (30, 0.2, 8, 6),
-        ] {
-            let f = blobs(n, r, seed);
-            let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), res).unwrap();
+        for_each_blob_case(&BLOB_CASES, |f, l| {
             for amb in [Ambiguity::Separate, Ambiguity::Join] {
-                let st = check_equal(&f, &l, amb);
+                let st = check_equal(&f, l, amb);
                 assert!(st.evaluations <= st.lattice_points * 2);
             }
-        }
+        });
     }
 
     #[test]

@@ -5,7 +5,7 @@ use super::errors::value_error;
 use super::field::FieldArg;
 use super::interrupt::run;
 use crate::lattice::Lattice;
-use crate::polygonize::tracking::Components;
+use crate::polygonize::tracking::{Components, TrackingSettings};
 use crate::polygonize::{dense, octree, sparse, tracking, Ambiguity, Settings, Stats};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
@@ -154,6 +154,29 @@ fn shared_settings(
     })
 }
 
+/// Tracking settings: `common`, the walks from the given seed points (up to the whole lattice)
+/// or from the field's own starts, and every component of a blob field (it bounds its values
+/// over blocks), the seeded ones of any other.
+fn tracking_settings(
+    field: &FieldArg,
+    seeds: Option<&Bound<'_, PyAny>>,
+    lattice: &Lattice,
+    common: Settings,
+) -> PyResult<TrackingSettings> {
+    let (starts, max_walk) = tracking_starts(field, seeds, lattice)?;
+    let components = match field {
+        FieldArg::Blob(_) => Components::All,
+        _ => Components::Seeded,
+    };
+    Ok(TrackingSettings {
+        common,
+        starts,
+        max_walk,
+        components,
+        ..Default::default()
+    })
+}
+
 /// Tracking starts: the given seed points (walk up to the whole lattice) or the field's own.
 fn tracking_starts(
     field: &FieldArg,
@@ -271,18 +294,16 @@ pub fn polygonize<'py>(
             run(py, progress, on_caller, || octree::polygonize(f, &lattice, &settings, &o).map(buffers))
         }
         "tracking" => {
-            let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
+            let ts = tracking_settings(&field, seeds, &lattice, settings)?;
             match &field {
-                // A blob field bounds its values over blocks: every component is found.
                 FieldArg::Blob(b) => {
                     let blobs = &b.inner;
                     run(py, progress, on_caller, || {
-                        tracking::polygonize_all(blobs, &lattice, &starts, walk, &settings)
-                            .map(buffers)
+                        tracking::polygonize_bounded(blobs, &lattice, &ts).map(buffers)
                     })
                 }
                 _ => run(py, progress, on_caller, || {
-                    tracking::polygonize(f, &lattice, &starts, walk, &settings).map(buffers)
+                    tracking::polygonize(f, &lattice, &ts).map(buffers)
                 }),
             }
         }
@@ -347,41 +368,32 @@ impl PyTessellator {
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
         let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
-        let (starts, walk) = tracking_starts(&field, seeds, &lattice)?;
+        let ts = tracking_settings(&field, seeds, &lattice, settings)?;
         let tess = &mut self.inner;
         let on_caller = field.is_callable();
-        // Blob fields bound their values over blocks: every component is found.
         let result = match &field {
             // Blob fields evaluate whole blocks: the walk goes block by block.
             FieldArg::Blob(b) if blocks => {
                 let blobs = &b.inner;
                 run(py, progress, on_caller, || {
-                    let all = Components::All;
-                    tess.polygonize_blocks::<_, i64>(
-                        blobs,
-                        &lattice,
-                        &starts,
-                        walk,
-                        &[],
-                        &settings,
-                        all,
+                    tess.polygonize_blocks::<_, i64>(blobs, &lattice, &ts).map(
+                        |(mesh, faces, stats)| {
+                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
+                        },
                     )
-                    .map(|(mesh, faces, stats)| {
-                        (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
-                    })
                 })
             }
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
                 run(py, progress, on_caller, || {
-                    tess.polygonize_all(blobs, &lattice, &starts, walk, &[], &settings)
+                    tess.polygonize_bounded(blobs, &lattice, &ts)
                         .map(|(m, s)| (MeshBuffers::copied(m), s))
                 })
             }
             _ => {
                 let f = field.as_field();
                 run(py, progress, on_caller, || {
-                    tess.polygonize(f, &lattice, &starts, walk, &[], &settings)
+                    tess.polygonize(f, &lattice, &ts)
                         .map(|(m, s)| (MeshBuffers::copied(m), s))
                 })
             }
