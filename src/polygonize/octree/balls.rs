@@ -40,10 +40,6 @@ pub(super) fn block_reach(cell: DVec3, safety: f64) -> Box<[[Reach; 27]; 27]> {
     t
 }
 
-/// The block points whose sign is known (bit per point) from their states: (negative, zero or
-/// positive, the signs inferred without a value).
-#[inline]
-
 /// [`balls`] of the points of `known` with the values `v` (bits and indices as in
 /// [`block_point`](super::block::block_point)).
 #[cfg(test)]

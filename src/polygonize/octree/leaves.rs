@@ -109,12 +109,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
             }
             indices.push((o, m, idx));
         }
-        self.store.evaluate(
-            self.field,
-            &self.points,
-            &self.settings.common,
-            &mut self.stats,
-        )?;
+        self.evaluate_points()?;
         let values = &self.store.values;
         let crossed_leaf = move |o: [u32; 3], d: usize, idx: &[u32; 27]| {
             let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);

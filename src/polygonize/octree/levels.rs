@@ -193,12 +193,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
             .map(|o| lattice.point([o[0] + h, o[1] + h, o[2] + h]))
             .collect_into_vec(&mut self.points);
         let base = self.store.values.len();
-        self.store.evaluate(
-            self.field,
-            &self.points,
-            &self.settings.common,
-            &mut self.stats,
-        )?;
+        self.evaluate_points()?;
         let r = self.safety * lattice.block_radius(s);
         let v = &self.store.values[base..];
         self.decided.mark_blocks(&self.blocks, s, |i| {

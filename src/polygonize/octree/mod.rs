@@ -61,8 +61,8 @@ pub struct OctreeSettings {
     /// Level of the first rejection test: 1 tests the root's 8 octants (the paper's
     /// r = √3/2 for a [-1, 1]³ root), 2 the 64 blocks below them (r = √3/4), and so on. Levels
     /// above it are split without evaluating anything. `None`: the first level whose blocks
-    /// span at most 1/8 of the lattice's longest side. Measured on the shared meshes at 24³ to
-    /// 128³: starting at coarser blocks (the paper's r = √3/2) rejected cells wrongly at some
+    /// span at most 1/8 of the lattice's longest side. On the shared meshes at 24³ to 128³,
+    /// starting at coarser blocks (the paper's r = √3/2) rejects cells wrongly at some
     /// resolutions, because far from the surface |f| stops under-estimating distance (Cuno's
     /// Fig. 2c and Table 1); testing from 1/8 costs at most 8³·(root/lattice)³ extra centres.
     pub start_level: Option<u32>,
@@ -93,7 +93,7 @@ pub struct OctreeSettings {
 
 impl Default for OctreeSettings {
     fn default() -> Self {
-        // Measured on the shared meshes (d = 0.015, w/d = 3/4, 24³ to 128³): see
+        // Chosen on the shared meshes (d = 0.015, w/d = 3/4, 24³ to 128³): see
         // notebooks/cuno_tables.ipynb and BENCHMARKS.md.
         OctreeSettings {
             common: Settings::default(),

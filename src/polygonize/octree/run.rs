@@ -86,4 +86,15 @@ impl<'a, F: Field + ?Sized> Run<'a, F> {
             suspects: Suspects::default(),
         })
     }
+
+    /// Evaluates `points` (queued in the store, or level centres) and appends their values to
+    /// the store's.
+    pub(super) fn evaluate_points(&mut self) -> Result<()> {
+        self.store.evaluate(
+            self.field,
+            &self.points,
+            &self.settings.common,
+            &mut self.stats,
+        )
+    }
 }

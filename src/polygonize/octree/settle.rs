@@ -91,12 +91,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// batch.
     fn evaluate_unsigned_corners(&mut self, open: &[u32]) -> Result<()> {
         self.points = self.store.claim_blocks(&self.blocks, open, self.lattice);
-        self.store.evaluate(
-            self.field,
-            &self.points,
-            &self.settings.common,
-            &mut self.stats,
-        )
+        self.evaluate_points()
     }
 
     /// One settling step: signs are inferred ([`balls`]) for the corners the undecided leaves
