@@ -31,6 +31,13 @@
 //! blocks' signs, a byte per 8 cells: 262 kB at 128³, 134 MB at 1024³). Leaves are
 //! triangulated in parallel, each edge vertex indexed through the value index of the edge's
 //! lower end and numbered as a serial sweep over the leaves would (first use).
+//!
+//! One call is a `Run` (`run.rs`) going through its phases, a file each: `levels.rs` (the
+//! rejection, level by level), `leaves.rs` (the crossed leaves), `settle.rs` (settling them by
+//! signs: inferring, claiming the corners without a sign, evaluating the crossed edges' ends),
+//! `repair.rs` and `triangulate.rs`. Beside them: the value store (`store.rs`, with the points'
+//! states in `state.rs`), the points of a block of leaves (`block.rs`), the ball tests
+//! (`cover.rs` for blocks, `balls.rs` for block points) and the decided blocks (`decided.rs`).
 
 mod balls;
 mod block;
