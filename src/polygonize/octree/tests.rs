@@ -238,6 +238,39 @@ fn start_level_matters_when_far_values_overshoot() {
     assert_eq!(d.compare(&o).missing, 0);
 }
 
+#[test]
+fn safety_is_given_or_derived_from_the_field() {
+    use crate::field::blob::{BlobField, BlobSettings, PerPrimitive};
+    let sphere = Sphere {
+        center: DVec3::ZERO,
+        radius: 0.5,
+    };
+    let blob = BlobField::new(
+        &[DVec3::ZERO],
+        PerPrimitive::All(0.5),
+        PerPrimitive::All(2.0),
+        0.5,
+        BlobSettings::default(),
+    )
+    .unwrap();
+    // Derived: 1 for a field without a gradient bound, the bound where it is larger.
+    let derived = OctreeSettings::default();
+    assert_eq!(derived.safety_for(&sphere).unwrap(), 1.0);
+    let bound = blob.gradient_bound();
+    assert!(bound > 1.0);
+    assert_eq!(derived.safety_for(&blob).unwrap(), bound);
+    assert_eq!(derived.safety_for(&Counting::new(&blob)).unwrap(), bound);
+    // Given: as it is, when positive and finite.
+    let given = |safety| OctreeSettings {
+        safety: Some(safety),
+        ..Default::default()
+    };
+    assert_eq!(given(0.5).safety_for(&blob).unwrap(), 0.5);
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(given(bad).safety_for(&sphere).is_err(), "{bad}");
+    }
+}
+
 /// `SHARED` holds exactly the points a block of 2 × 2 × 2 cells has in common with each
 /// neighbour, and the decided map gives those points, clipped to the lattice, the sign of
 /// the decided region they lie in.
