@@ -28,11 +28,14 @@ fn main() {
     let s = VariationalSurface::from_mesh(&v, &f, &placement, &FitSettings::default()).unwrap();
     let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [res; 3]).unwrap();
     let set = Settings::default();
-    let oct = octree::Settings::default();
+    let oct = octree::OctreeSettings {
+        common: set,
+        ..Default::default()
+    };
     let (mut ratios, mut best) = (Vec::new(), None::<(f64, _)>);
     for _ in 0..rounds {
         let t = Instant::now();
-        let (m, st) = octree::polygonize(&s, &lattice, &set, &oct).unwrap();
+        let (m, st) = octree::polygonize(&s, &lattice, &oct).unwrap();
         let to = t.elapsed().as_secs_f64();
         if !alone {
             let t = Instant::now();

@@ -88,8 +88,8 @@ proptest! {
     fn octree_settings_refuse_or_equal_dense(safety in any_f64(), start in prop::option::of(0u32..12), corner_test: bool, l in small_lattice(), r in 0.1..0.9f64) {
         let sphere = Sphere { center: DVec3::new(0.01, -0.02, 0.03), radius: r };
         let s = Settings::default();
-        let o = octree::Settings { safety, start_level: start, corner_test };
-        if let Ok((m, _)) = octree::polygonize(&sphere, &l, &s, &o) {
+        let o = octree::OctreeSettings { common: s, safety: Some(safety), start_level: start, corner_test };
+        if let Ok((m, _)) = octree::polygonize(&sphere, &l, &o) {
             let (d, _) = dense::polygonize(&sphere, &l, &s).unwrap();
             let cmp = d.compare(&m);
             // Only the dense mesh's triangles, and never a hole: what the octree finds of a

@@ -784,6 +784,11 @@ unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
 }
 
 impl Field for BlobField {
+    /// [`BlobField::gradient_bound`].
+    fn gradient_bound(&self) -> Option<f64> {
+        Some(BlobField::gradient_bound(self))
+    }
+
     /// Splats every primitive into the lattice points of its sphere of influence, plane by plane
     /// in parallel, row by row over the x-range the sphere covers. Each point accumulates the
     /// primitives in index order with the same arithmetic as [`BlobField::potential`] (terms

@@ -42,6 +42,12 @@ pub trait Field: Sync {
         1e-6
     }
 
+    /// An upper bound of |∇f| over all space, where the field knows one (`None`: unknown). The
+    /// octree's default safety factor is derived from it.
+    fn gradient_bound(&self) -> Option<f64> {
+        None
+    }
+
     /// Values at many points: `out[i] = value(points[i])`. The default splits the batch over rayon.
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
         assert_eq!(points.len(), out.len());
@@ -187,6 +193,9 @@ impl<F: Field + ?Sized> Field for &F {
     fn fd_step(&self) -> f64 {
         (**self).fd_step()
     }
+    fn gradient_bound(&self) -> Option<f64> {
+        (**self).gradient_bound()
+    }
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
         (**self).values(points, out)
     }
@@ -252,6 +261,9 @@ impl<F: Field> Field for IsoLevel<F> {
     fn fd_step(&self) -> f64 {
         self.inner.fd_step()
     }
+    fn gradient_bound(&self) -> Option<f64> {
+        self.inner.gradient_bound()
+    }
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
         self.inner.values(points, out);
         out.iter_mut().for_each(|v| *v -= self.level);
@@ -291,6 +303,9 @@ impl<F: Field> Field for Counting<F> {
     }
     fn fd_step(&self) -> f64 {
         self.inner.fd_step()
+    }
+    fn gradient_bound(&self) -> Option<f64> {
+        self.inner.gradient_bound()
     }
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
         self.count

@@ -281,17 +281,14 @@ pub fn polygonize<'py>(
     let result = match method.as_str() {
         "dense" => run(py, progress, on_caller, || dense::polygonize(f, &lattice, &settings).map(buffers)),
         "octree" => {
-            let od = octree::Settings::default();
-            let o = octree::Settings {
+            let od = octree::OctreeSettings::default();
+            let o = octree::OctreeSettings {
+                common: settings,
                 start_level: start_level.or(od.start_level),
-                // A blob field is no distance; its gradient bound makes rejection exact.
-                safety: safety.unwrap_or(match &field {
-                    FieldArg::Blob(b) => od.safety.max(b.inner.gradient_bound()),
-                    _ => od.safety,
-                }),
+                safety: safety.or(od.safety),
                 corner_test: corner_test.unwrap_or(od.corner_test),
             };
-            run(py, progress, on_caller, || octree::polygonize(f, &lattice, &settings, &o).map(buffers))
+            run(py, progress, on_caller, || octree::polygonize(f, &lattice, &o).map(buffers))
         }
         "tracking" => {
             let ts = tracking_settings(&field, seeds, &lattice, settings)?;

@@ -18,14 +18,17 @@
 //! a contradiction touched. The leaves it visits replace those of the levels. When the premise
 //! holds, nothing is found and the only cost is the scan of the crossed leaves' faces.
 
-use super::PointState;
-use super::{corner, CrossedLeaf, DecidedBlocks, Store, NONE};
+use super::block::corner;
+use super::decided::DecidedBlocks;
+use super::leaves::CrossedLeaf;
+use super::run::Run;
+use super::state::PointState;
+use super::store::NONE;
 use crate::error::Result;
 use crate::field::Field;
-use crate::lattice::Lattice;
 use crate::polygonize::cell::case_index;
 use crate::polygonize::tracking::FACE_STEP;
-use crate::polygonize::{CaseTable, Stats};
+use crate::polygonize::CaseTable;
 use rayon::prelude::*;
 use std::collections::HashSet;
 
@@ -62,7 +65,7 @@ fn cells_around(p: [u32; 3], cells: [u32; 3]) -> impl Iterator<Item = [u32; 3]> 
 
 /// The cells next to crossed leaves, across crossed faces, that lie in blocks the levels
 /// dropped: the surface goes on there, and no leaf holds it. Sorted, each once.
-pub(super) fn cells_beyond_crossed_faces(
+fn cells_beyond_crossed_faces(
     table: &CaseTable,
     dropped: &DecidedBlocks,
     leaves: &[CrossedLeaf],
@@ -86,114 +89,123 @@ pub(super) fn cells_beyond_crossed_faces(
     found
 }
 
-/// Walks the surface from the `suspects` and from `start` (cells, see the module docs) and
-/// updates `leaves`: the leaves visited are replaced by what their values give, and the crossed
-/// cells found in dropped blocks are added. `centres` are the value indices of the centres of
-/// the kept blocks of leaves `blocks` (kept beside the blocks, not in the store, until here).
-/// Returns the number of cells visited.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn close<F: Field + ?Sized>(
-    field: &F,
-    lattice: &Lattice,
-    table: &CaseTable,
-    store: &mut Store,
-    dropped: &DecidedBlocks,
-    (blocks, centres): (&[[u32; 3]], &[u32]),
-    start: Vec<[u32; 3]>,
-    suspects: Suspects,
-    leaves: &mut Vec<CrossedLeaf>,
-    settings: &crate::polygonize::Settings,
-    stats: &mut Stats,
-) -> Result<u64> {
-    let cells = lattice.cells;
-    let mut wave = start;
-    for &p in &suspects.points {
-        wave.extend(cells_around(p, cells));
+impl<F: Field + ?Sized> Run<'_, F> {
+    /// Completes the crossed `leaves` where the premise failed (see the module docs): from the
+    /// cells beyond crossed faces in dropped blocks and from the `suspects`, and counts the cells
+    /// visited as repaired.
+    pub(super) fn repair(&mut self, leaves: &mut Vec<CrossedLeaf>) -> Result<()> {
+        let beyond =
+            cells_beyond_crossed_faces(self.table, &self.decided, leaves, self.lattice.cells);
+        let suspects = std::mem::take(&mut self.suspects);
+        let repaired = self.close(beyond, suspects, leaves)?;
+        self.stats.cells_repaired = repaired;
+        self.stats.cells_visited += repaired;
+        Ok(())
     }
-    for &o in &suspects.blocks {
-        wave.extend(
-            (0..8)
-                .map(|d| corner(o, d))
-                .filter(|c| (0..3).all(|a| c[a] < cells[a])),
-        );
-    }
-    if wave.is_empty() {
-        return Ok(0);
-    }
-    // Every corner of a cell visited is read from the store, the kept blocks' centres too.
-    for (&o, &c) in blocks.iter().zip(centres) {
-        if c != NONE {
-            let s = store.slot_mut([o[0] + 1, o[1] + 1, o[2] + 1]);
-            store.slots[s] = c;
-            store.state[s] = PointState::of_value(store.values[c as usize]);
+
+    /// Walks the surface from the `suspects` and from `start` (cells, see the module docs) and
+    /// updates `leaves`: the leaves visited are replaced by what their values give, and the
+    /// crossed cells found in dropped blocks are added. The centres of the kept blocks of leaves
+    /// (kept beside the blocks, not in the store, until here) go into the store. Returns the
+    /// number of cells visited.
+    fn close(
+        &mut self,
+        start: Vec<[u32; 3]>,
+        suspects: Suspects,
+        leaves: &mut Vec<CrossedLeaf>,
+    ) -> Result<u64> {
+        let (lattice, table) = (self.lattice, self.table);
+        let (store, dropped) = (&mut self.store, &self.decided);
+        let cells = lattice.cells;
+        let mut wave = start;
+        for &p in &suspects.points {
+            wave.extend(cells_around(p, cells));
         }
-    }
-    let levels_leaves = leaves.len();
-    let mut visited: HashSet<[u32; 3]> = HashSet::new();
-    let mut found: Vec<CrossedLeaf> = Vec::new();
-    let mut points = Vec::new();
-    while !wave.is_empty() {
-        wave.sort_unstable();
-        wave.dedup();
-        wave.retain(|c| visited.insert(*c));
-        // Every corner without a value is evaluated, inferred signs included.
-        points.clear();
-        let mut inferred: Vec<(usize, bool, [u32; 3])> = Vec::new();
-        for &o in &wave {
-            for k in 0..8 {
-                let p = corner(o, k);
-                let s = store.slot_mut(p);
-                let state = store.state[s];
-                if state == PointState::UNKNOWN || state.is_inferred() {
-                    if state.is_inferred() {
-                        inferred.push((s, state.is_negative(), p));
+        for &o in &suspects.blocks {
+            wave.extend(
+                (0..8)
+                    .map(|d| corner(o, d))
+                    .filter(|c| (0..3).all(|a| c[a] < cells[a])),
+            );
+        }
+        if wave.is_empty() {
+            return Ok(0);
+        }
+        // Every corner of a cell visited is read from the store, the kept blocks' centres too.
+        for (&o, &c) in self.blocks.iter().zip(&self.centres) {
+            if c != NONE {
+                let s = store.slot_mut([o[0] + 1, o[1] + 1, o[2] + 1]);
+                store.slots[s] = c;
+                store.state[s] = PointState::of_value(store.values[c as usize]);
+            }
+        }
+        let levels_leaves = leaves.len();
+        let mut visited: HashSet<[u32; 3]> = HashSet::new();
+        let mut found: Vec<CrossedLeaf> = Vec::new();
+        let mut points = Vec::new();
+        while !wave.is_empty() {
+            wave.sort_unstable();
+            wave.dedup();
+            wave.retain(|c| visited.insert(*c));
+            // Every corner without a value is evaluated, inferred signs included.
+            points.clear();
+            let mut inferred: Vec<(usize, bool, [u32; 3])> = Vec::new();
+            for &o in &wave {
+                for k in 0..8 {
+                    let p = corner(o, k);
+                    let s = store.slot_mut(p);
+                    let state = store.state[s];
+                    if state == PointState::UNKNOWN || state.is_inferred() {
+                        if state.is_inferred() {
+                            inferred.push((s, state.is_negative(), p));
+                        }
+                        store.slots[s] = (store.values.len() + points.len()) as u32;
+                        store.state[s] = PointState::QUEUED;
+                        store.queued.push(s as u32);
+                        points.push(lattice.point(p));
                     }
-                    store.slots[s] = (store.values.len() + points.len()) as u32;
-                    store.state[s] = PointState::QUEUED;
-                    store.queued.push(s as u32);
-                    points.push(lattice.point(p));
                 }
             }
-        }
-        store.evaluate(field, &points, settings, stats)?;
-        let mut next = Vec::new();
-        // A value against its inferred sign: the cells around the point were decided wrongly.
-        for &(s, negative, p) in &inferred {
-            if store.state[s].is_negative() != negative {
-                next.extend(cells_around(p, cells));
+            store.evaluate(self.field, &points, &self.settings.common, &mut self.stats)?;
+            let mut next = Vec::new();
+            // A value against its inferred sign: the cells around the point were decided wrongly.
+            for &(s, negative, p) in &inferred {
+                if store.state[s].is_negative() != negative {
+                    next.extend(cells_around(p, cells));
+                }
             }
-        }
-        for &o in &wave {
-            let corners: [u32; 8] = std::array::from_fn(|k| {
-                let s = store.slot_mut(corner(o, k));
-                debug_assert!(store.state[s].has_value());
-                store.slots[s]
-            });
-            let case = case_index(&corners.map(|i| store.values[i as usize]));
-            if case == 0 || case == 255 {
-                continue;
+            for &o in &wave {
+                let corners: [u32; 8] = std::array::from_fn(|k| {
+                    let s = store.slot_mut(corner(o, k));
+                    debug_assert!(store.state[s].has_value());
+                    store.slots[s]
+                });
+                let case = case_index(&corners.map(|i| store.values[i as usize]));
+                if case == 0 || case == 255 {
+                    continue;
+                }
+                found.push(CrossedLeaf {
+                    origin: o,
+                    corners,
+                    case,
+                });
+                let faces = table.crossed_faces(case);
+                next.extend((0..6).filter_map(|f| {
+                    (faces & (1 << f) != 0)
+                        .then(|| neighbour(o, f, cells))
+                        .flatten()
+                        .filter(|&n| dropped.dropped(n))
+                }));
             }
-            found.push(CrossedLeaf {
-                origin: o,
-                corners,
-                case,
-            });
-            let faces = table.crossed_faces(case);
-            next.extend((0..6).filter_map(|f| {
-                (faces & (1 << f) != 0)
-                    .then(|| neighbour(o, f, cells))
-                    .flatten()
-                    .filter(|&n| dropped.dropped(n))
-            }));
+            wave = next;
         }
-        wave = next;
+        // The leaves visited are replaced by what their values give.
+        let mut i = 0;
+        leaves.retain(|l| {
+            i += 1;
+            i > levels_leaves || !visited.contains(&l.origin)
+        });
+        leaves.extend(found);
+        Ok(visited.len() as u64)
     }
-    // The leaves visited are replaced by what their values give.
-    let mut i = 0;
-    leaves.retain(|l| {
-        i += 1;
-        i > levels_leaves || !visited.contains(&l.origin)
-    });
-    leaves.extend(found);
-    Ok(visited.len() as u64)
 }

@@ -1,13 +1,13 @@
 //! What the octree's store knows of a lattice point, in one byte.
 
-use std::sync::atomic::AtomicU8;
+use std::sync::atomic::{AtomicU8, Ordering::Relaxed};
 
 /// A point's state: nothing known ([`PointState::UNKNOWN`]), claimed and not yet evaluated
 /// ([`PointState::QUEUED`]), a sign inferred without a value, or a value (whose index the point's
 /// slot holds). Bit 1: the sign is known; bit 0 with it: negative; bit 2: a value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(transparent)]
-pub(super) struct PointState(pub(super) u8);
+pub(super) struct PointState(u8);
 
 impl PointState {
     pub(super) const UNKNOWN: Self = Self(0);
@@ -72,10 +72,47 @@ impl PointState {
     }
 }
 
+/// A point's state, read and written from several threads.
+#[repr(transparent)]
+pub(super) struct AtomicPointState(AtomicU8);
+
+impl AtomicPointState {
+    /// Claims the point for evaluation (unknown → queued) when nothing is known of it; returns
+    /// whether this call claimed it.
+    #[inline]
+    pub(super) fn claim(&self) -> bool {
+        let (unknown, queued) = (PointState::UNKNOWN.0, PointState::QUEUED.0);
+        // (Most points are known: a plain read first.)
+        self.0.load(Relaxed) == unknown
+            && self
+                .0
+                .compare_exchange(unknown, queued, Relaxed, Relaxed)
+                .is_ok()
+    }
+
+    /// Stores a sign inferred when nothing is known of the point; returns the point's state
+    /// after (the sign given, or what another thread or an earlier step stored).
+    #[inline]
+    pub(super) fn infer(&self, negative: bool) -> PointState {
+        let (unknown, inferred) = (PointState::UNKNOWN.0, PointState::inferred(negative).0);
+        // Most points are shared: a plain read first spares the atomic write where a
+        // neighbour stored the sign already.
+        let now = self.0.load(Relaxed);
+        if now != unknown {
+            return PointState(now);
+        }
+        match self.0.compare_exchange(unknown, inferred, Relaxed, Relaxed) {
+            Ok(_) => PointState(inferred),
+            Err(now) => PointState(now),
+        }
+    }
+}
+
 /// `v` as atomics, for writes from several threads (the exclusive borrow guarantees that no one
 /// else reads it meanwhile).
-pub(super) fn atomic_states(v: &mut [PointState]) -> &[AtomicU8] {
-    // SAFETY: PointState is a transparent u8, and AtomicU8 has u8's size and alignment; the
-    // exclusive borrow means every access for its lifetime goes through the atomics.
-    unsafe { &*(v as *mut [PointState] as *const [AtomicU8]) }
+pub(super) fn atomic_states(v: &mut [PointState]) -> &[AtomicPointState] {
+    // SAFETY: PointState is a transparent u8 and AtomicPointState a transparent AtomicU8, which
+    // has u8's size and alignment; the exclusive borrow means every access for its lifetime
+    // goes through the atomics.
+    unsafe { &*(v as *mut [PointState] as *const [AtomicPointState]) }
 }

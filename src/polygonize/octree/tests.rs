@@ -1,24 +1,55 @@
 //! Unit tests of the octree: equality with dense marching cubes, repairs, thread independence
 //! and the settling's tables.
 
+use super::balls::{ball_masks, block_reach};
+use super::block::{block_point, LEAF_CORNERS};
+use super::cover::{covered, covered_by_opposite_balls, covered_piece};
+use super::decided::{DecidedBlocks, SHARED};
+use super::settle::{sign_masks, unknown_edge_ends};
+use super::state::PointState;
 use super::*;
 use crate::field::analytic::{Sphere, Torus};
 use crate::field::Counting;
+use crate::polygonize::cell::corner_offset;
+use crate::polygonize::table::EDGES;
 use crate::polygonize::{dense, Ambiguity};
+use glam::DVec3;
 
+/// Polygonizes `f` with the octree (`settings`) and checks the mesh is the dense mesh (`dense`,
+/// from `settings.common`) and that the evaluations counted are those the field was asked for;
+/// returns the octree's mesh and stats.
+fn check_equals_dense<F: Field>(
+    f: &F,
+    lattice: &Lattice,
+    settings: &OctreeSettings,
+    dense: &Mesh,
+    what: &str,
+) -> (Mesh, Stats) {
+    let counting = Counting::new(f);
+    let (o, st) = polygonize(&counting, lattice, settings).unwrap();
+    let c = dense.compare(&o);
+    assert_eq!(
+        (c.missing, c.extra),
+        (0, 0),
+        "octree differs from dense: {what}"
+    );
+    // Every point evaluated once, and the count is exact.
+    assert_eq!(counting.evaluations(), st.evaluations, "{what}");
+    (o, st)
+}
+
+/// [`check_equals_dense`] with the default settings but `amb`, for a closed surface.
 fn check_equal<F: Field>(f: &F, lattice: &Lattice, amb: Ambiguity) -> Stats {
-    let s = crate::polygonize::Settings {
-        ambiguity: amb,
+    let settings = OctreeSettings {
+        common: Settings {
+            ambiguity: amb,
+            ..Default::default()
+        },
         ..Default::default()
     };
-    let (d, _) = dense::polygonize(f, lattice, &s).unwrap();
-    let counting = Counting::new(f);
-    let (o, st) = polygonize(&counting, lattice, &s, &Settings::default()).unwrap();
-    let c = d.compare(&o);
-    assert_eq!((c.missing, c.extra), (0, 0), "octree differs from dense");
+    let (d, _) = dense::polygonize(f, lattice, &settings.common).unwrap();
+    let (o, st) = check_equals_dense(f, lattice, &settings, &d, "");
     assert!(o.is_closed_oriented());
-    // Every point evaluated once, and the count is exact.
-    assert_eq!(counting.evaluations(), st.evaluations);
     st
 }
 
@@ -75,19 +106,15 @@ fn tiny_lattices_and_brick_boundaries() {
         [31, 1, 33],
     ] {
         let l = Lattice::new(DVec3::splat(-0.2), DVec3::splat(0.8), cells).unwrap();
-        let set = crate::polygonize::Settings::default();
+        let set = Settings::default();
         let (d, _) = dense::polygonize(&s, &l, &set).unwrap();
         assert!(!d.triangles.is_empty(), "{cells:?}");
         for corner_test in [true, false] {
-            let counting = Counting::new(&s);
-            let o = Settings {
+            let o = OctreeSettings {
                 corner_test,
                 ..Default::default()
             };
-            let (m, st) = polygonize(&counting, &l, &set, &o).unwrap();
-            let c = d.compare(&m);
-            assert_eq!((c.missing, c.extra), (0, 0), "{cells:?}");
-            assert_eq!(counting.evaluations(), st.evaluations, "{cells:?}");
+            check_equals_dense(&s, &l, &o, &d, &format!("{cells:?}"));
         }
     }
 }
@@ -109,17 +136,15 @@ fn wrong_rejections_are_repaired() {
         center: DVec3::new(0.01, 0.02, 0.03),
         radius: 0.6,
     });
-    let s = crate::polygonize::Settings::default();
-    let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
+    let (d, _) = dense::polygonize(&f, &l, &Settings::default()).unwrap();
     for corner_test in [true, false] {
-        let octree = Settings {
+        let octree = OctreeSettings {
             corner_test,
             ..Default::default()
         };
-        let (o, stats) = polygonize(&f, &l, &s, &octree).unwrap();
-        assert!(stats.cells_repaired > 0, "corner test {corner_test}");
-        let c = d.compare(&o);
-        assert_eq!((c.missing, c.extra), (0, 0), "corner test {corner_test}");
+        let what = format!("corner test {corner_test}");
+        let (o, stats) = check_equals_dense(&f, &l, &octree, &d, &what);
+        assert!(stats.cells_repaired > 0, "{what}");
         // One vertex per crossed edge, shared across the seams: closed like the dense mesh.
         assert_eq!(
             o.vertices.len(),
@@ -132,9 +157,8 @@ fn wrong_rejections_are_repaired() {
     let (o, stats) = polygonize(
         &f,
         &l,
-        &s,
-        &Settings {
-            safety: 3.0,
+        &OctreeSettings {
+            safety: Some(3.0),
             ..Default::default()
         },
     )
@@ -160,13 +184,12 @@ fn same_mesh_and_count_on_any_number_of_threads() {
         major: 0.55,
         minor: 0.2,
     };
-    let s = crate::polygonize::Settings::default();
     let run = |threads: usize, f: &(dyn Field + Sync)| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        pool.install(|| polygonize(f, &l, &s, &Settings::default()).unwrap())
+        pool.install(|| polygonize(f, &l, &OctreeSettings::default()).unwrap())
     };
     for f in [&Over(t) as &(dyn Field + Sync), &t] {
         let (one, st1) = run(1, f);
@@ -200,20 +223,52 @@ fn start_level_matters_when_far_values_overshoot() {
         center: DVec3::new(0.51, 0.02, 0.03),
         radius: 0.3,
     });
-    let s = crate::polygonize::Settings::default();
-    let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
-    let coarse = Settings {
+    let (d, _) = dense::polygonize(&f, &l, &Settings::default()).unwrap();
+    let coarse = OctreeSettings {
         start_level: Some(1),
         ..Default::default()
     };
-    let (o, _) = polygonize(&f, &l, &s, &coarse).unwrap();
+    let (o, _) = polygonize(&f, &l, &coarse).unwrap();
     assert!(d.compare(&o).missing > 0);
-    let deep = Settings {
+    let deep = OctreeSettings {
         start_level: Some(6),
         ..Default::default()
     };
-    let (o, _) = polygonize(&f, &l, &s, &deep).unwrap();
+    let (o, _) = polygonize(&f, &l, &deep).unwrap();
     assert_eq!(d.compare(&o).missing, 0);
+}
+
+#[test]
+fn safety_is_given_or_derived_from_the_field() {
+    use crate::field::blob::{BlobField, BlobSettings, PerPrimitive};
+    let sphere = Sphere {
+        center: DVec3::ZERO,
+        radius: 0.5,
+    };
+    let blob = BlobField::new(
+        &[DVec3::ZERO],
+        PerPrimitive::All(0.5),
+        PerPrimitive::All(2.0),
+        0.5,
+        BlobSettings::default(),
+    )
+    .unwrap();
+    // Derived: 1 for a field without a gradient bound, the bound where it is larger.
+    let derived = OctreeSettings::default();
+    assert_eq!(derived.safety_for(&sphere).unwrap(), 1.0);
+    let bound = blob.gradient_bound();
+    assert!(bound > 1.0);
+    assert_eq!(derived.safety_for(&blob).unwrap(), bound);
+    assert_eq!(derived.safety_for(&Counting::new(&blob)).unwrap(), bound);
+    // Given: as it is, when positive and finite.
+    let given = |safety| OctreeSettings {
+        safety: Some(safety),
+        ..Default::default()
+    };
+    assert_eq!(given(0.5).safety_for(&blob).unwrap(), 0.5);
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(given(bad).safety_for(&sphere).is_err(), "{bad}");
+    }
 }
 
 /// `SHARED` holds exactly the points a block of 2 × 2 × 2 cells has in common with each

@@ -1,0 +1,149 @@
+//! The crossed leaves' triangles, made in parallel and numbered as a serial sweep would.
+
+use super::block::corner;
+use super::leaves::CrossedLeaf;
+use super::run::Run;
+use super::store::{atomic_u32s, NONE};
+use crate::field::Field;
+use crate::lattice::{edge_crossing, Lattice};
+use crate::mesh::Mesh;
+use crate::polygonize::table::{EDGES, EDGE_AXIS};
+use crate::polygonize::{CaseTable, Stats};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::Instant;
+
+impl<F: Field + ?Sized> Run<'_, F> {
+    /// The mesh of the crossed `leaves` (without normals), and the run's stats; everything
+    /// else the run holds is dropped first.
+    pub(super) fn triangulate(mut self, leaves: Vec<CrossedLeaf>) -> (Mesh, Stats) {
+        self.stats.cells_crossed = leaves.len() as u64;
+        let t = Instant::now();
+        let values = std::mem::take(&mut self.store.values);
+        let (table, lattice) = (self.table, self.lattice);
+        let mut stats = std::mem::take(&mut self.stats);
+        drop(self);
+        let mesh = triangulate(table, lattice, &values, &leaves);
+        drop((values, leaves));
+        stats.add_time("triangulate", t);
+        (mesh, stats)
+    }
+}
+
+/// The triangles of the crossed leaves, with a vertex on each crossed edge, made in parallel
+/// but numbered as the serial loop over the leaves would number them: each edge vertex in the
+/// order of its first use (by leaf, then triangle, then edge). The first leaf that uses an edge
+/// (found with `fetch_min` on the edge's entry, keyed by the value index of its lower end and
+/// its axis) makes its vertex; the leaves' counts of vertices made give where each leaf's
+/// vertices start.
+fn triangulate(
+    table: &CaseTable,
+    lattice: &Lattice,
+    values: &[f64],
+    leaves: &[CrossedLeaf],
+) -> Mesh {
+    // The cell edges each case's triangles use.
+    let used: [u16; 256] = std::array::from_fn(|c| {
+        table
+            .triangles(c as u8)
+            .iter()
+            .flatten()
+            .fold(0, |m, &e| m | 1 << e)
+    });
+    let key = |l: &CrossedLeaf, e: usize| {
+        3 * l.corners[EDGES[e][0] as usize] as usize + EDGE_AXIS[e] as usize
+    };
+    // Per edge: the first leaf that uses it, then (once the leaves have their vertices) its
+    // vertex.
+    let mut entries = vec![NONE; 3 * values.len()];
+    let entry = atomic_u32s(&mut entries);
+    leaves
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(i, l)| {
+            let i = i as u32;
+            let mut m = used[l.case as usize];
+            while m != 0 {
+                let e = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let a = &entry[key(l, e)];
+                if a.load(Relaxed) > i {
+                    a.fetch_min(i, Relaxed);
+                }
+            }
+        });
+    // The edges each leaf makes the vertex of.
+    let makes: Vec<u16> = leaves
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .map(|(i, l)| {
+            let mut made = 0;
+            let mut m = used[l.case as usize];
+            while m != 0 {
+                let e = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if entry[key(l, e)].load(Relaxed) == i as u32 {
+                    made |= 1 << e;
+                }
+            }
+            made
+        })
+        .collect();
+    // Where each leaf's vertices start, and how many vertices and triangles each makes.
+    let mut start = Vec::with_capacity(leaves.len());
+    let mut made_count = Vec::with_capacity(leaves.len());
+    let mut n = 0u32;
+    for m in &makes {
+        start.push(n);
+        made_count.push(m.count_ones());
+        n += m.count_ones();
+    }
+    let triangle_count: Vec<u32> = leaves
+        .iter()
+        .map(|l| table.triangles(l.case).len() as u32)
+        .collect();
+    let vertices: Vec<DVec3> = crate::memory::collect_counted(&made_count, |i| {
+        let (l, made, first) = (&leaves[i], makes[i], start[i]);
+        // The vertices in order of first use in the leaf's triangles.
+        let mut order = [0u8; 12];
+        let (mut k, mut left) = (0, made);
+        for t in table.triangles(l.case) {
+            for &e in t {
+                if left & 1 << e != 0 {
+                    left &= !(1 << e);
+                    order[k] = e;
+                    entry[key(l, e as usize)].store(first + k as u32, Relaxed);
+                    k += 1;
+                }
+            }
+        }
+        (0..k).map(move |j| {
+            let [ka, kb] = EDGES[order[j] as usize].map(|k| k as usize);
+            let (fa, fb) = (
+                values[l.corners[ka] as usize],
+                values[l.corners[kb] as usize],
+            );
+            edge_crossing(
+                lattice.point(corner(l.origin, ka)),
+                lattice.point(corner(l.origin, kb)),
+                fa,
+                fb,
+            )
+        })
+    });
+    let triangles: Vec<[u32; 3]> = crate::memory::collect_counted(&triangle_count, |i| {
+        let l = &leaves[i];
+        table
+            .triangles(l.case)
+            .iter()
+            .map(move |t| t.map(|e| entry[key(l, e as usize)].load(Relaxed)))
+    });
+    Mesh {
+        vertices,
+        triangles,
+        ..Default::default()
+    }
+}
