@@ -148,6 +148,7 @@ impl Bricks {
     }
 
     /// Bricks in use in this call and in the pool.
+    #[cfg(test)]
     pub fn counts(&self) -> (usize, usize) {
         (self.used, self.pool.len())
     }

@@ -1,16 +1,16 @@
 //! Polygonizers: from a [`Field`] and a [`Lattice`] to a [`Mesh`] and [`Stats`].
 //!
-//! All of them share the lattice, the case table ([`table`]) and the edge-vertex arithmetic
-//! ([`cell`]), so they produce the same triangles wherever they find the surface: the dense
+//! All of them share the lattice, the case table (`table`) and the edge-vertex arithmetic
+//! (`cell`), so they produce the same triangles wherever they find the surface: the dense
 //! polygonizer is the reference the others are tested against.
 
 pub(crate) mod bits;
-pub mod bricks;
-pub mod cell;
+pub(crate) mod bricks;
+pub(crate) mod cell;
 pub mod dense;
 pub mod octree;
 pub mod sparse;
-pub mod table;
+pub(crate) mod table;
 pub mod tracking;
 
 pub use table::{Ambiguity, CaseTable};

@@ -1,5 +1,5 @@
 //! Times the radial-basis kernel sums on one thread, for tuning the vector paths:
-//! `cargo run --release --example kernel_timing -- [centres] [blocks] [rounds]`
+//! `cargo bench --bench kernel_timing -- [centres] [blocks] [rounds]`
 //! (prints nanoseconds per point-centre pair for values, values with gradients, and gradients).
 use implicitmesh::field::kernel::{
     block_gradients, block_values, block_values_gradients, Block, Centres, Triharmonic, LANES,
@@ -7,7 +7,7 @@ use implicitmesh::field::kernel::{
 use std::time::Instant;
 
 fn main() {
-    let a: Vec<String> = std::env::args().collect();
+    let a: Vec<String> = std::env::args().filter(|s| s != "--bench").collect();
     let n: usize = a.get(1).map_or(1600, |s| s.parse().unwrap());
     let nb: usize = a.get(2).map_or(2048, |s| s.parse().unwrap());
     let rounds: usize = a.get(3).map_or(7, |s| s.parse().unwrap());

@@ -1,6 +1,6 @@
 //! Times the octree polygonizer against dense marching cubes on a variational surface fitted to
 //! a PLY mesh, in paired rounds (octree, then dense), for profiling:
-//! `cargo run --release --example octree_timing -- path/to/mesh.ply [resolution] [rounds] [octree]`
+//! `cargo bench --bench octree_timing -- path/to/mesh.ply [resolution] [rounds] [octree]`
 //! (over [-1, 1]³, d = 0.015 as in the benchmark; prints the octree's phases of its fastest run;
 //! `octree` skips dense, for profiles of the octree alone).
 use glam::DVec3;
@@ -15,7 +15,7 @@ mod ply;
 use ply::read_ply;
 
 fn main() {
-    let a: Vec<String> = std::env::args().collect();
+    let a: Vec<String> = std::env::args().filter(|s| s != "--bench").collect();
     let path = a.get(1).expect("mesh path");
     let res: u32 = a.get(2).map_or(128, |s| s.parse().unwrap());
     let rounds: usize = a.get(3).map_or(7, |s| s.parse().unwrap());

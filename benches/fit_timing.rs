@@ -1,5 +1,5 @@
 //! Times the phases of a variational fit and of batched evaluation on a PLY mesh:
-//! `cargo run --release --example fit_timing -- path/to/mesh.ply`.
+//! `cargo bench --bench fit_timing -- path/to/mesh.ply`.
 use glam::DVec3;
 use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::field::Field;
@@ -10,7 +10,7 @@ mod ply;
 use ply::read_ply;
 
 fn main() {
-    let path = std::env::args().nth(1).expect("mesh path");
+    let path = std::env::args().filter(|s| s != "--bench").nth(1).expect("mesh path");
     let (v, f) = read_ply(&path);
     for _ in 0..3 {
         let t = Instant::now();

@@ -1,5 +1,5 @@
 //! Times the polygonizers on random blob fields (the benchmark cases), for profiling:
-//! `cargo run --release --example blob_timing -- 200 0.25 128 dense [repeats] [voxel_size]`
+//! `cargo bench --bench blob_timing -- 200 0.25 128 dense [repeats] [voxel_size]`
 //! (method `dense`, `sparse`, `tracking` or `blocks` (the `Tessellator`'s walk block by block); prints the phases of the last run and the median).
 use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
@@ -9,7 +9,7 @@ use implicitmesh::polygonize::{dense, sparse, tracking, Settings};
 use std::time::Instant;
 
 fn main() {
-    let a: Vec<String> = std::env::args().collect();
+    let a: Vec<String> = std::env::args().filter(|s| s != "--bench").collect();
     let n: usize = a.get(1).map_or(200, |s| s.parse().unwrap());
     let r: f64 = a.get(2).map_or(0.25, |s| s.parse().unwrap());
     let res: u32 = a.get(3).map_or(128, |s| s.parse().unwrap());
