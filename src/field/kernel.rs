@@ -59,6 +59,15 @@ impl Kernel {
         }
     }
 
+    /// φ as a function of r².
+    pub fn phi_r2(self, r2: f64) -> f64 {
+        match self {
+            Kernel::Triharmonic => Triharmonic::phi_r2(r2),
+            Kernel::Biharmonic => Biharmonic::phi_r2(r2),
+            Kernel::ThinPlate => ThinPlate::phi_r2(r2),
+        }
+    }
+
     /// φ'(r)/r, so that ∇φ(|x − c|) = (φ'(r)/r)(x − c).
     pub fn dphi_over_r(self, r: f64) -> f64 {
         match self {

@@ -160,7 +160,7 @@ impl VariationalSurface {
         let smoothing = settings.smoothing * scale.powi(kernel.degree());
         let solver = SaddleSolver::with_parallelism(
             &np,
-            move |r| kernel.phi(r),
+            move |r2| kernel.phi_r2(r2),
             smoothing,
             kernel.cpd_sign(),
             par,

@@ -70,7 +70,7 @@ fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) 
 /// then copied to the upper (|c_i − c_j| and |c_j − c_i| are the same number).
 fn assemble(
     points: &[DVec3],
-    phi: &(impl Fn(f64) -> f64 + Sync),
+    phi_r2: &(impl Fn(f64) -> f64 + Sync),
     smoothing: f64,
     par: Par,
 ) -> Result<Vec<f64>> {
@@ -89,9 +89,10 @@ fn assemble(
             let cj = points[j];
             let (x, y, z, col) = (&xs[j..], &ys[j..], &zs[j..], &mut col[j..]);
             for (t, out) in col.iter_mut().enumerate() {
-                // |p_i − c_j| as DVec3::length computes it.
+                // |p_i − c_j|² as the evaluator computes it (kernel.rs), so that the matrix
+                // holds the numbers evaluation gives.
                 let (dx, dy, dz) = (x[t] - cj.x, y[t] - cj.y, z[t] - cj.z);
-                *out = phi((dx * dx + dy * dy + dz * dz).sqrt());
+                *out = phi_r2(dx * dx + dy * dy + dz * dz);
             }
             col[0] += smoothing;
         });
@@ -184,15 +185,16 @@ fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
 }
 
 impl SaddleSolver {
-    /// Factorizes the system for `points` (already normalised). `phi` is the kernel; `sign` is
+    /// Factorizes the system for `points` (already normalised). `phi_r2` is the kernel as a
+    /// function of r² (see [`super::kernel::RadialFn`]); `sign` is
     /// +1 for kernels conditionally positive definite of order 2 (r³, r² log r) and −1 for −r.
     pub fn new(
         points: &[DVec3],
-        phi: impl Fn(f64) -> f64 + Sync,
+        phi_r2: impl Fn(f64) -> f64 + Sync,
         smoothing: f64,
         sign: f64,
     ) -> Result<Self> {
-        Self::with_parallelism(points, phi, smoothing, sign, faer::get_global_parallelism())
+        Self::with_parallelism(points, phi_r2, smoothing, sign, faer::get_global_parallelism())
     }
 
     /// As [`SaddleSolver::new`], with the parallelism of the assembly and factorization:
@@ -200,18 +202,18 @@ impl SaddleSolver {
     /// this thread's [`cancel`] token is set.
     pub fn with_parallelism(
         points: &[DVec3],
-        phi: impl Fn(f64) -> f64 + Sync,
+        phi_r2: impl Fn(f64) -> f64 + Sync,
         smoothing: f64,
         sign: f64,
         par: Par,
     ) -> Result<Self> {
         let n = points.len();
-        let a = assemble(points, &phi, smoothing, par)?;
+        let a = assemble(points, &phi_r2, smoothing, par)?;
         if let Some(f) = Self::null_space(points, a, sign, par)? {
             return Ok(SaddleSolver { n, factor: f });
         }
         // Fallback: the whole (n + 4) × (n + 4) saddle-point matrix with LBLᵀ.
-        let a = assemble(points, &phi, smoothing, par)?;
+        let a = assemble(points, &phi_r2, smoothing, par)?;
         let m = n + 4;
         let mut full = vec![0.0f64; m * m];
         for_columns(&mut full, m, par, |j, col| {
@@ -304,22 +306,19 @@ impl SaddleSolver {
         }
         // QᵀAQ = A − V Zᵀ − Z Vᵀ with W = AV, S = Tᵀ(VᵀW)T, Z = WT − ½VS: one pass to read A
         // (W) and one to update it.
-        // The four dot products of a column with V in one pass, each summed in index order
-        // from −0.0 (as `Iterator::sum`).
-        let wcol = |c: &[f64]| {
-            let mut o = [-0.0f64; 4];
-            for (q, x) in c.iter().enumerate() {
-                for (k, ok) in o.iter_mut().enumerate() {
-                    *ok += x * v[k * n + q];
-                }
-            }
-            o
-        };
-        let w: Vec<[f64; 4]> = if matches!(par, Par::Seq) {
-            a.chunks(n).map(wcol).collect()
-        } else {
-            a.par_chunks(n).map(wcol).collect()
-        };
+        // W = AV (A is symmetric and whole: `assemble` mirrors it).
+        let mut wm = Mat::<f64>::zeros(n, 4);
+        faer::linalg::matmul::matmul(
+            wm.as_mut(),
+            Accum::Replace,
+            MatRef::from_column_major_slice(&a, n, n),
+            MatRef::from_column_major_slice(&v, n, 4),
+            1.0,
+            par,
+        );
+        let w: Vec<[f64; 4]> = (0..n)
+            .map(|q| std::array::from_fn(|k| wm[(q, k)]))
+            .collect();
         let mut m = [[0.0; 4]; 4];
         for i in 0..4 {
             for j in 0..4 {
@@ -510,8 +509,8 @@ mod tests {
     use super::*;
     use crate::field::testing::random_points;
 
-    fn check(points: &[DVec3], phi: fn(f64) -> f64, smoothing: f64, sign: f64, expect: &str) {
-        let s = SaddleSolver::new(points, phi, smoothing, sign).unwrap();
+    fn check(points: &[DVec3], phi_r2: fn(f64) -> f64, smoothing: f64, sign: f64, expect: &str) {
+        let s = SaddleSolver::new(points, phi_r2, smoothing, sign).unwrap();
         assert_eq!(s.method(), expect);
         let n = points.len();
         let f: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
@@ -520,7 +519,7 @@ mod tests {
         for i in 0..n {
             let c = points[i];
             let row: f64 = (0..n)
-                .map(|j| phi((c - points[j]).length()) * lam[j])
+                .map(|j| phi_r2((c - points[j]).length_squared()) * lam[j])
                 .sum::<f64>()
                 + smoothing * lam[i]
                 + a[0]
@@ -543,23 +542,23 @@ mod tests {
     #[test]
     fn null_space_cholesky_solves_the_saddle_system() {
         let p = random_points(120, -1.0, 1.0, 11);
-        check(&p, |r| r * r * r, 0.0, 1.0, "cholesky");
-        check(&p, |r| r, 0.0, -1.0, "cholesky");
+        check(&p, |r2| r2 * r2.sqrt(), 0.0, 1.0, "cholesky");
+        check(&p, f64::sqrt, 0.0, -1.0, "cholesky");
         check(
             &p,
-            |r| if r > 0.0 { r * r * r.ln() } else { 0.0 },
+            |r2| if r2 > 0.0 { 0.5 * r2 * r2.ln() } else { 0.0 },
             0.0,
             1.0,
             "cholesky",
         );
-        check(&p, |r| r * r * r, 0.01, 1.0, "cholesky");
+        check(&p, |r2| r2 * r2.sqrt(), 0.01, 1.0, "cholesky");
     }
 
     #[test]
     fn falls_back_to_lblt_when_not_definite() {
         let p = random_points(60, -1.0, 1.0, 5);
         // Wrong sign: −r³ on the null space is negative definite, so Cholesky fails.
-        check(&p, |r| -r * r * r, 0.0, 1.0, "lblt");
+        check(&p, |r2| -r2 * r2.sqrt(), 0.0, 1.0, "lblt");
     }
 
     /// Above one block of columns the factorization runs in steps; it solves the system as the
@@ -569,7 +568,7 @@ mod tests {
     fn cholesky_in_steps_solves_large_systems() {
         let p = random_points(COLUMNS_PER_STEP + 300, -1.0, 1.0, 3);
         // Smoothed: well conditioned at this size, so the residual check is about the steps.
-        check(&p, |r| r * r * r, 0.01, 1.0, "cholesky");
+        check(&p, |r2| r2 * r2.sqrt(), 0.01, 1.0, "cholesky");
         let m = 2 * COLUMNS_PER_STEP + 77;
         let b = Mat::<f64>::from_fn(m, m, |i, j| ((i * 7 + j * 13) % 17) as f64 / 17.0 - 0.5);
         let spd = &b * b.transpose() + Mat::<f64>::identity(m, m) * (m as f64);
@@ -609,7 +608,7 @@ mod tests {
         let p = random_points(COLUMNS_PER_STEP + 300, -1.0, 1.0, 3);
         let t = cancel::Token::new();
         t.stop();
-        let r = cancel::run_under(t, || SaddleSolver::new(&p, |r| r * r * r, 0.0, 1.0));
+        let r = cancel::run_under(t, || SaddleSolver::new(&p, |r2| r2 * r2.sqrt(), 0.0, 1.0));
         assert!(matches!(r, Err(crate::Error::Interrupted)));
     }
 }
