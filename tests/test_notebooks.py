@@ -25,7 +25,8 @@ CELL_TIMEOUT = 600  # seconds per cell
 def test_notebooks_are_present_and_saved_without_outputs():
     nbformat = pytest.importorskip("nbformat", reason="nbformat is not installed (pip install '.[test]')")
     names = {p.name for p in NOTEBOOKS}
-    assert {"cuno_distance.ipynb", "cuno_tables.ipynb", "jin_subdivision.ipynb", "triquet_blobs.ipynb"} <= names, names
+    assert {"cuno_distance.ipynb", "cuno_tables.ipynb", "jin_subdivision.ipynb", "triquet_blobs.ipynb",
+            "reconstruction_at_scale.ipynb"} <= names, names
     for path in NOTEBOOKS:
         nb = nbformat.read(path, as_version=4)
         nbformat.validate(nb)
