@@ -202,3 +202,17 @@ def test_ctrl_c_stops_a_global_fit(scan):
     assert not counts or counts[-1] < 2 * 4000 - 4
     s = im.VariationalSurface.fit(p[::100], n[::100], method="global")
     assert np.abs(s.evaluate(p[::100])).max() < 1e-6
+
+
+def test_ctrl_c_stops_a_long_evaluation(surface):
+    # 2·10⁶ points against 3,000 centres: seconds of work in batches of 65,536 points.
+    q = np.random.default_rng(0).uniform(-1, 1, (2_000_000, 3))
+    timer = interrupt_after(0.3)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            surface.evaluate(q)
+    finally:
+        timer.cancel()
+    # The same values as before, batch by batch.
+    small = q[:100_000]
+    assert np.array_equal(surface.evaluate(small)[:1000], surface.evaluate(small[:1000]))

@@ -142,13 +142,25 @@ fn batch<T: Clone + Default + Send>(
     obj: &Bound<'_, PyAny>,
     eval: impl Fn(&[DVec3], &mut [T]) + Sync,
 ) -> PyResult<Vec<T>> {
+    /// Points per call of `eval`; a batch of more stops on Ctrl-C between them.
+    const CHUNK: usize = 1 << 16;
     let p = points(obj, "points")?;
     crate::error::check_finite_points("points", &p)?;
-    Ok(py.detach(|| {
-        let mut out = vec![T::default(); p.len()];
-        eval(&p, &mut out);
-        out
-    }))
+    let n = p.len();
+    let work = || -> crate::Result<Vec<T>> {
+        let mut out = vec![T::default(); n];
+        for (pc, oc) in p.chunks(CHUNK).zip(out.chunks_mut(CHUNK)) {
+            crate::cancel::check()?;
+            eval(pc, oc);
+            crate::cancel::advance(pc.len() as u64)?;
+        }
+        Ok(out)
+    };
+    if n <= CHUNK {
+        Ok(py.detach(work)?)
+    } else {
+        super::interrupt::run(py, None, false, work)
+    }
 }
 
 /// `field.values` at points given from Python: (N, 3) → (N,) float64.
