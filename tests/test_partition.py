@@ -191,3 +191,17 @@ def test_method_and_bad_input_errors():
         VariationalSurface.fit(p, n, method="partition", memory_limit=1000)
     with pytest.raises(ValueError, match="values"):
         VariationalSurface.interpolate(p, p[:-1, 0], method="partition")
+
+
+def test_partition_options_change_the_patches_and_are_checked():
+    p, n = im.shapes.fibonacci_sphere(3000)
+    a = im.VariationalSurface.fit(p, n, method="partition")
+    b = im.VariationalSurface.fit(p, n, method="partition", partition_options={"max_per_leaf": 200, "max_patch": 600})
+    assert len(b.patches["sizes"]) < len(a.patches["sizes"])
+    assert np.abs(b.evaluate(p)).max() < 1e-6
+    with pytest.raises(ValueError, match="partition_options"):
+        im.VariationalSurface.fit(p, n, partition_options={"patch": 3})
+    with pytest.raises(ValueError, match="partition_options"):
+        im.VariationalSurface.fit(p, n, partition_options={"overlap": "big"})
+    with pytest.raises(ValueError, match="overlap"):
+        im.VariationalSurface.fit(p, n, method="partition", partition_options={"overlap": 0.5})

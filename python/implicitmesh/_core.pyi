@@ -24,6 +24,7 @@ class VariationalSurface:
         memory_limit: int | None = None,
         method: FitMethod = "auto",
         progress: bool | Callable[[int], object] | None = None,
+        partition_options: dict[str, int | float] | None = None,
     ) -> VariationalSurface: ...
     @staticmethod
     def from_mesh(
@@ -37,6 +38,7 @@ class VariationalSurface:
         memory_limit: int | None = None,
         method: FitMethod = "auto",
         progress: bool | Callable[[int], object] | None = None,
+        partition_options: dict[str, int | float] | None = None,
     ) -> VariationalSurface: ...
     @staticmethod
     def interpolate(
@@ -48,6 +50,7 @@ class VariationalSurface:
         memory_limit: int | None = None,
         method: FitMethod = "auto",
         progress: bool | Callable[[int], object] | None = None,
+        partition_options: dict[str, int | float] | None = None,
     ) -> VariationalSurface: ...
     def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
     def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...

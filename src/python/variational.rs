@@ -260,6 +260,13 @@ impl PyVariationalSurface {
     ///     a line on standard error); a callable gets that count (an int) about every 50 ms. The
     ///     partition fit counts patch by patch; the global fit counts the columns of its system
     ///     factorized, in steps of 2048.
+    /// partition_options : dict, optional
+    ///     The partition fit's patches: ``"max_per_leaf"`` (int, default 96: the octree splits
+    ///     leaves holding more constraints), ``"max_patch"`` (int, default 400: and leaves whose
+    ///     patch would hold more), ``"min_points"`` (int, default 256: smaller patches complete
+    ///     their system with constraints from further away) and ``"overlap"`` (float, default
+    ///     1.25: a patch's radius over its leaf's half-diagonal). Smaller patches fit faster and
+    ///     risk spurious surface away from sparse data.
     ///
     /// Returns
     /// -------
@@ -332,7 +339,7 @@ impl PyVariationalSurface {
     /// vertices : (V, 3) float64
     /// faces : (F, 3) int
     ///     Vertex indices of each triangle.
-    /// d, w, kernel, smoothing, memory_limit, method, progress
+    /// d, w, kernel, smoothing, memory_limit, method, progress, partition_options
     ///     As for :meth:`fit` (``"auto"``: global below 1000 vertices).
     ///
     /// Raises
@@ -379,7 +386,7 @@ impl PyVariationalSurface {
     /// ----------
     /// points : (N, 3) float64
     /// values : (N,) float64
-    /// kernel, smoothing, memory_limit, method, progress
+    /// kernel, smoothing, memory_limit, method, progress, partition_options
     ///     As for :meth:`fit` (``"auto"``: global below 2000 points).
     ///
     /// Returns
