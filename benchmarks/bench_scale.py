@@ -1,5 +1,7 @@
 """Surface reconstruction from oriented points at scan scale: our variational surface (fit with
-``method="auto"``, octree polygonization) against Open3D's screened Poisson, in one run.
+``method="auto"``, octree polygonization) against Open3D's screened Poisson and ferreus-rbf, in
+one run, each peer at the same number of cells as ours (Poisson depth 8 and 10: 256 and 1024
+cells; ferreus-rbf's isosurface at 128³).
 
 Every method runs each size in a fresh process, so that its peak resident size (VmHWM in
 /proc/self/status) is its own, on the same points: sampled uniformly on a ``_hires`` mesh with
@@ -25,10 +27,14 @@ from benchmarks.timing import ROOT, RunRecord, fmt_ratio, fmt_s, md_table, run_m
 
 MESH = ROOT / "tests" / "data" / "meshes"
 MODEL = "knot"
-#: Points per case (full, quick) and the methods run at each size.
+#: Points per case (full, quick) and the methods run at each size, ours beside its peer.
 SIZES = {False: (10_000, 100_000, 1_000_000), True: (10_000,)}
-OURS = {"ours-256": 256, "ours-512": 512}
+OURS = {"ours-128": 128, "ours-256": 256, "ours-1024": 1024}
 POISSON = {"poisson-8": 8, "poisson-10": 10}
+PEER = {"ours-128": "ferreus-128", "ours-256": "poisson-8", "ours-1024": "poisson-10"}
+#: ferreus-rbf runs only at the smallest size (about a minute there; hours above).
+FERREUS_MAX_POINTS = 10_000
+QUICK_METHODS = ("ours-256", "poisson-8")
 #: Repetitions per case (each in its own process); the median is reported.
 RUNS = {False: 3, True: 1}
 #: Cases too long to repeat: run once.
@@ -71,6 +77,8 @@ def reconstruct(method: str, p, n) -> tuple[object, dict]:
         out["evaluations"] = int(mesh.stats["evaluations"])
         out["max_abs_f_at_points"] = float(np.max(np.abs(s.evaluate(p))))
         return mesh.to_trimesh(), out
+    if method == "ferreus-128":
+        return ferreus(p, n, 128, out)
     import open3d as o3d
 
     t = time.perf_counter()
@@ -82,6 +90,32 @@ def reconstruct(method: str, p, n) -> tuple[object, dict]:
     return trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.triangles), process=False), out
 
 
+def ferreus(p, n, cells: int, out: dict) -> tuple[object, dict]:
+    """ferreus-rbf (r³, linear drift, its default solver) fitted to the constraints our fit
+    places (the same interpolation problem), meshed by its own isosurfacer over our default
+    bounds with cells of the same volume as ours at ``cells``³."""
+    import numpy as np
+    import trimesh
+    import ferreus_rbf
+    from ferreus_rbf.interpolant_config import Drift, InterpolantSettings, RBFKernelType
+
+    import implicitmesh as im
+
+    s = im.VariationalSurface.fit(p, n, method="partition")  # only for its constraints and bounds
+    c = s.constraints
+    lo, hi = np.asarray(s.bounds)
+    t = time.perf_counter()
+    settings = InterpolantSettings(RBFKernelType.Cubic, drift=Drift.Linear)
+    f = ferreus_rbf.RBFInterpolator(np.ascontiguousarray(c["points"]), np.ascontiguousarray(c["values"]), settings)
+    out["fit_s"] = time.perf_counter() - t
+    h = float(np.max(hi - lo)) / cells
+    t = time.perf_counter()
+    iso = f.build_isosurface(np.concatenate([lo, hi]), h, 0.0)
+    out["polygonize_s"] = time.perf_counter() - t
+    out["max_abs_f_at_points"] = float(np.max(np.abs(np.ravel(f.evaluate(np.ascontiguousarray(p))))))
+    return trimesh.Trimesh(np.asarray(iso.vertices), np.asarray(iso.facets), process=False), out
+
+
 def one(method: str, n: int) -> dict:
     import numpy as np
     from scipy.spatial import cKDTree
@@ -90,7 +124,7 @@ def one(method: str, n: int) -> dict:
     p, normals, ref = samples(n)
     t = time.perf_counter()
     tm, out = reconstruct(method, p, normals)
-    out["total_s"] = time.perf_counter() - t
+    out["total_s"] = out.get("fit_s", 0.0) + out.get("polygonize_s", 0.0)
     out["peak_mib"] = vmhwm_mib()
     out.update(method=method, n=n, triangles=int(len(tm.faces)), watertight=bool(tm.is_watertight),
                euler=int(tm.euler_number), bodies=int(len(tm.split(only_watertight=False))))
@@ -120,16 +154,24 @@ def measure(a: argparse.Namespace) -> dict:
     run = RunRecord("benchmarks.bench_scale", a.quick)
     cases = []
     for n in SIZES[a.quick]:
-        for method in (*OURS, *POISSON):
+        methods = [m for ours in OURS for m in (ours, PEER[ours])
+                   if not (m == "ferreus-128" and n > FERREUS_MAX_POINTS) and not (m == "ours-128" and n > FERREUS_MAX_POINTS)]
+        for method in QUICK_METHODS if a.quick else methods:
             repeats = 1 if n >= ONCE else RUNS[a.quick]
             log(f"{method}, {n:,} points, {repeats} run(s)")
             cases.append({"method": method, "n": n, "runs": [run_one(method, n) for _ in range(repeats)]})
-    return {"model": MODEL, "cases": cases, "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "implicitmesh"))}
+    return {"model": MODEL, "cases": cases,
+            "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "ferreus_rbf", "implicitmesh"))}
 
 
 def median(runs: list[dict], key: str) -> float | None:
     v = [r[key] for r in runs if key in r]
     return statistics.median(v) if v else None
+
+
+def by_method(raw: dict) -> list[str]:
+    """The methods in the order they ran."""
+    return list(dict.fromkeys(c["method"] for c in raw["cases"]))
 
 
 def render(raw: dict) -> str:
@@ -138,21 +180,20 @@ def render(raw: dict) -> str:
     sizes = sorted({c["n"] for c in raw["cases"]})
     rows = []
     for n in sizes:
-        poisson_best = min((median(by[(m, n)], "total_s") or float("inf")) for m in POISSON if (m, n) in by)
-        for method in (*OURS, *POISSON):
-            runs = by.get((method, n))
-            if not runs:
-                continue
+        for method in [m for m in by_method(raw) if (m, n) in by]:
+            runs = by[(method, n)]
             if "error" in runs[0]:
                 rows.append([f"{n:,}", method, f"failed: {runs[0]['error']}"] + [""] * 8)
                 continue
             r0 = runs[0]
-            phases = (f"{fmt_s(median(runs, 'fit_s'))} + {fmt_s(median(runs, 'polygonize_s'))}"
-                      if method in OURS else fmt_s(median(runs, "fit_s")))
+            phases = f"{fmt_s(median(runs, 'fit_s'))} + {fmt_s(median(runs, 'polygonize_s'))}" if "polygonize_s" in r0 \
+                else fmt_s(median(runs, "fit_s"))
             total = median(runs, "total_s")
+            peer = by.get((PEER.get(method), n))
+            ratio = fmt_ratio(median(peer, "total_s"), total) if peer and "error" not in peer[0] else ""
+            label = method + (f" ({r0['fit_method']})" if "fit_method" in r0 else "")
             rows.append([
-                f"{n:,}", method + (f" ({r0['fit_method']})" if method in OURS else ""), phases, fmt_s(total),
-                fmt_ratio(poisson_best, total) if method in OURS else "", f"{median(runs, 'peak_mib'):,.0f}",
+                f"{n:,}", label, phases, fmt_s(total), ratio, f"{median(runs, 'peak_mib'):,.0f}",
                 f"{r0['triangles']:,}", f"{median(runs, 'chamfer_over_diagonal'):.2e}",
                 f"{median(runs, 'hausdorff_over_diagonal'):.1e}",
                 f"{'yes' if r0['watertight'] else 'no'}, χ = {r0['euler']}, {r0['bodies']} bod{'y' if r0['bodies'] == 1 else 'ies'}",
@@ -164,18 +205,20 @@ def render(raw: dict) -> str:
         f"Run {run['date']} with `{run['command']}`. Points sampled uniformly on `{raw['model']}_hires` "
         "(`trimesh.sample.sample_surface`, seed 7) with their face normals; the same points for every method. "
         "Ours: `VariationalSurface.fit(points, normals)` (method \"auto\") then `polygonize(method=\"octree\", "
-        "normals=False)` at 256³ or 512³ over the default bounds. Open3D: "
+        "normals=False)` at 128³, 256³ or 1024³ over the default bounds. ferreus-rbf: r³ with linear drift, its "
+        "default solver, on the constraints our fit places, meshed by its `build_isosurface` at 128³. Open3D: "
         "`TriangleMesh.create_from_point_cloud_poisson(pcd, depth)` on a point cloud with the normals, its mesh "
         "untrimmed. Each case in a fresh process (peak resident size VmHWM its own); times are medians over the "
-        "runs column, seconds of wall-clock time including everything the method does from points to mesh. "
-        "Ratio: the faster Poisson depth's total over ours (above 1, ours is faster). Chamfer: the mean of the "
+        "runs column, seconds of wall-clock time from points to mesh. "
+        "Ratio: the peer's total over ours at the same cells (ferreus-rbf at 128, Poisson depth 8 at 256, "
+        "depth 10 at 1024; above 1, ours is faster). Chamfer: the mean of the "
         "two mean nearest distances between 2·10⁵ samples of each surface; Hausdorff the larger of the two "
         "largest; both as fractions of the reference's bounding-box diagonal. The reference mesh is closed, "
         "genus 1 (χ = 0).",
         "",
         run_markdown(run),
         "",
-        md_table(["points", "method", "seconds (fit + mesh)", "total (s)", "Poisson / ours", "peak MiB", "triangles",
+        md_table(["points", "method", "seconds (fit + mesh)", "total (s)", "peer / ours", "peak MiB", "triangles",
                   "Chamfer", "Hausdorff", "watertight, χ, bodies", "runs"], rows),
         "",
     ])
