@@ -10,7 +10,10 @@ mod ply;
 use ply::read_ply;
 
 fn main() {
-    let path = std::env::args().filter(|s| s != "--bench").nth(1).expect("mesh path");
+    let path = std::env::args()
+        .filter(|s| s != "--bench")
+        .nth(1)
+        .expect("mesh path");
     let (v, f) = read_ply(&path);
     for _ in 0..3 {
         let t = Instant::now();

@@ -1,6 +1,7 @@
 //! Which instruction set the hot loops run with, detected once per process.
 
-/// Instruction sets the hot loops are compiled for.
+/// Instruction sets the hot loops are compiled for: AVX2 stands for AVX2 with FMA (the kernel
+/// sums use both), and AVX-512 for AVX-512F with both of those.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(crate) enum Isa {
     Generic,
@@ -26,10 +27,10 @@ impl Isa {
         let mut isas = vec![Isa::Generic];
         #[cfg(target_arch = "x86_64")]
         {
-            if std::is_x86_feature_detected!("avx2") {
+            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
                 isas.push(Isa::Avx2);
             }
-            if std::is_x86_feature_detected!("avx512f") {
+            if std::is_x86_feature_detected!("avx512f") && isas.contains(&Isa::Avx2) {
                 isas.push(Isa::Avx512);
             }
         }
@@ -39,12 +40,15 @@ impl Isa {
     fn probe() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
+            let avx2_fma =
+                std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma");
             if std::env::var_os("IMPLICITMESH_NO_AVX512").is_none()
                 && std::is_x86_feature_detected!("avx512f")
+                && avx2_fma
             {
                 return Isa::Avx512;
             }
-            if std::is_x86_feature_detected!("avx2") {
+            if avx2_fma {
                 return Isa::Avx2;
             }
         }

@@ -456,8 +456,7 @@ mod avx512 {
 fn has_avx512() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::env::var_os("IMPLICITMESH_NO_AVX512").is_none()
-            && std::is_x86_feature_detected!("avx512f")
+        crate::simd::Isa::detect() == crate::simd::Isa::Avx512
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -477,15 +476,9 @@ fn avx512_kernel<K: 'static>() -> Option<bool> {
     }
 }
 
+/// AVX2 and FMA: present whenever [`crate::simd::Isa::detect`] is not generic.
 fn has_avx2_fma() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    crate::simd::Isa::detect() != crate::simd::Isa::Generic
 }
 
 /// Kernel sums for a run of blocks: `out[i]` = per-lane Σ_j w_j φ(|p − c_j|) for `blocks[i]`.

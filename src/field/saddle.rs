@@ -194,7 +194,13 @@ impl SaddleSolver {
         smoothing: f64,
         sign: f64,
     ) -> Result<Self> {
-        Self::with_parallelism(points, phi_r2, smoothing, sign, faer::get_global_parallelism())
+        Self::with_parallelism(
+            points,
+            phi_r2,
+            smoothing,
+            sign,
+            faer::get_global_parallelism(),
+        )
     }
 
     /// As [`SaddleSolver::new`], with the parallelism of the assembly and factorization:
