@@ -128,6 +128,41 @@ fn mirror_lower(a: &mut [f64], n: usize, par: Par) {
     }
 }
 
+/// Columns per piece of a trailing update: the factorization checks for interruption between
+/// pieces, so that a step of a large system stops within about a second.
+const COLUMNS_PER_UPDATE: usize = 256;
+
+/// The lower triangle of `a22 −= l21 l21ᵀ`, [`COLUMNS_PER_UPDATE`] columns at a time (the
+/// diagonal block of each piece as a lower triangle, the rows below it as a rectangle).
+fn update_trailing(mut a22: MatMut<'_, f64>, l21: MatRef<'_, f64>, par: Par) -> Result<()> {
+    let r = a22.nrows();
+    let mut c0 = 0;
+    while c0 < r {
+        cancel::check()?;
+        let w = COLUMNS_PER_UPDATE.min(r - c0);
+        let piece = a22.as_mut().submatrix_mut(c0, c0, r - c0, w);
+        let (diagonal, below) = piece.split_at_row_mut(w);
+        let (left, rest) = (
+            l21.submatrix(c0, 0, w, l21.ncols()),
+            l21.submatrix(c0 + w, 0, r - c0 - w, l21.ncols()),
+        );
+        tri::matmul(
+            diagonal,
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            left,
+            BlockStructure::Rectangular,
+            left.transpose(),
+            BlockStructure::Rectangular,
+            -1.0,
+            par,
+        );
+        faer::linalg::matmul::matmul(below, Accum::Add, rest, left.transpose(), -1.0, par);
+        c0 += w;
+    }
+    Ok(())
+}
+
 /// Cholesky factorization in place of the lower triangle of `a` (faer's, which cannot be
 /// stopped), by blocks of [`COLUMNS_PER_STEP`] columns when `a` is larger than one block, with
 /// a check for interruption between blocks and, unless `par` is [`Par::Seq`] (a fit inside
@@ -162,17 +197,7 @@ fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
             // L₂₁ = A₂₁ L₁₁⁻ᵀ, then the trailing block's lower triangle A₂₂ −= L₂₁ L₂₁ᵀ.
             let mut l21 = l21;
             solve_lower_triangular_in_place(l11.as_ref(), l21.as_mut().transpose_mut(), par);
-            tri::matmul(
-                a22,
-                BlockStructure::TriangularLower,
-                Accum::Add,
-                l21.as_ref(),
-                BlockStructure::Rectangular,
-                l21.as_ref().transpose(),
-                BlockStructure::Rectangular,
-                -1.0,
-                par,
-            );
+            update_trailing(a22, l21.as_ref(), par)?;
         }
         if matches!(par, Par::Seq) {
             cancel::check()?;
