@@ -39,7 +39,7 @@ from benchmarks.timing import (
 
 #: The sections of BENCHMARKS.md, in order: ``benchmarks.bench_NAME`` modules with
 #: ``measure(args) -> dict`` and ``render(raw) -> str``.
-SECTIONS = ("blobs", "octree", "partition", "rbf", "subdivision")
+SECTIONS = ("blobs", "octree", "partition", "rbf", "scale", "subdivision")
 #: The packages whose versions the header names.
 PACKAGES = ("numpy", "scipy", "scikit-image", "ferreus_rbf", "implicitmesh")
 
