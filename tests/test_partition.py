@@ -4,6 +4,8 @@ right genus) at a few thousand and at 5·10⁴ points, and the errors of the `me
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -142,6 +144,11 @@ def test_fifty_thousand_scan_points():
     assert np.max(np.abs(s.evaluate(p))) <= 1e-6
     mesh = im.polygonize(s, resolution=RES, method="octree", normals=False)
     closed_with_genus(mesh, 1)
+    dense = im.polygonize(s, resolution=RES, method="dense", normals=False)
+    c = im.compare(dense, mesh)
+    assert c["missing"] == 0 and c["extra"] == 0
+    back = pickle.loads(pickle.dumps(s))
+    assert np.array_equal(back.evaluate(p[:2000]), s.evaluate(p[:2000]))
 
 
 def test_interpolate_and_from_mesh_partition():
