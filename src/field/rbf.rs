@@ -13,7 +13,7 @@ pub use parts::SurfaceParts;
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::{
     block_gradients, block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel,
-    ThinPlate, Triharmonic, LANES,
+    RadialFn, ThinPlate, Triharmonic, LANES,
 };
 use super::saddle::SaddleSolver;
 use super::Field;
@@ -158,13 +158,19 @@ impl VariationalSurface {
         // Symmetric indefinite saddle-point system: see `saddle.rs` for the factorization
         // (null-space Cholesky, falling back to Bunch–Kaufman LBLᵀ) and why.
         let smoothing = settings.smoothing * scale.powi(kernel.degree());
-        let solver = SaddleSolver::with_parallelism(
-            &np,
-            move |r2| kernel.phi_r2(r2),
-            smoothing,
-            kernel.cpd_sign(),
-            par,
-        )?;
+        let sign = kernel.cpd_sign();
+        // One instance per kernel, so that the assembly's inner loop has no branch on it.
+        let solver = match kernel {
+            Kernel::Triharmonic => {
+                SaddleSolver::with_parallelism(&np, Triharmonic::phi_r2, smoothing, sign, par)
+            }
+            Kernel::Biharmonic => {
+                SaddleSolver::with_parallelism(&np, Biharmonic::phi_r2, smoothing, sign, par)
+            }
+            Kernel::ThinPlate => {
+                SaddleSolver::with_parallelism(&np, ThinPlate::phi_r2, smoothing, sign, par)
+            }
+        }?;
         let (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
         let mut x = (lam0, a0);
 

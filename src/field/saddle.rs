@@ -28,6 +28,7 @@ use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Conj, Mat, MatMut, MatRef, Par, Side};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::cell::RefCell;
 
 /// Columns per step of the assembly and of the blocked Cholesky factorization: the call
 /// checks for interruption and reports progress (columns done) between steps.
@@ -56,6 +57,44 @@ pub struct SaddleSolver {
     factor: Factor,
 }
 
+impl Drop for SaddleSolver {
+    fn drop(&mut self) {
+        if let Factor::NullSpace { l, .. } = &mut self.factor {
+            give_back(std::mem::take(l));
+        }
+    }
+}
+
+/// Largest matrix (in elements) a thread keeps for its next system: 8 MiB.
+const LARGEST_SPARE: usize = 1 << 20;
+
+thread_local! {
+    /// The storage of this thread's last factorized system, reused by its next one (a partition
+    /// fit solves thousands of systems of a few hundred constraints on each thread).
+    static SPARE: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+}
+
+/// `len` zeros, in this thread's spare storage when it has some.
+fn zeroed(len: usize) -> Vec<f64> {
+    let mut v = SPARE.with(|s| std::mem::take(&mut *s.borrow_mut()));
+    v.clear();
+    v.resize(len, 0.0);
+    v
+}
+
+/// Keeps `v` as this thread's spare storage unless it is larger than [`LARGEST_SPARE`] or
+/// smaller than the spare already kept.
+fn give_back(v: Vec<f64>) {
+    if v.capacity() <= LARGEST_SPARE {
+        SPARE.with(|s| {
+            let mut s = s.borrow_mut();
+            if v.capacity() > s.capacity() {
+                *s = v;
+            }
+        });
+    }
+}
+
 /// Calls `f(j, column j)` for the columns of the column-major `a` (`n` rows), over rayon unless
 /// `par` is [`Par::Seq`].
 fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) + Sync) {
@@ -66,8 +105,8 @@ fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) 
     }
 }
 
-/// Φ + sI, column-major: the lower triangle computed [`COLUMNS_PER_STEP`] columns at a time,
-/// then copied to the upper (|c_i − c_j| and |c_j − c_i| are the same number).
+/// The lower triangle of Φ + sI, column-major, computed [`COLUMNS_PER_STEP`] columns at a time
+/// (the strict upper triangle is left zero).
 fn assemble(
     points: &[DVec3],
     phi_r2: &(impl Fn(f64) -> f64 + Sync),
@@ -75,7 +114,7 @@ fn assemble(
     par: Par,
 ) -> Result<Vec<f64>> {
     let n = points.len();
-    let mut a = vec![0.0f64; n * n];
+    let mut a = zeroed(n * n);
     // The coordinates by axis, so that a column's loop reads contiguous slices.
     let (xs, ys, zs): (Vec<f64>, Vec<f64>, Vec<f64>) = (
         points.iter().map(|p| p.x).collect(),
@@ -87,77 +126,61 @@ fn assemble(
         for_columns(step, n, par, |k, col| {
             let j = s * COLUMNS_PER_STEP + k;
             let cj = points[j];
-            let (x, y, z, col) = (&xs[j..], &ys[j..], &zs[j..], &mut col[j..]);
-            for (t, out) in col.iter_mut().enumerate() {
+            let rows = xs[j..].iter().zip(&ys[j..]).zip(&zs[j..]);
+            for (out, ((x, y), z)) in col[j..].iter_mut().zip(rows) {
                 // |p_i − c_j|² as the evaluator computes it (kernel.rs), so that the matrix
                 // holds the numbers evaluation gives.
-                let (dx, dy, dz) = (x[t] - cj.x, y[t] - cj.y, z[t] - cj.z);
+                let (dx, dy, dz) = (x - cj.x, y - cj.y, z - cj.z);
                 *out = phi_r2(dx * dx + dy * dy + dz * dz);
             }
-            col[0] += smoothing;
+            col[j] += smoothing;
         });
     }
     cancel::check()?;
-    mirror_lower(&mut a, n, par);
     Ok(a)
-}
-
-/// Copies the strict lower triangle of the column-major `n × n` matrix `a` to its upper one.
-fn mirror_lower(a: &mut [f64], n: usize, par: Par) {
-    /// The matrix's storage, shared by the columns' tasks.
-    #[derive(Clone, Copy)]
-    struct Storage(*mut f64);
-    // SAFETY: the tasks below touch disjoint elements (see there).
-    unsafe impl Send for Storage {}
-    unsafe impl Sync for Storage {}
-    assert_eq!(a.len(), n * n);
-    let m = Storage(a.as_mut_ptr());
-    let column = move |j: usize| {
-        let m = m;
-        for i in 0..j {
-            // SAFETY: both indices are below n² = a.len(). Column j's task writes only the
-            // upper elements (i, j), i < j, and reads only lower ones (j, i), j > i: no element
-            // is written by two tasks or read by one while another writes it.
-            unsafe { *m.0.add(j * n + i) = *m.0.add(i * n + j) };
-        }
-    };
-    if matches!(par, Par::Seq) {
-        (0..n).for_each(column);
-    } else {
-        (0..n).into_par_iter().with_min_len(16).for_each(column);
-    }
 }
 
 /// Columns per piece of a trailing update: the factorization checks for interruption between
 /// pieces, so that a step of a large system stops within about a second.
 const COLUMNS_PER_UPDATE: usize = 256;
 
-/// The lower triangle of `a22 −= l21 l21ᵀ`, [`COLUMNS_PER_UPDATE`] columns at a time (the
-/// diagonal block of each piece as a lower triangle, the rows below it as a rectangle).
-fn update_trailing(mut a22: MatMut<'_, f64>, l21: MatRef<'_, f64>, par: Par) -> Result<()> {
-    let r = a22.nrows();
+/// The lower triangle of `a −= left rightᵀ`, [`COLUMNS_PER_UPDATE`] columns at a time (the
+/// diagonal block of each piece as a lower triangle, the rows below it as a rectangle), with a
+/// check for interruption between pieces.
+fn subtract_lower(
+    mut a: MatMut<'_, f64>,
+    left: MatRef<'_, f64>,
+    right: MatRef<'_, f64>,
+    par: Par,
+) -> Result<()> {
+    let r = a.nrows();
+    let k = left.ncols();
     let mut c0 = 0;
     while c0 < r {
         cancel::check()?;
         let w = COLUMNS_PER_UPDATE.min(r - c0);
-        let piece = a22.as_mut().submatrix_mut(c0, c0, r - c0, w);
+        let piece = a.as_mut().submatrix_mut(c0, c0, r - c0, w);
         let (diagonal, below) = piece.split_at_row_mut(w);
-        let (left, rest) = (
-            l21.submatrix(c0, 0, w, l21.ncols()),
-            l21.submatrix(c0 + w, 0, r - c0 - w, l21.ncols()),
-        );
+        let columns = right.submatrix(c0, 0, w, k).transpose();
         tri::matmul(
             diagonal,
             BlockStructure::TriangularLower,
             Accum::Add,
-            left,
+            left.submatrix(c0, 0, w, k),
             BlockStructure::Rectangular,
-            left.transpose(),
+            columns,
             BlockStructure::Rectangular,
             -1.0,
             par,
         );
-        faer::linalg::matmul::matmul(below, Accum::Add, rest, left.transpose(), -1.0, par);
+        faer::linalg::matmul::matmul(
+            below,
+            Accum::Add,
+            left.submatrix(c0 + w, 0, r - c0 - w, k),
+            columns,
+            -1.0,
+            par,
+        );
         c0 += w;
     }
     Ok(())
@@ -197,7 +220,7 @@ fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
             // L₂₁ = A₂₁ L₁₁⁻ᵀ, then the trailing block's lower triangle A₂₂ −= L₂₁ L₂₁ᵀ.
             let mut l21 = l21;
             solve_lower_triangular_in_place(l11.as_ref(), l21.as_mut().transpose_mut(), par);
-            update_trailing(a22, l21.as_ref(), par)?;
+            subtract_lower(a22, l21.as_ref(), l21.as_ref(), par)?;
         }
         if matches!(par, Par::Seq) {
             cancel::check()?;
@@ -337,13 +360,30 @@ impl SaddleSolver {
         }
         // QᵀAQ = A − V Zᵀ − Z Vᵀ with W = AV, S = Tᵀ(VᵀW)T, Z = WT − ½VS: one pass to read A
         // (W) and one to update it.
-        // W = AV (A is symmetric and whole: `assemble` mirrors it).
+        // W = AV, with A symmetric and stored as its lower triangle L: W = LV + (L − D)ᵀV.
         let mut wm = Mat::<f64>::zeros(n, 4);
-        faer::linalg::matmul::matmul(
+        let lower = MatRef::from_column_major_slice(&a, n, n);
+        let vm = MatRef::from_column_major_slice(&v, n, 4);
+        cancel::check()?;
+        tri::matmul(
             wm.as_mut(),
+            BlockStructure::Rectangular,
             Accum::Replace,
-            MatRef::from_column_major_slice(&a, n, n),
-            MatRef::from_column_major_slice(&v, n, 4),
+            lower,
+            BlockStructure::TriangularLower,
+            vm,
+            BlockStructure::Rectangular,
+            1.0,
+            par,
+        );
+        tri::matmul(
+            wm.as_mut(),
+            BlockStructure::Rectangular,
+            Accum::Add,
+            lower.transpose(),
+            BlockStructure::StrictTriangularUpper,
+            vm,
+            BlockStructure::Rectangular,
             1.0,
             par,
         );
@@ -386,38 +426,25 @@ impl SaddleSolver {
                 o
             })
             .collect();
-        // V and Z by columns, so that the update below runs down contiguous slices.
-        let zcols: [Vec<f64>; 4] = std::array::from_fn(|k| z.iter().map(|zq| zq[k]).collect());
-        // Only what is read afterwards: the first four rows (`top`) and the lower triangle
-        // (the Cholesky factorization's input).
-        for_columns(&mut a, n, par, |j, c| {
-            let vj: [f64; 4] = std::array::from_fn(|k| col(k)[j]);
-            let zj = z[j];
-            let update = |rows: std::ops::Range<usize>, c: &mut [f64], negate: bool| {
-                let vk: [&[f64]; 4] = std::array::from_fn(|k| &col(k)[rows.clone()]);
-                let zk: [&[f64]; 4] = std::array::from_fn(|k| &zcols[k][rows.clone()]);
-                let c = &mut c[rows];
-                for (t, x) in c.iter_mut().enumerate() {
-                    *x -= vk[0][t] * zj[0]
-                        + vk[1][t] * zj[1]
-                        + vk[2][t] * zj[2]
-                        + vk[3][t] * zj[3]
-                        + zk[0][t] * vj[0]
-                        + zk[1][t] * vj[1]
-                        + zk[2][t] * vj[2]
-                        + zk[3][t] * vj[3];
-                    if negate {
-                        *x = -*x;
-                    }
-                }
-            };
-            update(0..4.min(j), c, false);
-            // The trailing block (rows and columns from 4 on) changes sign for sign < 0.
-            update(j..n, c, sign < 0.0 && j >= 4);
-        });
+        // The lower triangle of A − [V Z][Z V]ᵀ, the only part read afterwards.
+        let left = Mat::<f64>::from_fn(n, 8, |q, k| if k < 4 { vm[(q, k)] } else { z[q][k - 4] });
+        let right = Mat::<f64>::from_fn(n, 8, |q, k| if k < 4 { z[q][k] } else { vm[(q, k - 4)] });
+        subtract_lower(
+            MatMut::from_column_major_slice_mut(&mut a, n, n),
+            left.as_ref(),
+            right.as_ref(),
+            par,
+        )?;
+        // The trailing block (rows and columns from 4 on) changes sign for sign < 0.
+        if sign < 0.0 {
+            for_columns(&mut a[4 * n..], n, par, |k, c| {
+                c[k + 4..].iter_mut().for_each(|x| *x = -*x)
+            });
+        }
+        // The first four rows of the symmetric result, read from its first four columns.
         let top: Vec<f64> = (0..n)
             .flat_map(|j| (0..4).map(move |i| (i, j)))
-            .map(|(i, j)| a[j * n + i])
+            .map(|(i, j)| if j >= i { a[i * n + j] } else { a[j * n + i] })
             .collect();
         // In-place Cholesky of the trailing block (its lower triangle).
         let mm = n - 4;
