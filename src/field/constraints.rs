@@ -120,21 +120,6 @@ pub fn check_points_and_values(points: &[DVec3], values: &[f64]) -> Result<()> {
     crate::error::check_finite_values("values", values)
 }
 
-/// For each point, the indices of the other points within `radius`, increasing (uniform grid,
-/// parallel over the points).
-fn neighbours_within(points: &[DVec3], radius: f64) -> Vec<Vec<u32>> {
-    let grid = Grid::new(points, radius);
-    points
-        .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let mut near = grid.within(*p, radius);
-            near.retain(|&j| j as usize != i);
-            near
-        })
-        .collect()
-}
-
 /// Errors on the first pair of points closer than `tol`: the smallest `first`, and for it the
 /// smallest `second > first`.
 pub fn check_duplicates(name: &'static str, points: &[DVec3], tol: f64) -> Result<()> {
@@ -234,15 +219,16 @@ pub fn place_capped(
 
     let mut offsets = vec![d; points.len()];
     if settings.shrink {
-        // Only points within 2d of q_i can be nearer than d_i ≤ d to q_i + d_i n_i.
-        let near = neighbours_within(points, 2.0 * d);
+        // The points nearer than d_i to q_i + d_i n_i lie in the grid's cells within d_i of it
+        // (searched with a radius a little larger, for the rounding of squared distances).
+        let grid = Grid::new(points, d);
         offsets.par_iter_mut().enumerate().for_each(|(i, di)| {
             for _ in 0..60 {
                 let p = points[i] + normals[i] * *di;
-                let ok = near[i]
-                    .iter()
-                    .all(|&j| (points[j as usize] - p).length() >= *di);
-                if ok {
+                let nearer = grid.any_within(p, *di * (1.0 + 1e-9), |j| {
+                    j as usize != i && (points[j as usize] - p).length() < *di
+                });
+                if !nearer {
                     break;
                 }
                 *di *= 0.5;

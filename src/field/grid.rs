@@ -89,10 +89,23 @@ impl<'a> Grid<'a> {
     /// Calls `visit(j)` for every point `j` with `|points[j] − p| ≤ radius`, cell by cell (z,
     /// then y, then x), increasing within a cell.
     pub fn for_each_within(&self, p: DVec3, radius: f64, mut visit: impl FnMut(u32)) {
+        let r2 = radius * radius;
+        self.for_each_cell_within(p, radius, |run| {
+            for &j in run {
+                if (self.points[j as usize] - p).length_squared() <= r2 {
+                    visit(j);
+                }
+            }
+            false
+        });
+    }
+
+    /// Calls `visit(run)` with the points of each row of cells meeting the cube of half-side
+    /// `radius` around `p` (z, then y), until it returns `true`.
+    fn for_each_cell_within(&self, p: DVec3, radius: f64, mut visit: impl FnMut(&[u32]) -> bool) {
         if self.points.is_empty() {
             return;
         }
-        let r2 = radius * radius;
         let range = |k: usize| -> Option<(usize, usize)> {
             let a = ((p[k] - radius - self.lo[k]) / self.cell).floor();
             let b = ((p[k] + radius - self.lo[k]) / self.cell).floor();
@@ -112,13 +125,23 @@ impl<'a> Grid<'a> {
                     self.start[row + rx.0] as usize,
                     self.start[row + rx.1 + 1] as usize,
                 );
-                for &j in &self.order[a..b] {
-                    if (self.points[j as usize] - p).length_squared() <= r2 {
-                        visit(j);
-                    }
+                if visit(&self.order[a..b]) {
+                    return;
                 }
             }
         }
+    }
+
+    /// Whether `accept(j)` holds for some point `j` within `radius` of `p`; stops at the first.
+    pub fn any_within(&self, p: DVec3, radius: f64, mut accept: impl FnMut(u32) -> bool) -> bool {
+        let mut found = false;
+        self.for_each_cell_within(p, radius, |run| {
+            found = run.iter().any(|&j| {
+                (self.points[j as usize] - p).length_squared() <= radius * radius && accept(j)
+            });
+            found
+        });
+        found
     }
 
     /// The indices of the points within `radius` of `p`, increasing.
@@ -148,5 +171,19 @@ mod tests {
             }
         }
         assert!(Grid::new(&[], 0.1).within(DVec3::ZERO, 1.0).is_empty());
+    }
+
+    #[test]
+    fn any_within_agrees_with_brute_force() {
+        let pts = random_points(400, -1.0, 1.0, 9);
+        let g = Grid::new(&pts, 0.1);
+        for (i, p) in pts.iter().enumerate().step_by(3) {
+            for radius in [0.01, 0.05, 0.2] {
+                // Another point nearer than `radius`; the grid's query stops at the first.
+                let brute = (0..pts.len())
+                    .any(|j| j != i && (pts[j] - *p).length_squared() <= radius * radius);
+                assert_eq!(g.any_within(*p, radius, |j| j as usize != i), brute);
+            }
+        }
     }
 }

@@ -7,7 +7,10 @@
 //! badly over a support many times its size; so the system is completed with constraints spread
 //! over a ball reaching one support radius past the nearest data, taken from the finest of
 //! these levels where they fit the patch's budget. Level `L` keeps every data point `j` (with
-//! its normal constraint) whose hash is divisible by 8^L: about one in 8^L, wherever it is.
+//! its normal constraint) whose hash is divisible by 2^L: about one in 2^L, wherever it is, and
+//! each level is a subset of the one before. Patches whose own leaf holds constraints choose
+//! among the levels 3, 6, 9, … (one in 8^k); patches of (nearly) empty leaves, whose completion
+//! must carry the surface over their whole support, among all.
 
 use super::octree::Octree;
 use glam::DVec3;
@@ -28,8 +31,8 @@ fn splitmix(mut x: u64) -> u64 {
 }
 
 /// Levels 1, 2, … of `points` (constraint `i` belongs to data point `i mod boundary`), down to
-/// the first with at most `smallest` points, each with an octree over the cube (`centre`,
-/// `half`).
+/// the first level 3k with at most `smallest` points, each with an octree over the cube
+/// (`centre`, `half`).
 pub fn levels(
     points: &[DVec3],
     boundary: usize,
@@ -42,8 +45,8 @@ pub fn levels(
     let mut out = Vec::new();
     let mut step = 1u64;
     let mut size = points.len();
-    while size > smallest && step < 1 << 60 {
-        step *= 8;
+    while (size > smallest || !out.len().is_multiple_of(3)) && step < 1 << 60 {
+        step *= 2;
         let index: Vec<u32> = (0..points.len() as u32)
             .filter(|&i| splitmix(i as u64 % boundary).is_multiple_of(step))
             .collect();

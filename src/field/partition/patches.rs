@@ -92,25 +92,33 @@ pub fn supports(
                 m
             };
             let full = count_outside(points, tree);
+            // The levels this patch may take its completion from (see `coarse`).
+            let step = if own >= SPARSE_LEAF { 3 } else { 1 };
+            let candidates: Vec<usize> = (step - 1..levels.len()).step_by(step).collect();
             // The finest level whose share of the ball fits the budget; a finer one when that
             // leaves too few constraints for a fit.
             let mut choice = (usize::MAX, full);
             if full > budget {
-                for (l, level) in levels.iter().enumerate() {
-                    let last = l + 1 == levels.len();
+                for (c, &l) in candidates.iter().enumerate() {
+                    let level = &levels[l];
+                    let last = c + 1 == candidates.len();
+                    // The level's constraints between the two balls must fit the budget.
                     if !last
-                        && level
-                            .tree
-                            .more_within_than(&level.points, n.centre, reach, budget)
+                        && level.tree.more_within_than(
+                            &level.points,
+                            n.centre,
+                            reach,
+                            budget + level.tree.count_within(&level.points, n.centre, r),
+                        )
                     {
                         continue;
                     }
                     let m = count_outside(&level.points, &level.tree);
                     if inside + m >= 16 {
                         choice = (l, m);
-                    } else if l > 0 {
-                        let finer = &levels[l - 1];
-                        choice = (l - 1, count_outside(&finer.points, &finer.tree));
+                    } else if c > 0 {
+                        let f = candidates[c - 1];
+                        choice = (f, count_outside(&levels[f].points, &levels[f].tree));
                     }
                     break;
                 }
