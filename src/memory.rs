@@ -1,10 +1,10 @@
 //! Large output buffers backed by huge pages where the system allows it.
 //!
 //! A polygonizer's output (vertices, normals, triangles) is fresh memory on every call; at 256³
-//! it is tens of megabytes, and faulting it in one 4 KiB page at a time took a tenth to a
-//! sixth of a run here (perf, 256³ blobs). On Linux with transparent huge pages in `madvise` mode, asking for huge pages
-//! before the first write makes it one fault per 2 MiB. Elsewhere this does nothing, and the
-//! environment variable `IMPLICITMESH_NO_HUGEPAGES` (set at all) turns it off.
+//! it is tens of megabytes, faulted in one 4 KiB page at a time. On Linux with transparent huge
+//! pages in `madvise` mode, asking for huge pages before the first write makes it one fault per
+//! 2 MiB. Elsewhere this does nothing, and the environment variable `IMPLICITMESH_NO_HUGEPAGES`
+//! (set at all) turns it off.
 //!
 //! [`collect_counted`] fills such a vector in parallel when the number of items each piece of
 //! work yields is known beforehand.

@@ -1,15 +1,28 @@
 """Type stubs for the Rust extension module."""
 
-from typing import Any, Callable, Literal, Sequence
+from typing import Any, Callable, Literal, Sequence, TypedDict
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import Unpack
 
 __version__: str
 
 ArrayLike = npt.ArrayLike
 Kernel = Literal["triharmonic", "biharmonic", "thin_plate"]
 FitMethod = Literal["auto", "global", "partition"]
+
+class _FitOptions(TypedDict, total=False):
+    """The keywords every fit takes; defaults: ``kernel="triharmonic"``, ``smoothing=0.0``,
+    ``memory_limit=None`` (8 GiB), ``method="auto"``, ``progress=None``,
+    ``partition_options=None``."""
+
+    kernel: Kernel
+    smoothing: float
+    memory_limit: int | None
+    method: FitMethod
+    progress: bool | Callable[[int], object] | None
+    partition_options: dict[str, int | float] | None
 
 class VariationalSurface:
     @staticmethod
@@ -19,12 +32,7 @@ class VariationalSurface:
         *,
         d: float | None = None,
         w: float | None = None,
-        kernel: Kernel = "triharmonic",
-        smoothing: float = 0.0,
-        memory_limit: int | None = None,
-        method: FitMethod = "auto",
-        progress: bool | Callable[[int], object] | None = None,
-        partition_options: dict[str, int | float] | None = None,
+        **options: Unpack[_FitOptions],
     ) -> VariationalSurface: ...
     @staticmethod
     def from_mesh(
@@ -33,24 +41,13 @@ class VariationalSurface:
         *,
         d: float | None = None,
         w: float | None = None,
-        kernel: Kernel = "triharmonic",
-        smoothing: float = 0.0,
-        memory_limit: int | None = None,
-        method: FitMethod = "auto",
-        progress: bool | Callable[[int], object] | None = None,
-        partition_options: dict[str, int | float] | None = None,
+        **options: Unpack[_FitOptions],
     ) -> VariationalSurface: ...
     @staticmethod
     def interpolate(
         points: ArrayLike,
         values: ArrayLike,
-        *,
-        kernel: Kernel = "triharmonic",
-        smoothing: float = 0.0,
-        memory_limit: int | None = None,
-        method: FitMethod = "auto",
-        progress: bool | Callable[[int], object] | None = None,
-        partition_options: dict[str, int | float] | None = None,
+        **options: Unpack[_FitOptions],
     ) -> VariationalSurface: ...
     def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
     def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
@@ -116,41 +113,46 @@ class BlobField:
     @property
     def bounds(self) -> npt.NDArray[np.float64]: ...
 
+_Field = VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike]
+_MeshTuple = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]
+
+class _PolygonizeOptions(TypedDict, total=False):
+    """The keywords every polygonizer takes; defaults: ``ambiguity="separate"``,
+    ``normals=True``, ``batch_size=262144``, ``memory_limit=None`` (8 GiB), ``progress=None``."""
+
+    ambiguity: str
+    normals: bool
+    batch_size: int
+    memory_limit: int | None
+    progress: Callable[[int], object] | None
+
 class Tessellator:
     def __init__(self) -> None: ...
     def polygonize(
         self,
-        field: VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike],
+        field: _Field,
         bounds: ArrayLike,
         resolution: int | Sequence[int],
         *,
         seeds: ArrayLike | None = None,
-        ambiguity: str = "separate",
-        normals: bool = True,
-        batch_size: int = 262144,
-        memory_limit: int | None = None,
         blocks: bool = True,
-        progress: Callable[[int], object] | None = None,
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...
+        **options: Unpack[_PolygonizeOptions],
+    ) -> _MeshTuple: ...
     @property
     def capacity_bytes(self) -> int: ...
 
 def polygonize(
-    field: VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike],
+    field: _Field,
     bounds: ArrayLike,
     resolution: int | Sequence[int],
     *,
     method: str = "dense",
-    ambiguity: str = "separate",
-    normals: bool = True,
-    batch_size: int = 262144,
-    memory_limit: int | None = None,
     start_level: int | None = None,
     safety: float | None = None,
     corner_test: bool | None = None,
     seeds: ArrayLike | None = None,
-    progress: Callable[[int], object] | None = None,
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]: ...
+    **options: Unpack[_PolygonizeOptions],
+) -> _MeshTuple: ...
 
-def subdivide(field: VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike], vertices: ArrayLike, faces: ArrayLike, levels: int, *, tolerance: float | None = None, max_steps: int | None = None, step: float | None = None, progress: Callable[[int], object] | None = None) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]]: ...
+def subdivide(field: _Field, vertices: ArrayLike, faces: ArrayLike, levels: int, *, tolerance: float | None = None, max_steps: int | None = None, step: float | None = None, progress: Callable[[int], object] | None = None) -> list[_MeshTuple]: ...
 def butterfly(vertices: ArrayLike, faces: ArrayLike, levels: int, w: float, *, progress: Callable[[int], object] | None = None) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64]]]: ...

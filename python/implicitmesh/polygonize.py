@@ -164,23 +164,31 @@ def polygonize(
         raise ValueError(f"safety: must be a positive number, got {safety!r}")
     if corner_test is not None and not isinstance(corner_test, (bool, np.bool_)):
         raise ValueError(f"corner_test: must be True or False, got {corner_test!r}")
-    report, end = reporter(progress, f"polygonize ({method})")
+    return _mesh(
+        _core.polygonize,
+        f"polygonize ({method})",
+        progress,
+        field,
+        bounds,
+        resolution,
+        method=method,
+        ambiguity=ambiguity,
+        normals=normals,
+        batch_size=batch_size,
+        memory_limit=memory_limit,
+        start_level=start_level,
+        safety=safety,
+        corner_test=corner_test,
+        seeds=seeds,
+    )
+
+
+def _mesh(polygonizer, what: str, progress, *args, **kwargs) -> Mesh:
+    """Calls the core's ``polygonizer`` with a progress report titled ``what``; its result as a
+    :class:`Mesh` whose stats also count the triangles and vertices."""
+    report, end = reporter(progress, what)
     try:
-        v, f, n, stats = _core.polygonize(
-            field,
-            bounds,
-            resolution,
-            method=method,
-            ambiguity=ambiguity,
-            normals=normals,
-            batch_size=batch_size,
-            memory_limit=memory_limit,
-            start_level=start_level,
-            safety=safety,
-            corner_test=corner_test,
-            seeds=seeds,
-            progress=report,
-        )
+        v, f, n, stats = polygonizer(*args, progress=report, **kwargs)
     finally:
         end()
     stats["triangles"] = len(f)
@@ -285,25 +293,20 @@ class Tessellator:
         bounds, ambiguity = _check_common(field, bounds, ambiguity, batch_size, memory_limit)
         if not isinstance(blocks, (bool, np.bool_)):
             raise ValueError(f"blocks: must be True or False, got {blocks!r}")
-        report, end = reporter(progress, "track")
-        try:
-            v, f, n, stats = self._core.polygonize(
-                field,
-                bounds,
-                resolution,
-                seeds=seeds,
-                ambiguity=ambiguity,
-                normals=normals,
-                batch_size=batch_size,
-                memory_limit=memory_limit,
-                blocks=bool(blocks),
-                progress=report,
-            )
-        finally:
-            end()
-        stats["triangles"] = len(f)
-        stats["vertices"] = len(v)
-        return Mesh(v, f, n, stats)
+        return _mesh(
+            self._core.polygonize,
+            "track",
+            progress,
+            field,
+            bounds,
+            resolution,
+            seeds=seeds,
+            ambiguity=ambiguity,
+            normals=normals,
+            batch_size=batch_size,
+            memory_limit=memory_limit,
+            blocks=bool(blocks),
+        )
 
     @property
     def capacity_bytes(self) -> int:

@@ -6,9 +6,9 @@ use crate::error::{Error, Result};
 use glam::DVec3;
 
 /// `field` with gradients by central differences with step `step`: every batch of gradients is
-/// one [`Field::values`] call on 6 points per point, and every batch of values with gradients one
-/// call on 7 (the point, then ± `step` along x, y and z), which
-/// [`Field::values_per_value_gradient`] reports.
+/// one [`Field::values`] call on 6 points per point (± `step` along x, y and z), which
+/// [`Field::values_per_gradient`] reports, and every batch of values with gradients one call on
+/// 7 (the point, then the same 6), which [`Field::values_per_value_gradient`] reports.
 pub struct Differences<F> {
     pub field: F,
     pub step: f64,
@@ -66,6 +66,9 @@ impl<F: Field> Field for Differences<F> {
     fn values_per_value_gradient(&self) -> u64 {
         7
     }
+    fn values_per_gradient(&self) -> u64 {
+        6
+    }
 }
 
 #[cfg(test)]
@@ -91,6 +94,7 @@ mod tests {
             assert_eq!(d.gradient(pts[i]), h[i]);
         }
         assert_eq!(d.values_per_value_gradient(), 7);
+        assert_eq!(d.values_per_gradient(), 6);
         for bad in [0.0, -1e-6, f64::NAN, f64::INFINITY] {
             assert!(matches!(
                 Differences::new(&sphere, bad),

@@ -280,7 +280,7 @@ dispatch!(sum_gradients, gradients_avx2, [[f64; LANES]; 4]);
 
 /// AVX-512 sums for the triharmonic and biharmonic kernels without `sqrt`: 1/√r² from the
 /// 14-bit `rsqrt14` estimate refined by two Newton steps (14 → 28 → 53+ bits), then r = r²·(1/r),
-/// all in multiplies and FMAs, which run several times faster than `vsqrtpd`. The result matches
+/// all in multiplies and FMAs (no `vsqrtpd`, whose latency and throughput are far worse). The result matches
 /// the square root to a few units in the last place. r² = 0 (a point on a centre) gives φ = 0 and
 /// ∇φ = 0 as it must.
 #[cfg(target_arch = "x86_64")]

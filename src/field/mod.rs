@@ -87,6 +87,12 @@ pub trait Field: Sync {
         1
     }
 
+    /// Field values that one point of [`Field::gradients`] costs, as evaluation counts report
+    /// them: 1 by default, 6 for central differences of values ([`Differences`]).
+    fn values_per_gradient(&self) -> u64 {
+        1
+    }
+
     /// Values at every lattice point of the z-planes `z0..z1`, x fastest, then y, then z; the
     /// points are [`Lattice::point`]. Fields with a faster way to fill a grid (a blob field
     /// splats each primitive into its box) override this; they must return the same bits as
@@ -207,6 +213,9 @@ impl<F: Field + ?Sized> Field for &F {
     }
     fn values_per_value_gradient(&self) -> u64 {
         (**self).values_per_value_gradient()
+    }
+    fn values_per_gradient(&self) -> u64 {
+        (**self).values_per_gradient()
     }
     fn lattice_values(
         &self,

@@ -85,6 +85,19 @@ pub(crate) fn for_each_set_bit(mut m: u64, mut f: impl FnMut(u32)) {
     }
 }
 
+/// The set bits of `m`, lowest first: [`for_each_set_bit`] as an iterator.
+#[inline]
+pub(crate) fn set_bits(m: impl Into<u64>) -> impl Iterator<Item = usize> {
+    let mut m = m.into();
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            i
+        })
+    })
+}
+
 /// The sign word of up to 64 values: bit `i` set when `values[i] < 0` (NaN is never inside).
 #[inline(always)]
 pub(crate) fn sign_word(values: &[f64]) -> u64 {

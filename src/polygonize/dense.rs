@@ -472,7 +472,7 @@ pub fn polygonize<F: Field + ?Sized>(
         .iter()
         .flatten()
         .all(|&v| (v as usize) < mesh.vertices.len()));
-    compute_normals(field, lattice, &mut mesh, settings, &mut stats)?;
+    compute_normals(field, &mut mesh, settings, &mut stats)?;
     Ok((mesh, stats))
 }
 

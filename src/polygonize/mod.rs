@@ -16,7 +16,7 @@ pub mod tracking;
 pub use table::{Ambiguity, CaseTable};
 
 use crate::error::{Error, Result};
-use crate::field::{gradients_by_differences, Field};
+use crate::field::Field;
 use crate::lattice::Lattice;
 use crate::mesh::Mesh;
 use glam::DVec3;
@@ -34,10 +34,6 @@ pub struct Settings {
     pub batch: usize,
     /// Refuse lattices whose memory estimate exceeds this many bytes.
     pub memory_limit: u64,
-    /// Compute gradients by central differences of batched values (for fields that only have
-    /// values, e.g. Python callables), with this step as a fraction of the smallest cell side.
-    /// `None`: use the field's own gradient.
-    pub difference_gradients: Option<f64>,
 }
 
 impl Default for Settings {
@@ -47,9 +43,18 @@ impl Default for Settings {
             normals: true,
             batch: 1 << 18,
             memory_limit: 8 << 30,
-            difference_gradients: None,
         }
     }
+}
+
+/// The step of central differences for the normals of a field that only has values (a Python
+/// callable wrapped in [`crate::field::Differences`]), as a fraction of the smallest cell side.
+pub const DIFFERENCE_STEP: f64 = 1e-3;
+
+/// [`DIFFERENCE_STEP`] on `lattice`: the step, in field units, of central differences for the
+/// normals of a field that only has values.
+pub fn difference_step(lattice: &Lattice) -> f64 {
+    DIFFERENCE_STEP * lattice.cell.min_element()
 }
 
 /// Exact counts and timings of one polygonization.
@@ -58,7 +63,8 @@ pub struct Stats {
     /// Field values computed at lattice points (a point computed twice, e.g. on the faces that
     /// blocks share, counts twice).
     pub evaluations: u64,
-    /// Points at which gradients were computed for normals (values, for difference gradients).
+    /// Field evaluations for normals: [`Field::values_per_gradient`] per vertex (1 for a field's
+    /// own gradient, the 6 values of central differences for [`crate::field::Differences`]).
     pub normal_evaluations: u64,
     /// Lattice points, (nx+1)(ny+1)(nz+1): what plain marching cubes evaluates.
     pub lattice_points: u64,
@@ -151,7 +157,6 @@ pub fn fill_vanishing_normals(mesh: &mut Mesh) {
 /// the gradient vanishes.
 pub fn compute_normals<F: Field + ?Sized>(
     field: &F,
-    lattice: &Lattice,
     mesh: &mut Mesh,
     settings: &Settings,
     stats: &mut Stats,
@@ -167,27 +172,15 @@ pub fn compute_normals<F: Field + ?Sized>(
         .into_par_iter()
         .map(|_| DVec3::ZERO)
         .collect_into_vec(&mut g);
-    let batch = settings.batch.max(1);
-    match settings.difference_gradients {
-        Some(frac) => {
-            let h = frac * lattice.cell.min_element();
-            let b = (batch / 6).max(1);
-            for (p, o) in mesh.vertices.chunks(b).zip(g.chunks_mut(b)) {
-                crate::cancel::check()?;
-                gradients_by_differences(field, p, h, o);
-                crate::cancel::advance(6 * p.len() as u64)?;
-            }
-            stats.normal_evaluations += 6 * mesh.vertices.len() as u64;
-        }
-        None => {
-            for (p, o) in mesh.vertices.chunks(batch).zip(g.chunks_mut(batch)) {
-                crate::cancel::check()?;
-                field.gradients(p, o);
-                crate::cancel::advance(p.len() as u64)?;
-            }
-            stats.normal_evaluations += mesh.vertices.len() as u64;
-        }
+    // Batches of `settings.batch` field values: fewer gradients when each costs several values.
+    let per_gradient = field.values_per_gradient();
+    let batch = (settings.batch / per_gradient as usize).max(1);
+    for (p, o) in mesh.vertices.chunks(batch).zip(g.chunks_mut(batch)) {
+        crate::cancel::check()?;
+        field.gradients(p, o);
+        crate::cancel::advance(per_gradient * p.len() as u64)?;
     }
+    stats.normal_evaluations += per_gradient * mesh.vertices.len() as u64;
     // Normalise in parallel chunks; count vanishing gradients and find the first non-finite one.
     const CHUNK: usize = 4096;
     let (zero, bad) = g
@@ -354,6 +347,26 @@ pub(crate) fn gather_map<T: Sync, U: Send, P: AsRef<[T]> + Sync>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The normals of a field with gradients by central differences cost 6 values a vertex,
+    /// and the stats count exactly the values the field was asked for.
+    #[test]
+    fn difference_normals_count_the_values_they_use() {
+        let sphere = crate::field::analytic::Sphere {
+            center: DVec3::new(0.05, -0.02, 0.01),
+            radius: 0.6,
+        };
+        let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 16).unwrap();
+        let counted = crate::field::Counting::new(&sphere);
+        let f = crate::field::Differences::new(&counted, difference_step(&lattice)).unwrap();
+        let (mesh, stats) = dense::polygonize(&f, &lattice, &Settings::default()).unwrap();
+        assert!(!mesh.vertices.is_empty());
+        assert_eq!(stats.normal_evaluations, 6 * mesh.vertices.len() as u64);
+        assert_eq!(
+            counted.evaluations(),
+            stats.evaluations + stats.normal_evaluations
+        );
+    }
 
     /// Every vectorised path gives the scalar loop's bits, zero and non-finite vectors
     /// included, wherever they fall among the groups of four or eight.

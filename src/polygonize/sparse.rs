@@ -27,11 +27,11 @@
 //! The output does not depend on the number of threads.
 //!
 //! Tracking block by block ([`super::tracking`]) walks the same blocks and makes its mesh the
-//! same way, through a small crate-private API: [`start_blocks`] (memory check, case table,
-//! the field's block data), [`evaluate_block`] (an [`Active`] block with its vertices in a
-//! [`BlockOutput`]), [`Active::restricted`] (a block reached in part),
-//! [`triangulate_blocks`] and [`finish_normals`] (the mesh), [`blocks_not_ruled_out`] and
-//! [`block_signs`] (the search for components no seed reaches), and [`bounds_error`].
+//! same way, through a small crate-private API: `start_blocks` (memory check, case table, the
+//! field's block data), `evaluate_block` (an `Active` block with its vertices in a
+//! `BlockOutput`), `Active::restricted` (a block reached in part), `triangulate_blocks` and
+//! `finish_normals` (the mesh), `blocks_not_ruled_out` and `block_signs` (the search for
+//! components no seed reaches), and `bounds_error`.
 //!
 //! ```
 //! use glam::DVec3;

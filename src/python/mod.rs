@@ -15,12 +15,10 @@ mod variational;
 use pyo3::prelude::*;
 
 /// The extension's allocator for everything the core allocates (meshes handed to numpy
-/// included). The system allocator returns large buffers to the OS when they are freed, and a
-/// fresh page costs a fault (measured here: 1.7 µs per 4 KiB page, about 8 % of a 256³ blob
-/// polygonization); mimalloc 3 keeps freed memory for reuse by the next call and returns it to
-/// the OS after its default purge delay of 1 s (`MIMALLOC_PURGE_DELAY` changes it). A delay of
-/// 10 s removed the ~160 page faults per octree call at 128³ in a loop, but no time difference
-/// showed in 6 paired loops of 30 calls, so mimalloc's default stays.
+/// included). The system allocator returns large buffers to the OS when they are freed, so the
+/// next call faults in fresh pages again; mimalloc 3 keeps freed memory for reuse by the next
+/// call and returns it to the OS after its default purge delay (`MIMALLOC_PURGE_DELAY` sets
+/// it).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

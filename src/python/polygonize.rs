@@ -4,9 +4,12 @@ use super::convert::{flat_faces, points, MeshBuffers};
 use super::errors::value_error;
 use super::field::FieldArg;
 use super::interrupt::run;
+use crate::field::{Differences, Field};
 use crate::lattice::Lattice;
 use crate::polygonize::tracking::{Components, TrackingSettings};
-use crate::polygonize::{dense, octree, sparse, tracking, Ambiguity, Settings, Stats};
+use crate::polygonize::{
+    dense, difference_step, octree, sparse, tracking, Ambiguity, Settings, Stats,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
 
@@ -131,7 +134,6 @@ pub fn stats_to_py<'py>(
 
 /// Settings shared by every method, from the Python arguments.
 fn shared_settings(
-    field: &FieldArg,
     ambiguity: &str,
     normals: bool,
     batch_size: usize,
@@ -146,11 +148,17 @@ fn shared_settings(
         normals,
         batch: batch_size,
         memory_limit: memory_limit.unwrap_or(defaults.memory_limit),
-        difference_gradients: if field.is_callable() {
-            Some(1e-3)
-        } else {
-            None
-        },
+    })
+}
+
+/// The field as the polygonizers take it: a callable only has values, so its normals come from
+/// central differences with the core's step for `lattice` ([`difference_step`]).
+fn polygonizer_field<'a>(field: &'a FieldArg, lattice: &Lattice) -> PyResult<Box<dyn Field + 'a>> {
+    let f = field.as_field();
+    Ok(if field.is_callable() {
+        Box::new(Differences::new(f, difference_step(lattice))?)
+    } else {
+        Box::new(f)
     })
 }
 
@@ -254,7 +262,7 @@ pub fn polygonize<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let lattice = parse_lattice(bounds, resolution)?;
-    let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
+    let settings = shared_settings(ambiguity, normals, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
     if !METHODS.contains(&method.as_str()) {
         return Err(unknown_method(&method));
@@ -276,7 +284,7 @@ pub fn polygonize<'py>(
             "seeds apply to method=\"tracking\" only",
         ));
     }
-    let f = field.as_field();
+    let f = &*polygonizer_field(&field, &lattice)?;
     let on_caller = field.is_callable();
     let result = match method.as_str() {
         "dense" => run(py, progress, on_caller, || dense::polygonize(f, &lattice, &settings).map(buffers)),
@@ -364,7 +372,7 @@ impl PyTessellator {
     ) -> PyResult<Bound<'py, PyTuple>> {
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
-        let settings = shared_settings(&field, ambiguity, normals, batch_size, memory_limit)?;
+        let settings = shared_settings(ambiguity, normals, batch_size, memory_limit)?;
         let ts = tracking_settings(&field, seeds, &lattice, settings)?;
         let tess = &mut self.inner;
         let on_caller = field.is_callable();
@@ -388,7 +396,7 @@ impl PyTessellator {
                 })
             }
             _ => {
-                let f = field.as_field();
+                let f = &*polygonizer_field(&field, &lattice)?;
                 run(py, progress, on_caller, || {
                     tess.polygonize(f, &lattice, &ts)
                         .map(|(m, s)| (MeshBuffers::copied(m), s))

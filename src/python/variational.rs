@@ -104,36 +104,65 @@ fn parse_method(method: &str) -> PyResult<Method> {
     }
 }
 
-/// Runs the global or the partition fit (with the GIL released), as `method` and the number of
-/// constraints decide.
-fn run(
-    py: Python<'_>,
-    progress: Option<&Bound<'_, PyAny>>,
+/// The keyword arguments that `fit`, `from_mesh` and `interpolate` share, converted and checked
+/// in this order: `method`, then `kernel`, `smoothing` and `memory_limit`, then
+/// `partition_options`.
+struct FitOptions<'a, 'py> {
     method: Method,
-    constraints: usize,
-    settings: rbf::FitSettings,
-    options: Option<&Bound<'_, PyDict>>,
-    global: impl FnOnce(&rbf::FitSettings) -> Result<VariationalSurface> + Send,
-    partition: impl FnOnce(&partition::PartitionSettings) -> Result<PartitionSurface> + Send,
-) -> PyResult<PyVariationalSurface> {
-    let ps = partition_settings(options, settings)?;
-    let use_partition = match method {
-        Method::Global => false,
-        Method::Partition => true,
-        Method::Auto => constraints >= AUTO_PARTITION_CONSTRAINTS,
-    };
-    let inner = if use_partition {
-        let (report, end) = reporter(py, progress, "fit (partition)")?;
-        let fitted = super::interrupt::run(py, report.as_ref(), false, move || partition(&ps));
-        end.call0()?;
-        Fitted::Partition(Arc::new(fitted?))
-    } else {
-        let (report, end) = reporter(py, progress, "fit (global)")?;
-        let fitted = super::interrupt::run(py, report.as_ref(), false, move || global(&settings));
-        end.call0()?;
-        Fitted::Global(Arc::new(fitted?))
-    };
-    Ok(PyVariationalSurface { inner })
+    global: rbf::FitSettings,
+    partition: partition::PartitionSettings,
+    progress: Option<&'a Bound<'py, PyAny>>,
+}
+
+/// [`FitOptions`] from the Python arguments.
+fn fit_options<'a, 'py>(
+    method: &str,
+    kernel: &str,
+    smoothing: f64,
+    memory_limit: Option<u64>,
+    progress: Option<&'a Bound<'py, PyAny>>,
+    partition_options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<FitOptions<'a, 'py>> {
+    let method = parse_method(method)?;
+    let global = fit_settings(kernel, smoothing, memory_limit)?;
+    let partition = partition_settings(partition_options, global)?;
+    Ok(FitOptions {
+        method,
+        global,
+        partition,
+        progress,
+    })
+}
+
+impl<'a, 'py> FitOptions<'a, 'py> {
+    /// Runs the global or the partition fit (with the GIL released), as the method and the
+    /// number of constraints decide.
+    fn run(
+        self,
+        py: Python<'py>,
+        constraints: usize,
+        global: impl FnOnce(&rbf::FitSettings) -> Result<VariationalSurface> + Send,
+        partition: impl FnOnce(&partition::PartitionSettings) -> Result<PartitionSurface> + Send,
+    ) -> PyResult<PyVariationalSurface> {
+        let use_partition = match self.method {
+            Method::Global => false,
+            Method::Partition => true,
+            Method::Auto => constraints >= AUTO_PARTITION_CONSTRAINTS,
+        };
+        let (progress, ps, gs) = (self.progress, self.partition, self.global);
+        let inner = if use_partition {
+            let (report, end) = reporter(py, progress, "fit (partition)")?;
+            let fitted = super::interrupt::run(py, report.as_ref(), false, move || partition(&ps));
+            end.call0()?;
+            Fitted::Partition(Arc::new(fitted?))
+        } else {
+            let (report, end) = reporter(py, progress, "fit (global)")?;
+            let fitted = super::interrupt::run(py, report.as_ref(), false, move || global(&gs));
+            end.call0()?;
+            Fitted::Global(Arc::new(fitted?))
+        };
+        Ok(PyVariationalSurface { inner })
+    }
 }
 
 /// The partition fit's settings: the defaults, with the keys of `options` (a dict) in place.
@@ -297,7 +326,14 @@ impl PyVariationalSurface {
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let m = parse_method(method)?;
+        let fit = fit_options(
+            method,
+            kernel,
+            smoothing,
+            memory_limit,
+            progress,
+            partition_options,
+        )?;
         let p = self::points(points, "points")?;
         let n = self::points(normals, "normals")?;
         if n.len() != p.len() {
@@ -310,16 +346,10 @@ impl PyVariationalSurface {
                 ),
             ));
         }
-        let s = fit_settings(kernel, smoothing, memory_limit)?;
         let pl = placement(d, w);
-        let count = 2 * p.len();
-        run(
+        fit.run(
             py,
-            progress,
-            m,
-            count,
-            s,
-            partition_options,
+            2 * p.len(),
             |s| VariationalSurface::fit(&p, &n, &pl, s),
             |s| PartitionSurface::fit(&p, &n, &pl, s),
         )
@@ -362,19 +392,20 @@ impl PyVariationalSurface {
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let m = parse_method(method)?;
+        let fit = fit_options(
+            method,
+            kernel,
+            smoothing,
+            memory_limit,
+            progress,
+            partition_options,
+        )?;
         let v = points(vertices, "vertices")?;
         let f = triangles(faces, "faces")?;
-        let s = fit_settings(kernel, smoothing, memory_limit)?;
         let pl = placement(d, w);
-        let count = 2 * v.len();
-        run(
+        fit.run(
             py,
-            progress,
-            m,
-            count,
-            s,
-            partition_options,
+            2 * v.len(),
             |s| VariationalSurface::from_mesh(&v, &f, &pl, s),
             |s| PartitionSurface::from_mesh(&v, &f, &pl, s),
         )
@@ -405,18 +436,19 @@ impl PyVariationalSurface {
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let m = parse_method(method)?;
+        let fit = fit_options(
+            method,
+            kernel,
+            smoothing,
+            memory_limit,
+            progress,
+            partition_options,
+        )?;
         let p = self::points(points, "points")?;
         let v = self::values(values, "values")?;
-        let s = fit_settings(kernel, smoothing, memory_limit)?;
-        let count = p.len();
-        run(
+        fit.run(
             py,
-            progress,
-            m,
-            count,
-            s,
-            partition_options,
+            p.len(),
             |s| VariationalSurface::interpolate(&p, &v, s),
             |s| PartitionSurface::interpolate(&p, &v, s),
         )

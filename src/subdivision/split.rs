@@ -9,7 +9,7 @@ use crate::mesh::Mesh;
 ///
 /// Returns the new mesh (without normals) and, for every new vertex in order, the two old
 /// vertices of its parent edge (smaller index first). Indices must be in range (see
-/// [`check_mesh`]).
+/// [`check_mesh`](super::check_mesh)).
 pub fn split(mesh: &Mesh) -> (Mesh, Vec<[u32; 2]>) {
     let n = mesh.vertices.len() as u32;
     // Edges filed under their smaller vertex: a slot per triangle side in CSR order, of which

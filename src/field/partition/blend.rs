@@ -3,7 +3,7 @@
 //! ∇f = (Σ_i (w_i ∇f_i + f_i ∇w_i) − f Σ_i ∇w_i) / Σ_i w_i.
 //!
 //! A batch is sorted by the octree leaf of each point and cut into groups of at most
-//! [`GROUP`] points of one leaf; rayon runs the groups, and each group evaluates the leaf's
+//! `GROUP` (256) points of one leaf; rayon runs the groups, and each group evaluates the leaf's
 //! covering patches, in increasing order, with the vectorised kernel sums of
 //! [`VariationalSurface`](crate::field::rbf::VariationalSurface). Every sum is per point and the
 //! patches are added in a fixed order, so a point's value has the same bits whatever the batch,

@@ -44,7 +44,10 @@ pub(super) fn block_reach(cell: DVec3, safety: f64) -> Box<[[Reach; 27]; 27]> {
 /// [`block_point`](super::block::block_point)).
 #[cfg(test)]
 pub(super) fn ball_masks(v: &[f64; 27], known: u32, reach: &[[Reach; 27]; 27]) -> (u32, u32) {
-    balls(super::block::bits(known).map(|p| (p, v[p])), reach)
+    balls(
+        crate::polygonize::bits::set_bits(known).map(|p| (p, v[p])),
+        reach,
+    )
 }
 
 /// The block points inside the balls of the values known in the block, `known` as (block

@@ -64,19 +64,6 @@ pub(super) fn corner_scaled(o: [u32; 3], k: usize, s: u32) -> [u32; 3] {
     [o[0] + d[0] * s, o[1] + d[1] * s, o[2] + d[2] * s]
 }
 
-/// The set bits of a mask (of children, or of block points), in increasing order.
-#[inline]
-pub(super) fn bits(m: impl Into<u32>) -> impl Iterator<Item = usize> {
-    let mut m = m.into();
-    std::iter::from_fn(move || {
-        (m != 0).then(|| {
-            let p = m.trailing_zeros() as usize;
-            m &= m - 1;
-            p
-        })
-    })
-}
-
 /// Lattice point of block point `p` (see [`block_point`]) of the block with lower corner `o`.
 #[inline]
 pub(super) fn block_offset(o: [u32; 3], p: usize) -> [u32; 3] {

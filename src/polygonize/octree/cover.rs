@@ -1,5 +1,6 @@
 //! Whether the balls around a box's corners cover it: the corner test of the levels.
 
+use crate::polygonize::bits::set_bits;
 use crate::polygonize::cell::corner_offset;
 use glam::DVec3;
 
@@ -99,11 +100,8 @@ pub(super) fn covered_piece(
 ) -> bool {
     let mid = 0.5 * (lo + hi);
     let (mut mid_covered, mut touching) = (false, 0u32);
-    let mut m = mask;
-    while m != 0 {
-        let i = m.trailing_zeros();
-        m &= m - 1;
-        let (c, r2) = balls[i as usize];
+    for i in set_bits(mask) {
+        let (c, r2) = balls[i];
         let far = (hi - c).abs().max((lo - c).abs());
         if far.length_squared() < r2 {
             return true;

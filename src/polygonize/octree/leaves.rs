@@ -1,11 +1,12 @@
 //! The leaf cells below the blocks of 2 × 2 × 2 cells the levels kept: which of them the surface
 //! crosses, with their corners' value indices.
 
-use super::block::{bits, cell_inside, corner, CENTRE, LEAF_CORNERS, LEAF_POINTS};
+use super::block::{cell_inside, corner, CENTRE, LEAF_CORNERS, LEAF_POINTS};
 use super::run::Run;
 use super::store::{corner_value, Store, NONE};
 use crate::error::Result;
 use crate::field::Field;
+use crate::polygonize::bits::set_bits;
 use crate::polygonize::cell::case_index;
 use rayon::prelude::*;
 
@@ -67,7 +68,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
                 idx[CENTRE] = c;
                 negative |= ((values[c as usize] < 0.0) as u32) << CENTRE;
             }
-            bits(m).map(move |d| {
+            set_bits(m).map(move |d| {
                 // The case from the signs gathered (the same as from the corners' values).
                 let case = LEAF_CORNERS[d]
                     .iter()
@@ -123,7 +124,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
         Ok(indices
             .par_iter()
             .with_min_len(256)
-            .flat_map_iter(|(o, m, idx)| bits(*m).filter_map(move |d| crossed_leaf(*o, d, idx)))
+            .flat_map_iter(|(o, m, idx)| set_bits(*m).filter_map(move |d| crossed_leaf(*o, d, idx)))
             .collect())
     }
 }

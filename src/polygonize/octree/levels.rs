@@ -2,7 +2,7 @@
 //! at their centres (and, with the corner test, by the balls of their known corners), the kept
 //! ones split into their children.
 
-use super::block::{bits, block_point, cell_inside, corner_scaled, CENTRE};
+use super::block::{block_point, cell_inside, corner_scaled, CENTRE};
 use super::cover::covered;
 use super::run::Run;
 use super::state::PointState;
@@ -10,6 +10,7 @@ use super::store::NONE;
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
+use crate::polygonize::bits::set_bits;
 use crate::polygonize::cell::corner_offset;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -250,11 +251,11 @@ impl<F: Field + ?Sized> Run<'_, F> {
         let (blocks, known, centres) = (&self.blocks, &self.known, &self.centres);
         let next = crate::memory::collect_counted(&counts, |i| {
             let o = blocks[i];
-            bits(children[i]).map(move |d| child(o, d))
+            set_bits(children[i]).map(move |d| child(o, d))
         });
         self.known = crate::memory::collect_counted(&counts, |i| {
             let (k, c) = (known[i], centres[i]);
-            bits(children[i]).map(move |d| k.child(d, c))
+            set_bits(children[i]).map(move |d| k.child(d, c))
         });
         self.blocks = next;
         self.centres.clear();

@@ -141,7 +141,7 @@ pub fn polygonize<F: Field + ?Sized>(
     run.repair(&mut leaves)?;
     run.stats.add_time("sample", sampling);
     let (mut mesh, mut stats) = run.triangulate(leaves);
-    compute_normals(field, lattice, &mut mesh, &settings.common, &mut stats)?;
+    compute_normals(field, &mut mesh, &settings.common, &mut stats)?;
     Ok((mesh, stats))
 }
 

@@ -8,12 +8,13 @@
 //! evaluated last.
 
 use super::balls::{balls, block_reach, Reach};
-use super::block::{bits, block_offset, LEAF_CORNERS, LEAF_POINTS};
+use super::block::{block_offset, LEAF_CORNERS, LEAF_POINTS};
 use super::repair::Suspects;
 use super::run::Run;
 use super::state::{atomic_states, PointState};
 use crate::error::Result;
 use crate::field::Field;
+use crate::polygonize::bits::set_bits;
 use crate::polygonize::evaluate;
 use crate::polygonize::table::EDGES;
 use rayon::prelude::*;
@@ -157,7 +158,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
                         // (After the first settling, every point without a sign was evaluated.)
                         None => {
                             let v = store.leaf_block_values(o, centres[i], cells);
-                            balls(bits(neg | pos).map(|q| (q, v[q])), reach)
+                            balls(set_bits(neg | pos).map(|q| (q, v[q])), reach)
                         }
                     };
                     if let Some((decided, _)) = first {
@@ -170,7 +171,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
                     inferred |= n | p;
                 }
                 let mut need = 0;
-                for d in bits(*m) {
+                for d in set_bits(*m) {
                     let corners = LEAF_POINTS[1 << d];
                     if corners & !(neg | pos) == 0 {
                         *m &= !(1 << d);
@@ -251,7 +252,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
             let mut points = Vec::new();
             for (i, need) in ends {
                 let o = blocks[i as usize];
-                for q in bits(need) {
+                for q in set_bits(need) {
                     let p = block_offset(o, q);
                     let s = store.slot_mut(p);
                     // A point two blocks share is taken once (queued until evaluated below).
@@ -289,7 +290,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
                 .filter_map(|(i, (&o, &x))| {
                     let (neg, _, inferred) =
                         sign_masks(&store.leaf_block_states(o, centres[i], cells));
-                    let need = bits(x).fold(0, |n, d| n | unknown_edge_ends(neg, inferred, d));
+                    let need = set_bits(x).fold(0, |n, d| n | unknown_edge_ends(neg, inferred, d));
                     (need != 0).then_some((i as u32, need))
                 })
                 .collect();
@@ -320,7 +321,8 @@ pub(super) fn unknown_edge_ends(neg: u32, inferred: u32, d: usize) -> u32 {
         negative |= (((neg >> p) & 1) as usize) << k;
         only_sign |= (((inferred >> p) & 1) as u8) << k;
     }
-    bits(CROSSED_EDGE_ENDS[negative] & only_sign).fold(0, |need, k| need | 1 << LEAF_CORNERS[d][k])
+    set_bits(CROSSED_EDGE_ENDS[negative] & only_sign)
+        .fold(0, |need, k| need | 1 << LEAF_CORNERS[d][k])
 }
 
 /// `CROSSED_EDGE_ENDS[c]`: the corners of a cell with case `c` (bit k set: corner k negative)

@@ -1,10 +1,12 @@
 //! The block-sparse store of the values of one call and of what is known at each lattice point.
 
-use super::block::{bits, block_offset, CENTRE};
+use super::block::{block_offset, CENTRE};
 use super::state::{atomic_states, PointState};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
+use crate::polygonize::bits::set_bits;
+use crate::polygonize::bricks::Grid;
 use crate::polygonize::{evaluate, Settings, Stats};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -22,6 +24,8 @@ pub(super) fn atomic_u32s(v: &mut [u32]) -> &[AtomicU32] {
 const BRICK_BITS: u32 = 3;
 const BRICK: u32 = 1 << BRICK_BITS;
 const BRICK_POINTS: usize = 1 << (3 * BRICK_BITS);
+/// The bricks of the value store on the lattice.
+type Bricks = Grid<BRICK>;
 /// Offsets within a brick of the block points, when the whole block lies in one brick.
 const BLOCK_SLOTS: [usize; 27] = {
     let mut t = [0; 27];
@@ -58,6 +62,12 @@ pub(super) fn corner_value(values: &[f64], i: u32) -> f64 {
 /// bricks used are touched).
 const RESERVED_BRICKS: usize = 1 << 15;
 
+/// The slot offset within its brick of the point at `(x, y, z)` in the brick (x fastest).
+#[inline(always)]
+fn local_offset(x: u32, y: u32, z: u32) -> usize {
+    (x | y << BRICK_BITS | z << (2 * BRICK_BITS)) as usize
+}
+
 /// Whether the block of 2 × 2 × 2 cells with lower corner `o` lies in one brick (the brick of
 /// `o`), so that its points' slots are those of `o` plus [`BLOCK_SLOTS`].
 #[inline]
@@ -73,8 +83,8 @@ fn in_one_brick(o: [u32; 3]) -> bool {
 /// kept blocks touch and with the evaluations, not with the lattice (the table has one `u32`
 /// per 512 lattice points). The states of a block's 27 points lie in three cache lines.
 pub(super) struct Store {
-    /// Bricks per axis.
-    pub(super) dims: [usize; 3],
+    /// The bricks of the lattice's points.
+    bricks: Bricks,
     /// Brick position → brick number (its slots start at number × 512), or `NONE`.
     pub(super) table: Vec<u32>,
     /// Per brick, a slot per lattice point (x fastest): the index of its value, or `NONE`.
@@ -88,31 +98,25 @@ pub(super) struct Store {
 }
 
 impl Store {
-    /// Bricks per axis of a lattice.
-    pub(super) fn dims(lattice: &Lattice) -> [usize; 3] {
-        lattice
-            .points_per_axis()
-            .map(|p| p.div_ceil(BRICK) as usize)
+    /// The bricks of a lattice's points.
+    fn bricks(lattice: &Lattice) -> Bricks {
+        Grid::new(lattice.points_per_axis())
     }
 
     /// Bytes of the brick table of a lattice.
     pub(super) fn table_bytes(lattice: &Lattice) -> u64 {
-        Self::dims(lattice)
-            .iter()
-            .map(|&d| d as u64)
-            .product::<u64>()
-            * 4
+        Self::bricks(lattice).len() as u64 * 4
     }
 
     pub(super) fn new(lattice: &Lattice) -> Self {
-        let dims = Self::dims(lattice);
-        let table = vec![NONE; dims.iter().product()];
+        let bricks = Self::bricks(lattice);
+        let table = vec![NONE; bricks.len()];
         // Room for the slots of every brick (up to RESERVED_BRICKS): they never move as bricks
         // are handed out (no copies, whose pages would be faulted in afresh), and only the pages
         // of bricks handed out are touched.
         let room = table.len().min(RESERVED_BRICKS) * BRICK_POINTS;
         Store {
-            dims,
+            bricks,
             table,
             slots: crate::memory::reserve_huge(room),
             state: crate::memory::reserve_huge(room),
@@ -126,12 +130,8 @@ impl Store {
     /// Table entry and offset within its brick of lattice point `p`.
     #[inline]
     pub(super) fn locate(&self, p: [u32; 3]) -> (usize, usize) {
-        let b = p.map(|c| (c >> BRICK_BITS) as usize);
-        let m = BRICK - 1;
-        let l = (p[0] & m) as usize
-            | ((p[1] & m) as usize) << BRICK_BITS
-            | ((p[2] & m) as usize) << (2 * BRICK_BITS);
-        (b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2]), l)
+        let (t, [x, y, z]) = self.bricks.locate(p);
+        (t, local_offset(x, y, z))
     }
 
     /// Gives slots to the bricks of the points of the block of 2 × 2 × 2 cells with lower
@@ -169,7 +169,7 @@ impl Store {
             let (t, l) = self.locate(o);
             self.table[t] as usize * BRICK_POINTS + l
         });
-        bits(wanted).map(move |p| {
+        set_bits(wanted).map(move |p| {
             let s = match base {
                 Some(b) => b + BLOCK_SLOTS[p],
                 None => {
@@ -281,7 +281,7 @@ impl Store {
         let mut idx = [NONE; 27];
         // The slots of the whole block, when it lies in the brick of `o`.
         let base = in_one_brick(o).then(|| self.slot_mut(o));
-        for p in bits(wanted) {
+        for p in set_bits(wanted) {
             let q = match base {
                 Some(b) => b + BLOCK_SLOTS[p],
                 None => self.slot_mut(block_offset(o, p)),
@@ -311,10 +311,7 @@ impl Store {
         let base = in_one_brick(o).then(|| self.slot_mut(o));
         let mut agreed = true;
         for (m, negative) in [(neg, true), (pos, false)] {
-            let mut m = m;
-            while m != 0 {
-                let p = m.trailing_zeros() as usize;
-                m &= m - 1;
+            for p in set_bits(m) {
                 let s = match base {
                     Some(b) => b + BLOCK_SLOTS[p],
                     None => self.slot_mut(block_offset(o, p)),
@@ -386,10 +383,10 @@ impl Store {
         }
         // Across bricks: per axis, the brick and offset of the block's three coordinates (None
         // beyond the lattice), then one table lookup per brick touched.
-        let axis = |a: usize| -> [Option<(usize, usize)>; 3] {
+        let axis = |a: usize| -> [Option<(u32, u32)>; 3] {
             std::array::from_fn(|i| {
                 let c = o[a] + i as u32;
-                (c <= cells[a]).then_some(((c >> BRICK_BITS) as usize, (c & (BRICK - 1)) as usize))
+                (c <= cells[a]).then_some((c / BRICK, c % BRICK))
             })
         };
         let (ax, ay, az) = (axis(0), axis(1), axis(2));
@@ -398,13 +395,14 @@ impl Store {
             let Some((bz, lz)) = *z else { continue };
             for (j, y) in ay.iter().enumerate() {
                 let Some((by, ly)) = *y else { continue };
-                let row = self.dims[0] * (by + self.dims[1] * bz);
-                let lrow = (ly << BRICK_BITS) | (lz << (2 * BRICK_BITS));
+                let row = self.bricks.index([0, by, bz]);
+                let lrow = local_offset(0, ly, lz);
                 for (i, x) in ax.iter().enumerate() {
                     let Some((bx, lx)) = *x else { continue };
-                    let b = self.table[row + bx];
+                    let b = self.table[row + bx as usize];
                     if b != NONE {
-                        v[i + 3 * j + 9 * k] = read(b as usize * BRICK_POINTS + (lrow | lx));
+                        v[i + 3 * j + 9 * k] =
+                            read(b as usize * BRICK_POINTS + (lrow | lx as usize));
                     }
                 }
             }

@@ -256,7 +256,7 @@ fn safety_is_given_or_derived_from_the_field() {
     // Derived: 1 for a field without a gradient bound, the bound where it is larger.
     let derived = OctreeSettings::default();
     assert_eq!(derived.safety_for(&sphere).unwrap(), 1.0);
-    let bound = blob.gradient_bound();
+    let bound = blob.gradient_bound().unwrap();
     assert!(bound > 1.0);
     assert_eq!(derived.safety_for(&blob).unwrap(), bound);
     assert_eq!(derived.safety_for(&Counting::new(&blob)).unwrap(), bound);

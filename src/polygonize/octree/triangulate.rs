@@ -7,6 +7,7 @@ use super::store::{atomic_u32s, NONE};
 use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
+use crate::polygonize::bits::set_bits;
 use crate::polygonize::table::{EDGES, EDGE_AXIS};
 use crate::polygonize::{CaseTable, Stats};
 use glam::DVec3;
@@ -64,10 +65,7 @@ fn triangulate(
         .with_min_len(1024)
         .for_each(|(i, l)| {
             let i = i as u32;
-            let mut m = used[l.case as usize];
-            while m != 0 {
-                let e = m.trailing_zeros() as usize;
-                m &= m - 1;
+            for e in set_bits(used[l.case as usize]) {
                 let a = &entry[key(l, e)];
                 if a.load(Relaxed) > i {
                     a.fetch_min(i, Relaxed);
@@ -80,16 +78,9 @@ fn triangulate(
         .enumerate()
         .with_min_len(1024)
         .map(|(i, l)| {
-            let mut made = 0;
-            let mut m = used[l.case as usize];
-            while m != 0 {
-                let e = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if entry[key(l, e)].load(Relaxed) == i as u32 {
-                    made |= 1 << e;
-                }
-            }
-            made
+            set_bits(used[l.case as usize])
+                .filter(|&e| entry[key(l, e)].load(Relaxed) == i as u32)
+                .fold(0, |made, e| made | 1 << e)
         })
         .collect();
     // Where each leaf's vertices start, and how many vertices and triangles each makes.

@@ -93,7 +93,7 @@ impl CellTracking {
             ));
         }
         let mut stats = self.walk_from(field, lattice, settings)?;
-        self.finish(field, lattice, &settings.common, &mut stats)?;
+        self.finish(field, &settings.common, &mut stats)?;
         Ok((&self.mesh, stats))
     }
 
@@ -108,7 +108,7 @@ impl CellTracking {
         if settings.components == Components::All {
             self.walk_the_rest(field, lattice, &settings.common, &mut stats)?;
         }
-        self.finish(field, lattice, &settings.common, &mut stats)?;
+        self.finish(field, &settings.common, &mut stats)?;
         Ok((&self.mesh, stats))
     }
 
@@ -300,12 +300,11 @@ impl CellTracking {
     fn finish<F: Field + ?Sized>(
         &mut self,
         field: &F,
-        lattice: &Lattice,
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<()> {
         let mut mesh = std::mem::take(&mut self.mesh);
-        let r = compute_normals(field, lattice, &mut mesh, settings, stats);
+        let r = compute_normals(field, &mut mesh, settings, stats);
         self.mesh = mesh;
         r
     }
