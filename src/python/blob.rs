@@ -78,8 +78,8 @@ impl PyBlobField {
         Ok(PyBlobField { inner })
     }
 
-    /// splashsurf's surface of SPH particles: the colour field Σᵢ (m/ρᵢ) W(|x − xᵢ|, H) with
-    /// densities ρᵢ = Σⱼ m W(|xᵢ − xⱼ|, H) computed from the particles, as a blob field of
+    /// splashsurf's surface of SPH particles: the colour field Σᵢ (m/ρᵢ) W(‖x − xᵢ‖, H) with
+    /// densities ρᵢ = Σⱼ m W(‖xᵢ − xⱼ‖, H) computed from the particles, as a blob field of
     /// support H per particle and strengths m/ρᵢ·W(0, H).
     ///
     /// The arguments are splashsurf's: ``pysplashsurf.reconstruct_surface(particles,
@@ -114,7 +114,7 @@ impl PyBlobField {
     /// Returns
     /// -------
     /// BlobField
-    ///     Radii H, strengths m/ρᵢ·W(0, H) = 1/Σⱼ w(|xᵢ − xⱼ|/H), threshold ``iso_surface_threshold``.
+    ///     Radii H, strengths m/ρᵢ·W(0, H) = 1/Σⱼ w(‖xᵢ − xⱼ‖/H), threshold ``iso_surface_threshold``.
     ///
     /// Raises
     /// ------
