@@ -99,6 +99,19 @@ def test_sph_kernels_sparse_equals_dense(kernel):
     assert same_mesh(dense, sparse)
 
 
+@pytest.mark.parametrize("kernel", ["cubic_spline", "wendland"])
+def test_sph_kernels_octree_and_tracking_equal_dense(kernel):
+    """The octree's safety comes from the kernel's gradient bound: no crossed block is lost."""
+    rng = np.random.default_rng(14)
+    b = im.BlobField(rng.uniform(-0.6, 0.6, (150, 3)), rng.uniform(0.1, 0.3, 150), threshold=0.35, kernel=kernel)
+    dense = im.polygonize(b, resolution=64, method="dense", normals=False)
+    assert len(dense.faces) > 1000
+    for method in ("octree", "tracking"):
+        m = im.polygonize(b, resolution=64, method=method, normals=False)
+        c = im.compare(dense, m)
+        assert (c["missing"], c["extra"]) == (0, 0), (method, c)
+
+
 def test_colour_field_equals_numpy_sum():
     """splashsurf's formula with its normalised cubic spline, mass (2r)³ρ₀ and densities."""
     rng = np.random.default_rng(5)
