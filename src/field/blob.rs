@@ -5,7 +5,8 @@
 //! default profile its gradient is −∇F = Σ (4A_i/R_i²)(1 − d_i²/R_i²)(p − c_i) (the paper's eq. 2
 //! has the wrong factor and sign).
 //!
-//! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`]). The
+//! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`], built on
+//! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
 use super::blob_kernel::{with_profile, BlobKernel, Profile, Triquet};
@@ -55,7 +56,9 @@ pub struct BlobField {
     packed: Vec<Packed>,
     threshold: f64,
     settings: BlobSettings,
-    grid: VoxelGrid,
+    /// The voxel lists, built by [`BlobField::grid`] on first use and rebuilt in place by
+    /// [`BlobField::update`] once built.
+    grid: std::sync::OnceLock<VoxelGrid>,
 }
 
 /// One primitive as point queries read it.
@@ -194,17 +197,22 @@ impl BlobField {
         self.inv_r2.clear();
         self.inv_r2.extend(self.radii.iter().map(|r| 1.0 / (r * r)));
         self.pack();
+        let side = self.voxel_side();
+        if let Some(grid) = self.grid.get_mut() {
+            grid.rebuild(&self.centers, &self.radii, side);
+        }
+        Ok(())
+    }
+
+    /// The voxels' side: [`BlobSettings::voxel_size`] times the mean radius.
+    fn voxel_side(&self) -> f64 {
+        let n = self.radii.len();
         let mean_r = if n > 0 {
             self.radii.iter().sum::<f64>() / n as f64
         } else {
             1.0
         };
-        self.grid.rebuild(
-            &self.centers,
-            &self.radii,
-            self.settings.voxel_size * mean_r,
-        );
-        Ok(())
+        self.settings.voxel_size * mean_r
     }
 
     /// Replaces the strengths (one per primitive or a scalar), keeping centres, radii and the
@@ -263,7 +271,7 @@ impl BlobField {
     /// ∇f(p) = −∇F(p) from the voxel lists.
     #[inline(always)]
     fn gradient_at(&self, p: DVec3) -> DVec3 {
-        with_profile!(self.settings.kernel, K => self.gradient_over::<K>(self.grid.candidates(p), p))
+        with_profile!(self.settings.kernel, K => self.gradient_over::<K>(self.grid().candidates(p), p))
     }
 
     /// ∇f(p) summed over the primitives `list` (in index order: the same terms, in the same
@@ -291,7 +299,7 @@ impl BlobField {
     #[inline(always)]
     fn potential_with<K: Profile>(&self, p: DVec3) -> f64 {
         let mut f = 0.0;
-        for &i in self.grid.candidates(p) {
+        for &i in self.grid().candidates(p) {
             f += self.term::<K>(i as usize, p);
         }
         f
@@ -731,12 +739,13 @@ impl BlobField {
     }
 
     /// An upper bound on |∇f| over all space: one primitive's gradient is at most
-    /// A·max|w′| / R (for the default profile at d = R/√3, where it is 8A / (3√3 R)); near any point only the primitives of its voxel
-    /// list act, so the bound is the largest sum over one list. With this as the octree's
-    /// safety factor, its rejection test never rejects a block the surface crosses.
+    /// A·max|w′| / R (for the default profile at d = R/√3, where it is 8A / (3√3 R)); near any
+    /// point only the primitives of its voxel list act, so the bound is the largest sum over one
+    /// list. With this as the octree's safety factor, its rejection test never rejects a block
+    /// the surface crosses.
     pub fn gradient_bound(&self) -> f64 {
         let k = self.settings.kernel.max_slope();
-        self.grid
+        self.grid()
             .max_list_sum(|i| k * self.strengths[i as usize].abs() / self.radii[i as usize])
     }
 
@@ -752,8 +761,13 @@ impl BlobField {
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
+    /// The voxel lists of the primitives, built on the first call.
     pub fn grid(&self) -> &VoxelGrid {
-        &self.grid
+        self.grid.get_or_init(|| {
+            let mut grid = VoxelGrid::default();
+            grid.rebuild(&self.centers, &self.radii, self.voxel_side());
+            grid
+        })
     }
     pub fn settings(&self) -> BlobSettings {
         self.settings
@@ -947,7 +961,7 @@ impl Field for BlobField {
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
         with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
-            self.gradient_over::<K>(self.grid.candidates(p), p)
+            self.gradient_over::<K>(self.grid().candidates(p), p)
         }));
     }
 }
@@ -1399,6 +1413,24 @@ mod tests {
                 assert!((b.potential(p) - want).abs() < 1e-12, "{kernel:?} d={d}");
             }
         }
+    }
+
+    #[test]
+    fn sparse_without_normals_builds_no_voxel_lists() {
+        use crate::polygonize::{sparse, Settings};
+        let b = random_blobs(60, 23);
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 40).unwrap();
+        let settings = Settings {
+            normals: false,
+            ..Default::default()
+        };
+        let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
+        assert!(!m.triangles.is_empty());
+        assert!(b.grid.get().is_none());
+        // Built on the first point query, the same lists as a field built with them.
+        let p = DVec3::new(0.1, 0.2, 0.3);
+        assert_eq!(b.potential(p), b.potential_brute_force(p));
+        assert!(b.grid.get().is_some());
     }
 
     #[test]
