@@ -85,7 +85,19 @@ class BlobField:
         threshold: float = 0.5,
         *,
         voxel_size: float | None = None,
+        kernel: str = "triquet",
     ) -> None: ...
+    @staticmethod
+    def from_particles(
+        particles: ArrayLike,
+        particle_radius: float,
+        *,
+        smoothing_length: float = 2.0,
+        iso_surface_threshold: float = 0.6,
+        kernel: str = "cubic_spline",
+        voxel_size: float | None = None,
+        progress: bool | Callable[[int], object] | None = None,
+    ) -> BlobField: ...
     def update(
         self,
         centers: ArrayLike,
@@ -106,6 +118,8 @@ class BlobField:
     def strengths(self) -> npt.NDArray[np.float64]: ...
     @property
     def threshold(self) -> float: ...
+    @property
+    def kernel(self) -> str: ...
     @property
     def voxel_size(self) -> float: ...
     @property

@@ -31,6 +31,7 @@ def _state(field: Field) -> dict[str, Any]:
             "strengths": strengths,
             "threshold": threshold,
             "voxel_size": kwargs["voxel_size"],
+            "kernel": kwargs["kernel"],
         }
     raise ValueError(f"field: expected a VariationalSurface or a BlobField, got {type(field).__name__}")
 
@@ -77,6 +78,11 @@ def load(path: str | os.PathLike[str]) -> Field:
         return VariationalSurface.from_state(state)
     if kind == "BlobField":
         return BlobField(
-            state["centers"], state["radii"], state["strengths"], state["threshold"], voxel_size=state["voxel_size"]
+            state["centers"],
+            state["radii"],
+            state["strengths"],
+            state["threshold"],
+            voxel_size=state["voxel_size"],
+            kernel=state.get("kernel", "triquet"),
         )
     raise ValueError(f"path: {os.fspath(path)!r} does not hold a field written by implicitmesh.save")

@@ -1,10 +1,15 @@
 //! Blob fields of point primitives (Triquet et al. §4.2): the potential
-//! F(p) = Σ A_i (1 − d_i²/R_i²)² for d_i < R_i (else 0), and the surface F = threshold. The field
-//! the polygonizers see is `threshold − F`, negative inside. Its gradient is
-//! −∇F = Σ (4A_i/R_i²)(1 − d_i²/R_i²)(p − c_i) (the paper's eq. 2 has the wrong factor and sign).
+//! F(p) = Σ A_i w(d_i/R_i), with w a compact profile ([`BlobKernel`]: by default Triquet's
+//! (1 − q²)², else the SPH cubic spline or Wendland C2) that is 0 for d_i ≥ R_i, and the surface
+//! F = threshold. The field the polygonizers see is `threshold − F`, negative inside. With the
+//! default profile its gradient is −∇F = Σ (4A_i/R_i²)(1 − d_i²/R_i²)(p − c_i) (the paper's eq. 2
+//! has the wrong factor and sign).
 //!
-//! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`]).
+//! Evaluation looks only at the primitives listed in the point's voxel ([`VoxelGrid`], built on
+//! the first point query: the sparse polygonizer without normals never needs it). The
+//! hand-written vector paths serve the default profile; the others run the generic loops.
 
+use super::blob_kernel::{with_profile, BlobKernel, Profile, Triquet};
 use super::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
@@ -15,22 +20,23 @@ use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// BlobSettings of a blob field.
+/// Settings of a blob field.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BlobSettings {
-    /// Voxel side as a multiple of the mean radius of influence. Default 0.5, from the sweep in
-    /// `notebooks/triquet_blobs.ipynb` (tracking at 128³ over [-1, 1]³, machine loaded):
-    /// 7,000 blobs (R = 0.08) took 0.96, 0.57, 0.69, 0.66, 0.66, 0.69, 0.79, 0.89 s at 0.25,
-    /// 0.5, 0.75, 1, 1.5, 2, 3, 4, with 5.0, 7.7, 11.0, 15.2, 24.8, 39.2, 75.3, 128.8
-    /// primitives looked at per evaluation; 200 blobs (R = 0.25) were flat (0.21–0.26 s), 0.5
-    /// fastest. Smaller voxels look at fewer primitives but hold more list entries (589,274 at
-    /// 0.5 against 144,261 at 1 for 7,000 blobs), and below 0.5 building the lists dominates.
+    /// Voxel side as a multiple of the mean radius of influence (default 0.5; the trade-off
+    /// is in `notebooks/triquet_blobs.ipynb`). Smaller voxels give evaluations fewer primitives
+    /// to look at and the grid more list entries to hold.
     pub voxel_size: f64,
+    /// The profile every primitive sums (default [`BlobKernel::Triquet`]).
+    pub kernel: BlobKernel,
 }
 
 impl Default for BlobSettings {
     fn default() -> Self {
-        BlobSettings { voxel_size: 0.5 }
+        BlobSettings {
+            voxel_size: 0.5,
+            kernel: BlobKernel::Triquet,
+        }
     }
 }
 
@@ -46,7 +52,9 @@ pub struct BlobField {
     packed: Vec<Packed>,
     threshold: f64,
     settings: BlobSettings,
-    grid: VoxelGrid,
+    /// The voxel lists, built by [`BlobField::grid`] on first use and rebuilt in place by
+    /// [`BlobField::update`] once built.
+    grid: std::sync::OnceLock<VoxelGrid>,
 }
 
 /// One primitive as point queries read it.
@@ -58,7 +66,7 @@ struct Packed {
     inv_r2: f64,
     /// A.
     strength: f64,
-    /// 4A / R², the gradient's factor.
+    /// c·A / R² (c: the profile's [`Profile::GRADIENT_SCALE`]), the gradient's factor.
     grad: f64,
 }
 
@@ -184,31 +192,58 @@ impl BlobField {
         self.centers.extend_from_slice(centers);
         self.inv_r2.clear();
         self.inv_r2.extend(self.radii.iter().map(|r| 1.0 / (r * r)));
-        self.packed.clear();
-        for i in 0..n {
-            self.packed.push(Packed {
-                center: self.centers[i],
-                inv_r2: self.inv_r2[i],
-                strength: self.strengths[i],
-                grad: 4.0 * self.strengths[i] * self.inv_r2[i],
-            });
+        self.pack();
+        let side = self.voxel_side();
+        if let Some(grid) = self.grid.get_mut() {
+            grid.rebuild(&self.centers, &self.radii, side);
         }
+        Ok(())
+    }
+
+    /// The voxels' side: [`BlobSettings::voxel_size`] times the mean radius.
+    fn voxel_side(&self) -> f64 {
+        let n = self.radii.len();
         let mean_r = if n > 0 {
             self.radii.iter().sum::<f64>() / n as f64
         } else {
             1.0
         };
-        self.grid.rebuild(
-            &self.centers,
-            &self.radii,
-            self.settings.voxel_size * mean_r,
-        );
-        Ok(())
+        self.settings.voxel_size * mean_r
+    }
+
+    /// Replaces the strengths (one per primitive or a scalar), keeping centres, radii and the
+    /// voxel lists.
+    pub fn set_strengths(&mut self, strengths: PerPrimitive) -> Result<()> {
+        let mut a = std::mem::take(&mut self.strengths);
+        let res = strengths.fill("strengths", self.centers.len(), &mut a, false);
+        if res.is_ok() {
+            self.strengths = a;
+            self.pack();
+        } else {
+            self.strengths = a;
+        }
+        res
+    }
+
+    /// Fills [`BlobField::packed`] from the per-primitive arrays.
+    fn pack(&mut self) {
+        let scale = self.settings.kernel.gradient_scale();
+        self.packed.clear();
+        for i in 0..self.centers.len() {
+            self.packed.push(Packed {
+                center: self.centers[i],
+                inv_r2: self.inv_r2[i],
+                strength: self.strengths[i],
+                grad: scale * self.strengths[i] * self.inv_r2[i],
+            });
+        }
     }
 
     /// Potential F(p) by brute force over all primitives (the reference for tests).
     pub fn potential_brute_force(&self, p: DVec3) -> f64 {
-        (0..self.centers.len()).map(|i| self.term(i, p)).sum()
+        with_profile!(self.settings.kernel, K => (0..self.centers.len())
+            .map(|i| self.term::<K>(i, p))
+            .sum())
     }
 
     /// Centre, 1/R², A and R of primitive `i`.
@@ -224,28 +259,27 @@ impl BlobField {
     }
 
     #[inline(always)]
-    fn term(&self, i: usize, p: DVec3) -> f64 {
-        // max(t, 0) instead of a branch: the same bits (a·0·0 = +0), no mispredictions.
+    fn term<K: Profile>(&self, i: usize, p: DVec3) -> f64 {
         let q = &self.packed[i];
-        q.strength * unit_term(p - q.center, q.inv_r2)
+        q.strength * K::value(unit_t(p - q.center, q.inv_r2))
     }
 
     /// ∇f(p) = −∇F(p) from the voxel lists.
     #[inline(always)]
     fn gradient_at(&self, p: DVec3) -> DVec3 {
-        self.gradient_over(self.grid.candidates(p), p)
+        with_profile!(self.settings.kernel, K => self.gradient_over::<K>(self.grid().candidates(p), p))
     }
 
     /// ∇f(p) summed over the primitives `list` (in index order: the same terms, in the same
     /// order, as any other list that holds every primitive reaching `p`).
     #[inline(always)]
-    fn gradient_over(&self, list: &[u32], p: DVec3) -> DVec3 {
+    fn gradient_over<K: Profile>(&self, list: &[u32], p: DVec3) -> DVec3 {
         let mut g = DVec3::ZERO;
         for &i in list {
             let q = &self.packed[i as usize];
             let d = p - q.center;
-            let t = (1.0 - d.length_squared() * q.inv_r2).max(0.0);
-            g += d * (q.grad * t);
+            let s = K::slope(1.0 - d.length_squared() * q.inv_r2);
+            g += d * (q.grad * s);
         }
         g
     }
@@ -254,9 +288,15 @@ impl BlobField {
     /// [`BlobField::potential_brute_force`] minus those that cannot reach `p`).
     #[inline(always)]
     pub fn potential(&self, p: DVec3) -> f64 {
+        with_profile!(self.settings.kernel, K => self.potential_with::<K>(p))
+    }
+
+    /// [`BlobField::potential`] with the profile `K`.
+    #[inline(always)]
+    fn potential_with<K: Profile>(&self, p: DVec3) -> f64 {
         let mut f = 0.0;
-        for &i in self.grid.candidates(p) {
-            f += self.term(i as usize, p);
+        for &i in self.grid().candidates(p) {
+            f += self.term::<K>(i as usize, p);
         }
         f
     }
@@ -265,8 +305,15 @@ impl BlobField {
     /// plane's) by splatting every primitive that reaches the plane, row by row over the
     /// x-range its sphere covers.
     #[inline(always)]
-    fn splat_plane(&self, lattice: &Lattice, xs: &[f64], ys: &[f64], z: f64, slab: &mut [f64]) {
-        self.splat_plane_with(lattice, xs, ys, z, slab, splat_row)
+    fn splat_plane<K: Profile>(
+        &self,
+        lattice: &Lattice,
+        xs: &[f64],
+        ys: &[f64],
+        z: f64,
+        slab: &mut [f64],
+    ) {
+        self.splat_plane_with(lattice, xs, ys, z, slab, splat_row::<K>)
     }
 
     /// [`BlobField::splat_plane`] with the row loop given (a vector build of [`splat_row`]).
@@ -328,6 +375,7 @@ impl BlobField {
         }
     }
 
+    /// [`BlobField::splat_plane`] with AVX-512 rows (the default profile only).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     unsafe fn splat_plane_avx512(
@@ -344,17 +392,26 @@ impl BlobField {
         })
     }
 
+    /// [`BlobField::splat_plane`] compiled for AVX2 (the compiler's vectors; no fused
+    /// multiply-adds, so the same bits).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn splat_plane_avx2(&self, l: &Lattice, xs: &[f64], ys: &[f64], z: f64, s: &mut [f64]) {
-        self.splat_plane(l, xs, ys, z, s)
+    unsafe fn splat_plane_avx2<K: Profile>(
+        &self,
+        l: &Lattice,
+        xs: &[f64],
+        ys: &[f64],
+        z: f64,
+        s: &mut [f64],
+    ) {
+        self.splat_plane::<K>(l, xs, ys, z, s)
     }
 
     /// Fills a block of values (see [`BlockField::block_values`]) by splatting the primitives of
     /// `list` row by row: the dense splat's arithmetic and order, so the same bits. Rows are
     /// always eight wide (lanes beyond the lattice repeat its last point and are never read);
     /// `row_fn` adds one primitive's terms to a row from dx²/R² per lane (computed once per
-    /// primitive), the row's k = 1 − (dy² + dz²)/R² and A (see [`unit_term`]).
+    /// primitive), the row's k = 1 − (dy² + dz²)/R² and A (see [`unit_t`] and [`Profile::value`]).
     #[inline(always)]
     fn splat_block_with(
         &self,
@@ -368,7 +425,7 @@ impl BlobField {
         out.fill(0.0);
         for &i in list {
             let (c, inv, a, r) = self.primitive(i);
-            // dx²/R² per lane, once per primitive (see `unit_term`).
+            // dx²/R² per lane, once per primitive (see `unit_t`).
             let qx: [f64; 8] = std::array::from_fn(|l| ((xs[l] - c.x) * (xs[l] - c.x)) * inv);
             let dy2: [f64; 8] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
             // The lane nearest the centre has a row's largest term (the rounded steps are
@@ -403,7 +460,7 @@ impl BlobField {
     /// [`BlobField::splat_block_with`] written for AVX-512: per primitive, dx²/R² is one vector
     /// and per plane the rows' k = 1 − (dy² + dz²)/R² another, compared with the nearest lane's
     /// dx²/R² at once for the mask of rows to splat. The same operations on each value as
-    /// [`unit_term`], in the same order, so the same bits.
+    /// [`unit_t`] and [`Profile::value`], in the same order, so the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     unsafe fn splat_block_avx512(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
@@ -465,26 +522,66 @@ impl BlobField {
     /// Fills a block's values (see [`BlockField::block_values`]) from the primitives of `list`
     /// with the vector path of `isa` (which the CPU must have): the same bits on every path.
     fn splat_block(&self, isa: Isa, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
-        match isa {
+        with_profile!(self.settings.kernel, K => match isa {
             // SAFETY: the caller passes an instruction set the CPU has.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { self.splat_block_avx512(list, block, out) },
+            Isa::Avx512 if is_triquet::<K>() => unsafe { self.splat_block_avx512(list, block, out) },
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe { self.splat_block_avx2(list, block, out) },
-            Isa::Generic => self.splat_block_with(list, block, out, |row, qx, k, a| {
-                for (v, q) in row.iter_mut().zip(qx) {
-                    let t = (k - q).max(0.0);
-                    *v += a * (t * t);
-                }
-            }),
-        }
+            Isa::Avx2 if is_triquet::<K>() => unsafe { self.splat_block_avx2(list, block, out) },
+            // SAFETY: as above (AVX-512 implies AVX2).
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 | Isa::Avx512 => unsafe { self.splat_block_generic_avx2::<K>(list, block, out) },
+            Isa::Generic => self.splat_block_generic::<K>(list, block, out),
+        })
+    }
+
+    /// [`BlobField::splat_block_with`] with the profile's scalar row loop.
+    #[inline(always)]
+    fn splat_block_generic<K: Profile>(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        out: &mut [f64; 512],
+    ) {
+        self.splat_block_with(list, block, out, |row, qx, k, a| {
+            for (v, q) in row.iter_mut().zip(qx) {
+                *v += a * K::value(k - q);
+            }
+        })
+    }
+
+    /// [`BlobField::splat_block_generic`] compiled for AVX2 (the compiler's vectors; no fused
+    /// multiply-adds, so the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn splat_block_generic_avx2<K: Profile>(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        out: &mut [f64; 512],
+    ) {
+        self.splat_block_generic::<K>(list, block, out)
     }
 
     /// [`BlobField::gradient_over`] at each point, with the vector path of `isa` (which the CPU
     /// must have) for whole vectors of points: the same bits on every path.
     fn gradients_over(&self, isa: Isa, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        with_profile!(self.settings.kernel, K => self.gradients_over_with::<K>(isa, list, points, out))
+    }
+
+    /// [`BlobField::gradients_over`] with the profile `K` (vector paths for the default one).
+    #[inline(always)]
+    fn gradients_over_with<K: Profile>(
+        &self,
+        isa: Isa,
+        list: &[u32],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) {
         let done = match isa {
+            #[cfg(target_arch = "x86_64")]
+            _ if !is_triquet::<K>() => 0,
             #[cfg(target_arch = "x86_64")]
             Isa::Avx512 => {
                 let full = points.len() / 8 * 8;
@@ -502,12 +599,12 @@ impl BlobField {
             Isa::Generic => 0,
         };
         for (p, o) in points[done..].iter().zip(&mut out[done..]) {
-            *o = self.gradient_over(list, *p);
+            *o = self.gradient_over::<K>(list, *p);
         }
     }
 
     /// [`BlobField::splat_block_avx512`] for AVX2: each row of eight as two vectors of four. The
-    /// same operations on each value as [`unit_term`], in the same order, so the same bits.
+    /// same operations on each value as [`unit_t`] and [`Profile::value`], in the same order, so the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn splat_block_avx2(&self, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
@@ -649,8 +746,13 @@ impl BlobField {
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
+    /// The voxel lists of the primitives, built on the first call.
     pub fn grid(&self) -> &VoxelGrid {
-        &self.grid
+        self.grid.get_or_init(|| {
+            let mut grid = VoxelGrid::default();
+            grid.rebuild(&self.centers, &self.radii, self.voxel_side());
+            grid
+        })
     }
     pub fn settings(&self) -> BlobSettings {
         self.settings
@@ -697,15 +799,20 @@ fn map_points<T: Send>(points: &[DVec3], out: &mut [T], f: impl Fn(DVec3) -> T +
         .for_each(|(p, o)| run(p, o));
 }
 
-/// t·t of one primitive at offset `d` from its centre (1/R² `inv`), with
-/// t = max((1 − (dy² + dz²)/R²) − dx²/R², 0): the order every evaluation of the potential uses
-/// (point, plane and block), so that all give the same bits. Grouping dy² + dz² first lets a
-/// lattice row share 1 − (dy² + dz²)/R² and a block share dx²/R² per primitive; both rounded
-/// steps are monotone, so the term never grows with any |d_i|.
+/// t = (1 − (dy² + dz²)/R²) − dx²/R² of one primitive at offset `d` from its centre (1/R²
+/// `inv`), unclamped, which [`Profile::value`] turns into the term: the order every evaluation of
+/// the potential uses (point, plane and block), so that all give the same bits. Grouping
+/// dy² + dz² first lets a lattice row share 1 − (dy² + dz²)/R² and a block share dx²/R² per
+/// primitive; both rounded steps are monotone, so t never grows with any |d_i|.
 #[inline(always)]
-fn unit_term(d: DVec3, inv: f64) -> f64 {
-    let t = ((1.0 - (d.y * d.y + d.z * d.z) * inv) - (d.x * d.x) * inv).max(0.0);
-    t * t
+fn unit_t(d: DVec3, inv: f64) -> f64 {
+    (1.0 - (d.y * d.y + d.z * d.z) * inv) - (d.x * d.x) * inv
+}
+
+/// Whether `K` is the default profile, the one the hand-written vector paths compute.
+#[inline(always)]
+fn is_triquet<K: Profile>() -> bool {
+    std::any::TypeId::of::<K>() == std::any::TypeId::of::<Triquet>()
 }
 
 /// One primitive's term along one lattice row: x-centre, k = 1 − (dy² + dz²)/R², 1/R², A.
@@ -728,19 +835,18 @@ impl RowTerm {
     }
 }
 
-/// Adds the term A·(t·t), t = max(k − dx²/R², 0) (see [`unit_term`]), to each value of a row
-/// (`row[i]` at x = `xs[i]`). The order of operations is that of [`BlobField::potential`],
-/// without fused multiply-adds, so the values are bit-identical to point evaluation.
+/// Adds the term A·w(t), t = k − dx²/R² (see [`unit_t`]), to each value of a row (`row[i]` at
+/// x = `xs[i]`). The order of operations is that of [`BlobField::potential`], without fused
+/// multiply-adds, so the values are bit-identical to point evaluation.
 #[inline(always)]
-fn splat_row(row: &mut [f64], xs: &[f64], q: &RowTerm) {
+fn splat_row<K: Profile>(row: &mut [f64], xs: &[f64], q: &RowTerm) {
     for (v, &x) in row.iter_mut().zip(xs) {
         let dx = x - q.cx;
-        let t = (q.k - (dx * dx) * q.inv).max(0.0);
-        *v += q.a * (t * t);
+        *v += q.a * K::value(q.k - (dx * dx) * q.inv);
     }
 }
 
-/// [`splat_row`] eight lanes at a time with masked loads and stores for the tail (rows are
+/// [`splat_row`] of the default profile eight lanes at a time with masked loads and stores for the tail (rows are
 /// short: a sphere of 16 cells' radius spans at most 33 points). The same operations in the
 /// same order, so the same bits.
 #[cfg(target_arch = "x86_64")]
@@ -774,14 +880,15 @@ unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
 }
 
 impl Field for BlobField {
-    /// An upper bound on |∇f| over all space: one primitive's gradient is largest at
-    /// d = R/√3, where it is 8A / (3√3 R); near any point only the primitives of its voxel
-    /// list act, so the bound is the largest sum over one list. With this as the octree's
-    /// safety factor, its rejection test never rejects a block the surface crosses.
+    /// An upper bound on |∇f| over all space: one primitive's gradient is at most
+    /// A·max|w′| / R (for the default profile at d = R/√3, where it is 8A / (3√3 R)); near any
+    /// point only the primitives of its voxel list act, so the bound is the largest sum over one
+    /// list. With this as the octree's safety factor, its rejection test never rejects a block
+    /// the surface crosses.
     fn gradient_bound(&self) -> Option<f64> {
-        let k = 8.0 / (3.0 * 3f64.sqrt());
+        let k = self.settings.kernel.max_slope();
         Some(
-            self.grid
+            self.grid()
                 .max_list_sum(|i| k * self.strengths[i as usize].abs() / self.radii[i as usize]),
         )
     }
@@ -805,21 +912,26 @@ impl Field for BlobField {
         let xs: Vec<f64> = (0..px).map(|i| lattice.point([i, 0, 0]).x).collect();
         let ys: Vec<f64> = (0..py).map(|j| lattice.point([0, j, 0]).y).collect();
         let isa = Isa::detect();
-        out.par_chunks_mut(plane)
-            .enumerate()
-            .for_each(|(dz, slab)| {
-                let k = z0 + dz as u32;
-                debug_assert!(k < z1);
-                let z = lattice.point([0, 0, k]).z;
-                match isa {
-                    // SAFETY: the variant is only chosen when the CPU has the feature.
-                    #[cfg(target_arch = "x86_64")]
-                    Isa::Avx512 => unsafe { self.splat_plane_avx512(lattice, &xs, &ys, z, slab) },
-                    #[cfg(target_arch = "x86_64")]
-                    Isa::Avx2 => unsafe { self.splat_plane_avx2(lattice, &xs, &ys, z, slab) },
-                    Isa::Generic => self.splat_plane(lattice, &xs, &ys, z, slab),
-                }
-            });
+        with_profile!(self.settings.kernel, K => out.par_chunks_mut(plane)
+        .enumerate()
+        .for_each(|(dz, slab)| {
+            let k = z0 + dz as u32;
+            debug_assert!(k < z1);
+            let z = lattice.point([0, 0, k]).z;
+            match isa {
+                // SAFETY: the variant is only chosen when the CPU has the feature.
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx512 if is_triquet::<K>() => unsafe {
+                    self.splat_plane_avx512(lattice, &xs, &ys, z, slab)
+                },
+                // SAFETY: as above (AVX-512 implies AVX2).
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx2 | Isa::Avx512 => unsafe {
+                    self.splat_plane_avx2::<K>(lattice, &xs, &ys, z, slab)
+                },
+                Isa::Generic => self.splat_plane::<K>(lattice, &xs, &ys, z, slab),
+            }
+        }));
     }
 
     #[inline]
@@ -835,11 +947,15 @@ impl Field for BlobField {
     /// The batch loops call the point functions inlined: a call per point (the trait's default)
     /// costs as much as the terms themselves here.
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
-        map_points(points, out, |p| self.threshold - self.potential(p));
+        with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+            self.threshold - self.potential_with::<K>(p)
+        }));
     }
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
-        map_points(points, out, |p| self.gradient_at(p));
+        with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+            self.gradient_over::<K>(self.grid().candidates(p), p)
+        }));
     }
 }
 
@@ -917,14 +1033,21 @@ impl BlobField {
     /// the nearest and the farthest point of the box), or [`BlockSign::Mixed`]. The margin,
     /// 1e-9 of the strengths' sum, is far above rounding.
     fn box_sign(&self, list: &[u32], plo: DVec3, phi: DVec3) -> BlockSign {
+        with_profile!(self.settings.kernel, K => self.box_sign_with::<K>(list, plo, phi))
+    }
+
+    /// [`BlobField::box_sign`] with the profile `K`.
+    #[inline(always)]
+    fn box_sign_with<K: Profile>(&self, list: &[u32], plo: DVec3, phi: DVec3) -> BlockSign {
         let (mut fmin, mut fmax, mut scale) = (0.0f64, 0.0f64, self.threshold.abs());
         for &i in list {
             let i = i as usize;
             let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
             let (near, far) = box_distances2(c, plo, phi);
-            let t_near = (1.0 - near * inv).max(0.0);
-            let t_far = (1.0 - far * inv).max(0.0);
-            let (big, small) = (a * t_near * t_near, a * t_far * t_far);
+            let (big, small) = (
+                a * K::value(1.0 - near * inv),
+                a * K::value(1.0 - far * inv),
+            );
             fmax += big.max(small);
             fmin += big.min(small);
             scale += a.abs();
@@ -1099,7 +1222,7 @@ impl BlockField for BlobField {
         // A block much larger than the primitives (a coarse lattice) lists far more of them than
         // reach any one point: the voxel lists are shorter then (the same terms, the same bits).
         if list.len() > LONG_BLOCK_LIST {
-            map_points(points, out, |p| self.gradient_at(p));
+            self.gradients(points, out);
             return;
         }
         self.gradients_over(Isa::detect(), list, points, out);
@@ -1113,7 +1236,13 @@ mod tests {
 
     #[test]
     fn every_vector_path_gives_the_same_bits() {
-        let f = random_blobs(300, 17);
+        for kernel in BlobKernel::ALL {
+            every_vector_path_gives_the_same_bits_with(kernel);
+        }
+    }
+
+    fn every_vector_path_gives_the_same_bits_with(kernel: BlobKernel) {
+        let f = random_blobs_with(300, 17, kernel);
         let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [37, 30, 45]).unwrap();
         let all: Vec<u32> = (0..300).collect();
         let points = random_points(23, -0.9, 0.9, 5);
@@ -1149,6 +1278,10 @@ mod tests {
     }
 
     fn random_blobs(n: usize, seed: u64) -> BlobField {
+        random_blobs_with(n, seed, BlobKernel::Triquet)
+    }
+
+    fn random_blobs_with(n: usize, seed: u64, kernel: BlobKernel) -> BlobField {
         let c = random_points(n, -0.8, 0.8, seed);
         let r: Vec<f64> = random_points(n, 0.1, 0.3, seed + 1)
             .iter()
@@ -1159,15 +1292,21 @@ mod tests {
             PerPrimitive::Each(&r),
             PerPrimitive::All(1.0),
             0.5,
-            BlobSettings::default(),
+            BlobSettings {
+                kernel,
+                ..Default::default()
+            },
         )
         .unwrap()
     }
 
     #[test]
     fn voxel_evaluation_equals_brute_force() {
-        for (n, seed) in [(1, 3), (20, 5), (300, 7)] {
-            let b = random_blobs(n, seed);
+        for ((n, seed), kernel) in [(1, 3), (20, 5), (300, 7)]
+            .into_iter()
+            .flat_map(|c| BlobKernel::ALL.map(|k| (c, k)))
+        {
+            let b = random_blobs_with(n, seed, kernel);
             for p in random_points(2000, -1.2, 1.2, seed + 9) {
                 assert!((b.potential(p) - b.potential_brute_force(p)).abs() < 1e-12);
             }
@@ -1176,7 +1315,13 @@ mod tests {
 
     #[test]
     fn splatted_lattice_values_are_bit_identical() {
-        let b = random_blobs(120, 31);
+        for kernel in BlobKernel::ALL {
+            splatted_lattice_values_are_bit_identical_with(kernel);
+        }
+    }
+
+    fn splatted_lattice_values_are_bit_identical_with(kernel: BlobKernel) {
+        let b = random_blobs_with(120, 31, kernel);
         let l = Lattice::new(
             DVec3::new(-1.0, -0.9, -1.1),
             DVec3::new(1.1, 1.0, 0.9),
@@ -1203,8 +1348,11 @@ mod tests {
 
     #[test]
     fn gradient_bound_holds() {
-        for (n, seed) in [(1, 41), (50, 43), (400, 47)] {
-            let b = random_blobs(n, seed);
+        for ((n, seed), kernel) in [(1, 41), (50, 43), (400, 47)]
+            .into_iter()
+            .flat_map(|c| BlobKernel::ALL.map(|k| (c, k)))
+        {
+            let b = random_blobs_with(n, seed, kernel);
             let bound = b.gradient_bound().unwrap();
             let worst = random_points(20_000, -1.2, 1.2, seed + 1)
                 .iter()
@@ -1230,9 +1378,52 @@ mod tests {
 
     #[test]
     fn gradient_matches_differences() {
-        let b = random_blobs(50, 11);
-        let pts = random_points(300, -1.0, 1.0, 12);
-        assert!(gradient_error(&b, &pts, 1e-6) < 1e-6);
+        for kernel in BlobKernel::ALL {
+            let b = random_blobs_with(50, 11, kernel);
+            let pts = random_points(300, -1.0, 1.0, 12);
+            assert!(gradient_error(&b, &pts, 1e-6) < 1e-6, "{kernel:?}");
+        }
+    }
+
+    /// The potential of one primitive of each profile at known distances.
+    #[test]
+    fn potential_follows_the_profile() {
+        for kernel in BlobKernel::ALL {
+            let b = BlobField::new(
+                &[DVec3::new(0.1, 0.2, 0.3)],
+                PerPrimitive::All(0.5),
+                PerPrimitive::All(2.0),
+                0.5,
+                BlobSettings {
+                    kernel,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            for d in [0.0, 0.1, 0.2, 0.25, 0.3, 0.49, 0.5, 0.7] {
+                let p = DVec3::new(0.1, 0.2, 0.3) + DVec3::new(0.6, 0.0, 0.8) * d;
+                let want = 2.0 * kernel.value(d, 0.5);
+                assert!((b.potential(p) - want).abs() < 1e-12, "{kernel:?} d={d}");
+            }
+        }
+    }
+
+    #[test]
+    fn sparse_without_normals_builds_no_voxel_lists() {
+        use crate::polygonize::{sparse, Settings};
+        let b = random_blobs(60, 23);
+        let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 40).unwrap();
+        let settings = Settings {
+            normals: false,
+            ..Default::default()
+        };
+        let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
+        assert!(!m.triangles.is_empty());
+        assert!(b.grid.get().is_none());
+        // Built on the first point query, the same lists as a field built with them.
+        let p = DVec3::new(0.1, 0.2, 0.3);
+        assert_eq!(b.potential(p), b.potential_brute_force(p));
+        assert!(b.grid.get().is_some());
     }
 
     #[test]

@@ -7,10 +7,12 @@
 
 pub mod analytic;
 pub mod blob;
+pub mod blob_kernel;
 pub mod constraints;
 pub mod differences;
 pub mod grid;
 pub mod kernel;
+pub mod particles;
 pub mod partition;
 pub mod rbf;
 pub mod saddle;

@@ -18,9 +18,6 @@ pub struct VoxelGrid {
     items: Vec<u32>,
     /// Per-voxel fill cursor used while building.
     cursor: Vec<u32>,
-    /// The runs of voxels each primitive touches (first voxel, count, primitive), found once
-    /// per rebuild and read by its counting and filling passes.
-    runs: Vec<(u32, u32, u32)>,
 }
 
 /// Largest number of voxels a grid may have (the voxel size is grown to stay under it).
@@ -57,22 +54,18 @@ impl VoxelGrid {
         self.size = size;
         self.inv_size = 1.0 / size;
         let nvox = self.dims.iter().map(|&d| d as usize).product::<usize>();
-        // The runs of voxels each primitive touches, then a counting pass and a fill pass
-        // over them.
+        // A counting pass and a fill pass over the runs of voxels each primitive touches (found
+        // again in the second pass: storing them would take more memory than the lists).
         self.start.clear();
         self.start.resize(nvox + 1, 0);
         let (origin, dims) = (self.origin, self.dims);
-        self.runs.clear();
-        for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
-            let runs = &mut self.runs;
+        for (c, r) in centers.iter().zip(radii) {
+            let start = &mut self.start;
             voxels_touching(origin, size, dims, *c, *r, |first, count| {
-                runs.push((first as u32, count as u32, i as u32));
+                for s in &mut start[first..first + count] {
+                    *s += 1;
+                }
             });
-        }
-        for &(first, count, _) in &self.runs {
-            for s in &mut self.start[first as usize..(first + count) as usize] {
-                *s += 1;
-            }
         }
         let mut total = 0u32;
         for s in self.start.iter_mut() {
@@ -84,11 +77,14 @@ impl VoxelGrid {
         self.items.resize(total as usize, 0);
         self.cursor.clear();
         self.cursor.extend_from_slice(&self.start[..nvox]);
-        for &(first, count, i) in &self.runs {
-            for c in &mut self.cursor[first as usize..(first + count) as usize] {
-                self.items[*c as usize] = i;
-                *c += 1;
-            }
+        for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
+            let (cursor, items) = (&mut self.cursor, &mut self.items);
+            voxels_touching(origin, size, dims, *c, *r, |first, count| {
+                for c in &mut cursor[first..first + count] {
+                    items[*c as usize] = i as u32;
+                    *c += 1;
+                }
+            });
         }
     }
 
@@ -140,7 +136,6 @@ impl VoxelGrid {
     /// Bytes held by the grid's arrays (capacity).
     pub fn capacity_bytes(&self) -> usize {
         4 * (self.start.capacity() + self.items.capacity() + self.cursor.capacity())
-            + 12 * self.runs.capacity()
     }
 }
 

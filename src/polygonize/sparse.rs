@@ -938,6 +938,30 @@ mod tests {
     }
 
     #[test]
+    fn equals_dense_with_sph_kernels() {
+        use crate::field::blob::{BlobSettings, PerPrimitive};
+        use crate::field::blob_kernel::BlobKernel;
+        for kernel in [BlobKernel::CubicSpline, BlobKernel::Wendland] {
+            for_each_blob_case(&BLOB_CASES[..4], |f, l| {
+                let settings = BlobSettings {
+                    kernel,
+                    ..Default::default()
+                };
+                let g = BlobField::new(
+                    f.centers(),
+                    PerPrimitive::Each(f.radii()),
+                    PerPrimitive::All(1.0),
+                    0.3,
+                    settings,
+                )
+                .unwrap();
+                let st = check_equal(&g, l, Ambiguity::Separate);
+                assert!(st.cells_crossed > 0);
+            });
+        }
+    }
+
+    #[test]
     fn anisotropic_and_cut_lattices() {
         let f = blobs(40, 0.3, 9);
         // Odd cell counts (partial blocks on every axis) and a box that cuts the surface.

@@ -2,6 +2,8 @@
 
 use super::convert::{field_gradients, field_values, points, points_to_py, values, values_to_py};
 use crate::field::blob::{self, BlobField, PerPrimitive};
+use crate::field::blob_kernel::BlobKernel;
+use crate::field::particles::{self, ParticleSettings};
 use glam::DVec3;
 use pyo3::prelude::*;
 
@@ -20,15 +22,16 @@ fn as_per(v: &Result<f64, Vec<f64>>) -> PerPrimitive<'_> {
     }
 }
 
-/// A blob field: point primitives with the compact kernel A·(1 − d²/R²)² (Triquet et al.),
-/// surface at potential = ``threshold``; as a field, ``threshold − potential`` (negative inside).
+/// A blob field: point primitives with a compact kernel, by default A·(1 − d²/R²)² (Triquet et
+/// al.), surface at potential = ``threshold``; as a field, ``threshold − potential`` (negative
+/// inside).
 ///
 /// Parameters
 /// ----------
-/// centers : (N, 3) float64
-///     Primitive positions.
+/// centers : (N, 3) float64 or float32
+///     Primitive positions (C or Fortran order; read as they are, without a copy in Python).
 /// radii : float or (N,) float64
-///     Radii of influence R (positive).
+///     Radii of influence R (positive): the kernel's compact support.
 /// strengths : float or (N,) float64
 ///     Scale factors A. Default 1.0.
 /// threshold : float
@@ -36,6 +39,12 @@ fn as_per(v: &Result<f64, Vec<f64>>) -> PerPrimitive<'_> {
 /// voxel_size : float, optional
 ///     Side of the acceleration voxels as a multiple of the mean radius (default 0.5, chosen
 ///     from the sweep in ``notebooks/triquet_blobs.ipynb``).
+/// kernel : {"triquet", "cubic_spline", "wendland"}
+///     The profile w(q), q = d/R, each 1 at the centre and 0 from q = 1 on: ``"triquet"``
+///     (default) (1 − q²)²; ``"cubic_spline"`` the SPH cubic spline, 1 − 6q² + 6q³ up to
+///     q = 1/2 and 2(1 − q)³ beyond; ``"wendland"`` Wendland C2, (1 − q)⁴(1 + 4q). The
+///     potential is Σ A·w(d/R); the SPH kernels normalised to integral 1 are these times
+///     8/(πR³) and 21/(2πR³). See :meth:`from_particles` for splashsurf's colour field.
 #[pyclass(name = "BlobField", module = "implicitmesh")]
 pub struct PyBlobField {
     pub inner: BlobField,
@@ -44,7 +53,7 @@ pub struct PyBlobField {
 #[pymethods]
 impl PyBlobField {
     #[new]
-    #[pyo3(signature = (centers, radii, strengths=None, threshold=0.5, *, voxel_size=None))]
+    #[pyo3(signature = (centers, radii, strengths=None, threshold=0.5, *, voxel_size=None, kernel="triquet"))]
     fn new(
         py: Python<'_>,
         centers: &Bound<'_, PyAny>,
@@ -52,6 +61,7 @@ impl PyBlobField {
         strengths: Option<&Bound<'_, PyAny>>,
         threshold: f64,
         voxel_size: Option<f64>,
+        kernel: &str,
     ) -> PyResult<Self> {
         let c = points(centers, "centers")?;
         let r = per_primitive(radii, "radii")?;
@@ -61,10 +71,89 @@ impl PyBlobField {
         };
         let settings = blob::BlobSettings {
             voxel_size: voxel_size.unwrap_or(blob::BlobSettings::default().voxel_size),
+            kernel: BlobKernel::parse(kernel)?,
         };
         let inner =
             py.detach(|| BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings))?;
         Ok(PyBlobField { inner })
+    }
+
+    /// splashsurf's surface of SPH particles: the colour field Σᵢ (m/ρᵢ) W(‖x − xᵢ‖, H) with
+    /// densities ρᵢ = Σⱼ m W(‖xᵢ − xⱼ‖, H) computed from the particles, as a blob field of
+    /// support H per particle and strengths m/ρᵢ·W(0, H).
+    ///
+    /// The arguments are splashsurf's: ``pysplashsurf.reconstruct_surface(particles,
+    /// particle_radius=r, smoothing_length=ℓ, iso_surface_threshold=T, cube_size=c)`` and
+    /// ``polygonize(BlobField.from_particles(particles, r, smoothing_length=ℓ,
+    /// iso_surface_threshold=T), bounds, cells)`` with cells of side c·r give the same level set
+    /// (pysplashsurf 0.14 reads ``smoothing_length`` and ``cube_size`` relative to the particle
+    /// radius). The particle mass (2r)³ρ₀ and the rest density ρ₀ cancel out of the field, so
+    /// neither is an argument.
+    ///
+    /// Parameters
+    /// ----------
+    /// particles : (N, 3) float64 or float32
+    ///     Particle positions (C or Fortran order; read as they are).
+    /// particle_radius : float
+    ///     r: half the particle spacing (positive).
+    /// smoothing_length : float
+    ///     ℓ, relative to ``particle_radius``: the kernel's compact support is H = 2ℓr. Default
+    ///     2.0.
+    /// iso_surface_threshold : float
+    ///     The colour field's value on the surface (positive; about 1 inside the fluid). Default
+    ///     0.6. The field's :attr:`threshold`.
+    /// kernel : {"cubic_spline", "wendland", "triquet"}
+    ///     W (see the class docstring). Default ``"cubic_spline"``, splashsurf's.
+    /// voxel_size : float, optional
+    ///     Side of the acceleration voxels as a multiple of H (default 0.5).
+    /// progress : bool or callable, optional
+    ///     ``True``: show the particle densities computed so far (a tqdm bar when tqdm is
+    ///     installed, else a line on standard error); a callable gets that count (an int) about
+    ///     every 50 ms.
+    ///
+    /// Returns
+    /// -------
+    /// BlobField
+    ///     Radii H, strengths m/ρᵢ·W(0, H) = 1/Σⱼ w(‖xᵢ − xⱼ‖/H), threshold ``iso_surface_threshold``.
+    ///
+    /// Raises
+    /// ------
+    /// KeyboardInterrupt
+    ///     On Ctrl-C, between chunks of 65,536 particles.
+    /// ValueError
+    ///     For a wrong shape, NaN/inf positions, a non-positive radius, smoothing length,
+    ///     threshold or voxel size, or an unknown kernel.
+    #[staticmethod]
+    #[pyo3(signature = (particles, particle_radius, *, smoothing_length=2.0, iso_surface_threshold=0.6, kernel="cubic_spline", voxel_size=None, progress=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_particles(
+        py: Python<'_>,
+        particles: &Bound<'_, PyAny>,
+        particle_radius: f64,
+        smoothing_length: f64,
+        iso_surface_threshold: f64,
+        kernel: &str,
+        voxel_size: Option<f64>,
+        progress: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let p = points(particles, "particles")?;
+        let settings = ParticleSettings {
+            smoothing_length,
+            iso_surface_threshold,
+            kernel: BlobKernel::parse(kernel)?,
+            voxel_size: voxel_size.unwrap_or(ParticleSettings::default().voxel_size),
+        };
+        let r = py.import("implicitmesh._progress")?.call_method1(
+            "reporter",
+            (progress, "from_particles", p.len(), "particle densities"),
+        )?;
+        let (report, end): (Bound<'_, PyAny>, Bound<'_, PyAny>) = r.extract()?;
+        let report = (!report.is_none()).then_some(report);
+        let inner = super::interrupt::run(py, report.as_ref(), false, || {
+            particles::colour_field(&p, particle_radius, &settings)
+        });
+        end.call0()?;
+        Ok(PyBlobField { inner: inner? })
     }
 
     /// Moves the primitives; optionally new radii and strengths (required when the number of
@@ -147,6 +236,11 @@ impl PyBlobField {
     fn strengths<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
         values_to_py(py, self.inner.strengths().to_vec())
     }
+    /// str: the kernel's name (``"triquet"``, ``"cubic_spline"`` or ``"wendland"``).
+    #[getter]
+    fn kernel(&self) -> &'static str {
+        self.inner.settings().kernel.name()
+    }
     /// float: the potential of the surface.
     #[getter]
     fn threshold(&self) -> f64 {
@@ -185,6 +279,7 @@ impl PyBlobField {
     )> {
         let kwargs = pyo3::types::PyDict::new(py);
         kwargs.set_item("voxel_size", self.inner.settings().voxel_size)?;
+        kwargs.set_item("kernel", self.kernel())?;
         Ok((
             (
                 self.centers(py)?,
@@ -200,9 +295,10 @@ impl PyBlobField {
     }
     fn __repr__(&self) -> String {
         format!(
-            "BlobField(primitives={}, threshold={})",
+            "BlobField(primitives={}, threshold={}, kernel={:?})",
             self.inner.centers().len(),
-            self.inner.threshold()
+            self.inner.threshold(),
+            self.kernel()
         )
     }
 }

@@ -40,8 +40,13 @@ pub fn python_shape(shape: &[usize]) -> String {
     }
 }
 
-/// An (N, 3) array of points, as float64.
+/// An (N, 3) array of points, as float64. float64 and float32 numpy arrays in native byte order
+/// are read as they are (any strides, no copy in Python); anything else goes through
+/// `numpy.asarray(x, dtype=float64)`.
 pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>> {
+    if let Some(p) = points_in_place::<f64>(obj).or_else(|| points_in_place::<f32>(obj)) {
+        return Ok(p);
+    }
     let arr = asarray(obj, "float64")
         .map_err(|e| value_error(name, format!("not convertible to a float64 array ({e})")))?;
     let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
@@ -61,6 +66,25 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>
         .into_iter()
         .map(|r| DVec3::new(r[0], r[1], r[2]))
         .collect())
+}
+
+/// The rows of `obj` when it is an (N, 3) numpy array of `T` (None otherwise, or when it is
+/// borrowed mutably).
+fn points_in_place<T: numpy::Element + Copy + Into<f64>>(
+    obj: &Bound<'_, PyAny>,
+) -> Option<Vec<DVec3>> {
+    let a = obj.cast::<numpy::PyArray2<T>>().ok()?;
+    let a = a.try_readonly().ok()?;
+    let view = a.as_array();
+    if view.ncols() != 3 {
+        return None;
+    }
+    Some(
+        view.rows()
+            .into_iter()
+            .map(|r| DVec3::new(r[0].into(), r[1].into(), r[2].into()))
+            .collect(),
+    )
 }
 
 /// An (N,) array of float64 values.

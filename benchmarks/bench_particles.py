@@ -1,0 +1,246 @@
+"""Particles to surfaces: our blob fields (``method="sparse"``) against splashsurf
+(pysplashsurf, f32 and f64) on the same SPH particles at the same cells.
+
+Two layouts of particles on a jittered lattice of spacing s (jitter ±0.1 s per axis): ``slab``, a
+slab of fluid with a sphere falling onto it, and ``droplets``, a shallow pool under randomly
+placed droplets of 2–6 s radius. splashsurf: ``reconstruct_surface(P, particle_radius=s/2,
+smoothing_length=2.0, cube_size=0.5, iso_surface_threshold=0.6)`` (pysplashsurf 0.14 reads the
+last two relative to the particle radius: support 2s, cells s/4). Ours over the same cells of
+s/4: ``BlobField.from_particles(P, s/2)`` (splashsurf's colour field, the cubic spline) and
+``BlobField(P, 2s, 1.0, T, kernel="triquet")`` with T placing the surface where the colour field
+lies on a flat face of the fluid (see :func:`triquet_threshold`), each with normals off and on.
+
+Every case runs in a fresh process (its peak resident size VmHWM is its own, particles included);
+times are wall-clock seconds from particles to mesh, medians over the runs.
+
+    python -m benchmarks.bench_particles [--quick] [--results DIR]
+    python -m benchmarks.bench_particles one LAYOUT METHOD PARTICLES   # one JSON line
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from functools import lru_cache
+
+from benchmarks.bench_scale import median, vmhwm_mib
+from benchmarks.timing import ROOT, RunRecord, fmt_ratio, fmt_s, md_table, run_markdown, run_section
+
+#: Particle spacing.
+S = 0.01
+LAYOUTS = ("slab", "droplets")
+#: Particles per case (full, quick).
+SIZES = {False: (100_000, 1_000_000, 4_000_000), True: (20_000,)}
+OURS = ("colour", "colour+normals", "triquet", "triquet+normals")
+PEERS = ("splashsurf-f32", "splashsurf-f64")
+#: Repetitions per case, each in its own process; the median is reported.
+RUNS = {False: 3, True: 1}
+#: The colour field's threshold (splashsurf's default).
+ISO = 0.6
+
+
+def lattice_ball(radius: float, center, rng):
+    """Jittered lattice points of spacing S inside a ball."""
+    import numpy as np
+
+    k = int(np.ceil(radius / S))
+    i = np.arange(-k, k + 1) * S
+    g = np.stack(np.meshgrid(i, i, i, indexing="ij"), axis=-1).reshape(-1, 3)
+    g = g[np.linalg.norm(g, axis=1) <= radius]
+    return g + np.asarray(center) + rng.uniform(-0.1 * S, 0.1 * S, g.shape)
+
+
+def lattice_box(lo, counts, rng):
+    """Jittered lattice points of spacing S, ``counts`` per axis from ``lo``."""
+    import numpy as np
+
+    axes = [lo[a] + np.arange(counts[a]) * S for a in range(3)]
+    g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    return g + rng.uniform(-0.1 * S, 0.1 * S, g.shape)
+
+
+def particles(layout: str, n: int):
+    """About ``n`` particles of ``layout`` (deterministic), float64 (P, 3)."""
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    if layout == "slab":
+        # A slab L × L × L/4 and a sphere of radius L/5 two radii above it: volume 0.2835 L³.
+        side = (n * S**3 / (0.25 + 4 / 3 * np.pi / 125)) ** (1 / 3)
+        c = int(round(side / S))
+        slab = lattice_box((0.0, 0.0, 0.0), (c, c, max(1, c // 4)), rng)
+        ball = lattice_ball(side / 5, (side / 2, side / 2, side / 4 + 2 * side / 5 + 4 * S), rng)
+        return np.vstack([slab, ball])
+    # A pool of a quarter of the particles, 6 layers deep, and droplets of radius 2–6 s above it.
+    c = int(round(np.sqrt(n / 4 / 6)))
+    side = c * S
+    parts = [lattice_box((0.0, 0.0, 0.0), (c, c, 6), rng)]
+    count = len(parts[0])
+    while count < n:
+        r = rng.uniform(2, 6) * S
+        centre = (rng.uniform(0, side), rng.uniform(0, side), rng.uniform(6 * S + 2 * r, 6 * S + side / 2))
+        parts.append(lattice_ball(r, centre, rng))
+        count += len(parts[-1])
+    return np.vstack(parts)
+
+
+@lru_cache(maxsize=None)
+def triquet_threshold() -> float:
+    """T for ``BlobField(P, 2s, 1.0, T)``: the Triquet potential where the colour field (cubic
+    spline, support 2s) crosses 0.6 on the line out of the middle of a face of a lattice block."""
+    import numpy as np
+
+    import implicitmesh as im
+
+    g = np.stack(np.meshgrid(*[np.arange(16) * S] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    colour = im.BlobField.from_particles(g, S / 2, iso_surface_threshold=ISO)
+    triquet = im.BlobField(g, 2 * S, 1.0, 0.5)
+    mid = 7.5 * S
+    lo, hi = 15 * S, 17 * S  # the last layer, and two spacings out
+    for _ in range(60):
+        x = 0.5 * (lo + hi)
+        lo, hi = (x, hi) if colour.potential(np.array([[x, mid, mid]]))[0] > ISO else (lo, x)
+    return float(triquet.potential(np.array([[0.5 * (lo + hi), mid, mid]]))[0])
+
+
+def lattice(p):
+    """Bounds and cells per axis with cells of exactly s/4 around the particles (a margin of the
+    support 2s and two cells)."""
+    import numpy as np
+
+    h = S / 4
+    lo = p.min(axis=0) - 2 * S - 2 * h
+    cells = np.ceil((p.max(axis=0) + 2 * S + 2 * h - lo) / h).astype(int)
+    return np.stack([lo, lo + cells * h]), [int(c) for c in cells]
+
+
+def reconstruct(method: str, p) -> tuple[object, object, dict]:
+    """(vertices, faces, extra facts) of one method."""
+    import numpy as np
+
+    out: dict = {}
+    if method.startswith("splashsurf"):
+        import pysplashsurf
+
+        q = np.ascontiguousarray(p, dtype=np.float32 if method.endswith("f32") else np.float64)
+        t = time.perf_counter()
+        r = pysplashsurf.reconstruct_surface(q, particle_radius=S / 2, smoothing_length=2.0, cube_size=0.5,
+                                             iso_surface_threshold=ISO)
+        out["total_s"] = time.perf_counter() - t
+        m = r.mesh if hasattr(r, "mesh") else r
+        v, f = (m.vertices, m.triangles) if hasattr(m, "vertices") else m
+        return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64), out
+    import implicitmesh as im
+
+    normals = method.endswith("+normals")
+    bounds, cells = lattice(p)
+    t = time.perf_counter()
+    if method.startswith("colour"):
+        field = im.BlobField.from_particles(p, S / 2, iso_surface_threshold=ISO)
+    else:
+        out["threshold"] = triquet_threshold()
+        t = time.perf_counter()
+        field = im.BlobField(p, 2 * S, 1.0, out["threshold"])
+    out["field_s"] = time.perf_counter() - t
+    mesh = im.polygonize(field, bounds=bounds, resolution=cells, method="sparse", normals=normals)
+    out["total_s"] = time.perf_counter() - t
+    out["polygonize_s"] = out["total_s"] - out["field_s"]
+    out["evaluations"] = int(mesh.stats["evaluations"])
+    return mesh.vertices, mesh.faces, out
+
+
+def one(layout: str, method: str, n: int) -> dict:
+    import numpy as np
+
+    p = particles(layout, n)
+    if method.startswith("triquet"):
+        triquet_threshold()  # outside the timed part
+    v, f, out = reconstruct(method, p)
+    out["peak_mib"] = vmhwm_mib()
+    a, b, c = (v[f[:, k]] for k in range(3))
+    out.update(layout=layout, method=method, n=int(len(p)), triangles=int(len(f)),
+               area=float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()),
+               volume=float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0))
+    return out
+
+
+def run_one(layout: str, method: str, n: int) -> dict:
+    """:func:`one` in a fresh process."""
+    r = subprocess.run([sys.executable, "-m", "benchmarks.bench_particles", "one", layout, method, str(n)],
+                       capture_output=True, text=True, cwd=ROOT)
+    if r.returncode != 0:
+        return {"layout": layout, "method": method, "n": n,
+                "error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"}
+    return json.loads(r.stdout)
+
+
+def log(msg: str) -> None:
+    print(f"[bench_particles] {msg}", file=sys.stderr, flush=True)
+
+
+def measure(a: argparse.Namespace) -> dict:
+    run = RunRecord("benchmarks.bench_particles", a.quick)
+    cases = []
+    for layout in LAYOUTS:
+        for n in SIZES[a.quick]:
+            for method in PEERS + OURS:
+                log(f"{layout}, {method}, {n:,} particles, {RUNS[a.quick]} run(s)")
+                cases.append({"layout": layout, "method": method, "n": n,
+                              "runs": [run_one(layout, method, n) for _ in range(RUNS[a.quick])]})
+    return {"spacing": S, "iso_surface_threshold": ISO, "cases": cases,
+            "run": run.finish(("numpy", "pysplashsurf", "implicitmesh"))}
+
+
+def render(raw: dict) -> str:
+    run = raw["run"]
+    rows = []
+    by = {(c["layout"], c["method"], c["n"]): c["runs"] for c in raw["cases"]}
+    for c in raw["cases"]:
+        runs = c["runs"]
+        head = [c["layout"], f"{runs[0].get('n', c['n']):,}", c["method"]]
+        if "error" in runs[0]:
+            rows.append(head + [f"failed: {runs[0]['error']}"] + [""] * 6)
+            continue
+        total = median(runs, "total_s")
+        peer = by.get((c["layout"], "splashsurf-f32", c["n"]))
+        ratio = fmt_ratio(median(peer, "total_s"), total) if peer and "error" not in peer[0] else "—"
+        r0 = runs[0]
+        rows.append(head + [fmt_s(total), ratio, f"{median(runs, 'peak_mib'):,.0f}", f"{r0['triangles']:,}",
+                            f"{r0['area']:.4g}", f"{r0['volume']:.4g}"])
+    t = next((r["threshold"] for c in raw["cases"] for r in c["runs"] if "threshold" in r), None)
+    return "\n".join([
+        "## Particles to surfaces: blob fields against splashsurf" + (" (QUICK)" if run["quick"] else ""),
+        "",
+        f"Run {run['date']} with `{run['command']}`. Particles on a jittered lattice of spacing s = {raw['spacing']} "
+        "(±0.1 s per axis): `slab`, a slab L × L × L/4 with a sphere of radius L/5 above it; `droplets`, a pool "
+        "six layers deep under droplets of radius 2–6 s. splashsurf: `pysplashsurf.reconstruct_surface(P, "
+        "particle_radius=s/2, smoothing_length=2.0, cube_size=0.5, iso_surface_threshold=0.6)` with P as float32 "
+        "or float64 (support 2s, cells s/4). Ours, `polygonize(method=\"sparse\")` over cells of s/4, normals off "
+        "unless `+normals`: `colour` is `BlobField.from_particles(P, s/2)` (splashsurf's colour field, cubic "
+        "spline), `triquet` is `BlobField(P, 2s, 1.0, T)` with T = "
+        f"{'—' if t is None else f'{t:.4f}'} (the Triquet potential where the colour field crosses 0.6 outside a "
+        "face of a lattice block). Each case in a fresh process (peak resident size VmHWM its own, the particles "
+        "included); seconds of wall-clock time from particles to mesh, medians over the runs. splashsurf f32 / "
+        "ours: above 1, ours is faster.",
+        "",
+        run_markdown(run),
+        "",
+        md_table(["layout", "particles", "method", "seconds", "splashsurf f32 / ours", "peak MiB", "triangles",
+                  "area", "volume"], rows, "llrrrrrrr"),
+        "",
+    ])
+
+
+def main() -> int:
+    if len(sys.argv) == 5 and sys.argv[1] == "one":
+        print(json.dumps(one(sys.argv[2], sys.argv[3], int(sys.argv[4]))))
+        return 0
+    return run_section("particles", measure, render, __doc__.split("\n")[0],
+                       "2·10⁴ particles, one run per case")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

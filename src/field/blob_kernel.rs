@@ -1,0 +1,284 @@
+//! The radial profiles a blob field can sum: Triquet et al.'s (1 − q²)², and the SPH cubic
+//! spline and Wendland C2 kernels, each scaled to 1 at the centre, with q = d/R and R the
+//! compact support (the profile is 0 for q ≥ 1).
+//!
+//! Every evaluation of a blob field (point, lattice plane, block) computes the same rounded
+//! t = (1 − (dy² + dz²)/R²) − dx²/R² (one minus q², unclamped) and hands it to
+//! [`Profile::value`], so that every path gives the same bits. Each profile is 0 (+0.0) for
+//! t ≤ 0 and does not decrease as t grows, which the blob field's row and block skipping rely on.
+//!
+//! The SPH kernels as SPH codes normalise them (integral 1 over space) are these profiles times
+//! σ/R³: 8/π for the cubic spline (as splashsurf's `CubicSplineKernel` with compact support R) and
+//! 21/(2π) for Wendland C2.
+
+use crate::error::{Error, Result};
+
+/// The kernel a blob field sums (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BlobKernel {
+    /// (1 − q²)² (Triquet et al. §4.2).
+    #[default]
+    Triquet,
+    /// The SPH cubic spline: 1 − 6q² + 6q³ for q ≤ 1/2, 2(1 − q)³ for 1/2 < q ≤ 1.
+    CubicSpline,
+    /// Wendland C2 in 3-D: (1 − q)⁴(1 + 4q).
+    Wendland,
+}
+
+impl BlobKernel {
+    /// Every kernel, in the order of [`BlobKernel::NAMES`].
+    pub const ALL: [BlobKernel; 3] = [
+        BlobKernel::Triquet,
+        BlobKernel::CubicSpline,
+        BlobKernel::Wendland,
+    ];
+    /// The names [`BlobKernel::parse`] reads.
+    pub const NAMES: [&'static str; 3] = ["triquet", "cubic_spline", "wendland"];
+
+    /// The kernel's name (`"triquet"`, `"cubic_spline"`, `"wendland"`).
+    pub fn name(self) -> &'static str {
+        Self::NAMES[self as usize]
+    }
+
+    /// The kernel called `name`; an error names the argument `kernel`.
+    pub fn parse(name: &str) -> Result<BlobKernel> {
+        Self::NAMES
+            .iter()
+            .position(|n| *n == name)
+            .map(|i| Self::ALL[i])
+            .ok_or_else(|| {
+                Error::invalid(
+                    "kernel",
+                    format!("unknown kernel {name:?}; expected one of {:?}", Self::NAMES),
+                )
+            })
+    }
+
+    /// The profile's value at distance `d` for compact support `r` (by [`Profile::value`]).
+    pub fn value(self, d: f64, r: f64) -> f64 {
+        let t = 1.0 - (d * d) / (r * r);
+        match self {
+            BlobKernel::Triquet => Triquet::value(t),
+            BlobKernel::CubicSpline => CubicSpline::value(t),
+            BlobKernel::Wendland => Wendland::value(t),
+        }
+    }
+
+    /// max over q of |w′(q)|: a primitive of strength A and support R has |∇| ≤ this · A / R.
+    pub fn max_slope(self) -> f64 {
+        match self {
+            BlobKernel::Triquet => Triquet::MAX_SLOPE,
+            BlobKernel::CubicSpline => CubicSpline::MAX_SLOPE,
+            BlobKernel::Wendland => Wendland::MAX_SLOPE,
+        }
+    }
+
+    /// The factor `c` of a primitive's gradient c·(A/R²)·g(s)·(p − centre) (see
+    /// [`Profile::GRADIENT_SCALE`]).
+    pub fn gradient_scale(self) -> f64 {
+        match self {
+            BlobKernel::Triquet => Triquet::GRADIENT_SCALE,
+            BlobKernel::CubicSpline => CubicSpline::GRADIENT_SCALE,
+            BlobKernel::Wendland => Wendland::GRADIENT_SCALE,
+        }
+    }
+}
+
+/// One radial profile w(q), q = d/R ∈ [0, 1], w(0) = 1, read through t = 1 − q².
+pub trait Profile: 'static {
+    /// w at t = 1 − q² as rounded by the caller; +0.0 for t ≤ 0.
+    fn value(t: f64) -> f64;
+    /// g(s) = −w′(q)/(q·GRADIENT_SCALE) at s = 1 − q² (unclamped): the gradient of A·w(|p − c|/R)
+    /// is −GRADIENT_SCALE·(A/R²)·g(s)·(p − c). +0.0 for s ≤ 0.
+    fn slope(s: f64) -> f64;
+    /// The constant factor taken out of [`Profile::slope`].
+    const GRADIENT_SCALE: f64;
+    /// max over q of |w′(q)|.
+    const MAX_SLOPE: f64;
+}
+
+/// (1 − q²)².
+pub struct Triquet;
+
+impl Profile for Triquet {
+    #[inline(always)]
+    fn value(t: f64) -> f64 {
+        let t = t.max(0.0);
+        t * t
+    }
+    #[inline(always)]
+    fn slope(s: f64) -> f64 {
+        s.max(0.0)
+    }
+    const GRADIENT_SCALE: f64 = 4.0;
+    /// 4q(1 − q²) peaks at q = 1/√3: 8/(3√3).
+    const MAX_SLOPE: f64 = 1.539_600_717_839_002;
+}
+
+/// q from t = 1 − q² (clamped to [0, 1]).
+#[inline(always)]
+fn q_of(t: f64) -> (f64, f64) {
+    let q2 = 1.0 - t.max(0.0);
+    (q2, q2.max(0.0).sqrt())
+}
+
+/// 1 − 6q² + 6q³ for q ≤ 1/2, 2(1 − q)³ beyond.
+pub struct CubicSpline;
+
+impl Profile for CubicSpline {
+    #[inline(always)]
+    fn value(t: f64) -> f64 {
+        let (q2, q) = q_of(t);
+        if q <= 0.5 {
+            1.0 + 6.0 * q2 * (q - 1.0)
+        } else {
+            let u = 1.0 - q;
+            2.0 * (u * u * u)
+        }
+    }
+    /// −w′/q: 12 − 18q for q ≤ 1/2, 6(1 − q)²/q beyond.
+    #[inline(always)]
+    fn slope(s: f64) -> f64 {
+        let (_, q) = q_of(s);
+        if q <= 0.5 {
+            12.0 - 18.0 * q
+        } else {
+            let u = 1.0 - q;
+            6.0 * (u * u) / q
+        }
+    }
+    const GRADIENT_SCALE: f64 = 1.0;
+    /// |18q² − 12q| peaks at q = 1/3: 2.
+    const MAX_SLOPE: f64 = 2.0;
+}
+
+/// (1 − q)⁴(1 + 4q).
+pub struct Wendland;
+
+impl Profile for Wendland {
+    #[inline(always)]
+    fn value(t: f64) -> f64 {
+        let (_, q) = q_of(t);
+        let u = 1.0 - q;
+        let u2 = u * u;
+        (u2 * u2) * (1.0 + 4.0 * q)
+    }
+    /// −w′/q = 20(1 − q)³.
+    #[inline(always)]
+    fn slope(s: f64) -> f64 {
+        let (_, q) = q_of(s);
+        let u = 1.0 - q;
+        20.0 * (u * u * u)
+    }
+    const GRADIENT_SCALE: f64 = 1.0;
+    /// 20q(1 − q)³ peaks at q = 1/4: 135/64.
+    const MAX_SLOPE: f64 = 2.109_375;
+}
+
+/// Runs `$body` with the type alias `$K` naming the profile of `$kernel` (one match per call, the
+/// loops inside monomorphised per profile).
+macro_rules! with_profile {
+    ($kernel:expr, $K:ident => $body:expr) => {
+        match $kernel {
+            $crate::field::blob_kernel::BlobKernel::Triquet => {
+                type $K = $crate::field::blob_kernel::Triquet;
+                $body
+            }
+            $crate::field::blob_kernel::BlobKernel::CubicSpline => {
+                type $K = $crate::field::blob_kernel::CubicSpline;
+                $body
+            }
+            $crate::field::blob_kernel::BlobKernel::Wendland => {
+                type $K = $crate::field::blob_kernel::Wendland;
+                $body
+            }
+        }
+    };
+}
+pub(crate) use with_profile;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// w(q) by the textbook formulas.
+    fn textbook(k: BlobKernel, q: f64) -> f64 {
+        if q >= 1.0 {
+            return 0.0;
+        }
+        match k {
+            BlobKernel::Triquet => (1.0 - q * q).powi(2),
+            BlobKernel::CubicSpline if q <= 0.5 => 6.0 * (q.powi(3) - q * q) + 1.0,
+            BlobKernel::CubicSpline => 2.0 * (1.0 - q).powi(3),
+            BlobKernel::Wendland => (1.0 - q).powi(4) * (1.0 + 4.0 * q),
+        }
+    }
+
+    #[test]
+    fn profiles_match_their_formulas_and_vanish_outside() {
+        for k in BlobKernel::ALL {
+            assert_eq!(BlobKernel::parse(k.name()), Ok(k));
+            for i in 0..=200 {
+                let q = i as f64 / 100.0;
+                assert!(
+                    (k.value(q, 1.0) - textbook(k, q)).abs() < 1e-7,
+                    "{k:?} q={q}"
+                );
+            }
+            assert_eq!(k.value(1.0, 1.0).to_bits(), 0.0f64.to_bits());
+            assert_eq!(k.value(3.0, 1.0).to_bits(), 0.0f64.to_bits());
+        }
+        assert!(BlobKernel::parse("gauss").is_err());
+    }
+
+    /// σ/R³ · w integrates to 1 (midpoint rule on a grid of R/40).
+    #[test]
+    fn normalised_sph_kernels_integrate_to_one() {
+        use std::f64::consts::PI;
+        for (k, sigma) in [
+            (BlobKernel::CubicSpline, 8.0 / PI),
+            (BlobKernel::Wendland, 21.0 / (2.0 * PI)),
+        ] {
+            let n = 40;
+            let h = 1.0 / n as f64;
+            let mut sum = 0.0;
+            for i in -n..n {
+                for j in -n..n {
+                    for l in -n..n {
+                        let p = [i, j, l].map(|v| (v as f64 + 0.5) * h);
+                        let d = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                        sum += k.value(d, 1.0);
+                    }
+                }
+            }
+            assert!((sum * h * h * h * sigma - 1.0).abs() < 1e-3, "{k:?}");
+        }
+    }
+
+    /// The slope functions against differences of the values, and MAX_SLOPE attained and not
+    /// exceeded.
+    #[test]
+    fn slopes_match_differences() {
+        for k in BlobKernel::ALL {
+            let (slope, scale): (fn(f64) -> f64, f64) = match k {
+                BlobKernel::Triquet => (Triquet::slope, Triquet::GRADIENT_SCALE),
+                BlobKernel::CubicSpline => (CubicSpline::slope, CubicSpline::GRADIENT_SCALE),
+                BlobKernel::Wendland => (Wendland::slope, Wendland::GRADIENT_SCALE),
+            };
+            let mut worst = 0.0f64;
+            for i in 1..1000 {
+                let q = i as f64 / 1000.0;
+                let e = 1e-6;
+                let dw = (k.value(q + e, 1.0) - k.value(q - e, 1.0)) / (2.0 * e);
+                let g = -scale * slope(1.0 - q * q) * q;
+                assert!((dw - g).abs() < 1e-5, "{k:?} q={q}: {dw} vs {g}");
+                worst = worst.max(g.abs());
+            }
+            assert!(
+                worst <= k.max_slope() && worst > 0.999 * k.max_slope(),
+                "{k:?}"
+            );
+            assert_eq!(slope(-0.5).to_bits(), 0.0f64.to_bits());
+        }
+    }
+}
