@@ -96,6 +96,19 @@ def test_variational_surface_equals_one_machine(client, knot, kind):
         assert genus_of(tiled.euler_number) == 1
 
 
+def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
+    lo, hi = np.array([-0.5, -0.2, 0.0]), np.array([0.1, 0.3, 0.4])
+    points = lo + (hi - lo) * np.random.default_rng(2).random((500, 3))
+    points = np.vstack([points, lo, hi])
+    for field in (blobs, knot[1]):
+        part = imd.cut_field(field, lo, hi)
+        assert np.array_equal(part(points).view(np.uint64), field(points).view(np.uint64))
+        assert np.array_equal(part.gradient(points).view(np.uint64), field.gradient(points).view(np.uint64))
+    assert 0 < len(imd.cut_field(blobs, lo, hi)) < len(blobs)
+    assert 0 < len(imd.cut_field(knot[1], lo, hi).patches["radii"]) < len(knot[1].patches["radii"])
+    assert imd.cut_field(blobs, lo + 5, hi + 5) is None
+
+
 def test_callable_and_uneven_tiles(client):
     sphere = lambda p: np.linalg.norm(p - 0.05, axis=1) - 0.7  # noqa: E731
     whole = im.polygonize(sphere, bounds=[[-1, -1, -1], [1, 0.9, 0.8]], resolution=(23, 19, 17))

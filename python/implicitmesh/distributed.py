@@ -24,7 +24,7 @@ from .mesh import Mesh
 from .polygonize import _check_common
 from ._weld import tile_box, weld_tiles
 
-__all__ = ["polygonize", "weld", "tiles", "TILE_METHODS"]
+__all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
 
 #: Methods :func:`polygonize` runs per tile.
 TILE_METHODS = ("dense", "sparse", "octree")
@@ -86,6 +86,24 @@ def cut_blobs(field: "_core.BlobField", lo: np.ndarray, hi: np.ndarray) -> "_cor
     return _core.BlobField(
         centers[keep], radii[keep], field.strengths[keep], field.threshold, voxel_size=kwargs["voxel_size"]
     )
+
+
+def _cut_per_tile(field: Any) -> bool:
+    return isinstance(field, _core.BlobField) or (
+        isinstance(field, _core.VariationalSurface) and field.method == "partition"
+    )
+
+
+def cut_field(field: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
+    """What a tile ``[lo, hi]`` (its box) needs of ``field``: for a :class:`BlobField` the
+    primitives reaching the box (None when none does), for a partition
+    :class:`VariationalSurface` the patches its points use; other fields whole. Values and
+    gradients in the box are the same bits as the whole field's."""
+    if isinstance(field, _core.BlobField):
+        return cut_blobs(field, lo, hi)
+    if isinstance(field, _core.VariationalSurface):
+        return field._cut(np.stack([lo, hi]))
+    return field
 
 
 def _run_tile(field, bounds, resolution, window, method, options, output):
@@ -151,8 +169,10 @@ def polygonize(
     ----------
     field : VariationalSurface, BlobField or callable
         As for :func:`implicitmesh.polygonize`; it must pickle (a callable is sent with
-        cloudpickle). Each task of a :class:`BlobField` receives only the primitives reaching its
-        tile; other fields are sent to the workers once, whole.
+        cloudpickle). Each task receives what its tile needs (:func:`cut_field`): for a
+        :class:`BlobField` the primitives reaching the tile (tiles no primitive reaches are not
+        run), for a partition :class:`VariationalSurface` the patches covering it (and the
+        constraints, whole); other fields are sent to the workers once, whole.
     bounds : (2, 3) array_like, optional
         As for :func:`implicitmesh.polygonize` (defaults to ``field.bounds``).
     resolution : int or (3,) ints
@@ -222,12 +242,13 @@ def polygonize(
     futures = []
     report, end = reporter(progress, "tiles", None, "tiles")
     try:
-        # A blob field is cut per tile; any other field is one task's result that the tiles
-        # share (a task, not scattered data, so that Dask recomputes it if its worker dies).
-        shared = None if isinstance(field, _core.BlobField) else client.submit(_pickled(field), pure=False)
+        # Blob fields and partition fits are cut per tile; any other field is one task's result
+        # that the tiles share (a task, not scattered data, so that Dask recomputes it if its
+        # worker dies).
+        shared = None if _cut_per_tile(field) else client.submit(_pickled(field), pure=False)
         for lo, hi in tiles(cells, tile3):
             if shared is None:
-                part = cut_blobs(field, *tile_box(origin, cell, lo, hi))
+                part = cut_field(field, *tile_box(origin, cell, lo, hi))
                 if part is None:
                     continue
             else:
