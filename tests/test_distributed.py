@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -30,7 +32,7 @@ WORKER_MEMORY = 900 * 2**20
 @pytest.fixture(scope="module")
 def client():
     cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, memory_limit=WORKER_MEMORY, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, memory_limit=WORKER_MEMORY, dashboard_address=":0"
     )
     with distributed.Client(cluster) as c:
         yield c
@@ -196,6 +198,33 @@ def test_bad_arguments(client, blobs):
     lock = threading.Lock()
     with pytest.raises(TypeError, match="field: .*pickle"):
         imd.polygonize(lambda p: p[:, 0] + 0 * bool(lock), bounds=BOX, resolution=8, client=client, method="dense")
+
+
+def test_without_dask_the_error_names_the_extra(monkeypatch, blobs):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(ImportError, match=r"implicitmesh\[distributed\]"):
+        imd.polygonize(blobs, bounds=BOX, resolution=8)
+
+
+def test_ctrl_c_cancels_the_tasks(client, knot):
+    def interrupt(done: int) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        imd.polygonize(knot[0], resolution=40, method="dense", client=client, tile=10, progress=interrupt)
+    left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+    for _ in range(50):
+        if left == 0:
+            break
+        time.sleep(0.1)
+        left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+    assert left == 0
+
+
+def test_the_current_client_is_the_default(client, blobs):
+    assert distributed.get_client() is client
+    whole = im.polygonize(blobs, bounds=BOX, resolution=16, method="sparse")
+    assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=16, tile=7), whole)
 
 
 def test_a_worker_killed_mid_run_changes_nothing(client, knot):

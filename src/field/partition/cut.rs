@@ -49,6 +49,7 @@ impl PartitionSurface {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::testing::random_points;
     use crate::field::Field;
 
     /// Values and gradients in the box are the whole surface's bits, with fewer patches.
@@ -58,24 +59,15 @@ mod tests {
         let (lo, hi) = (DVec3::new(-1.2, -0.3, 0.1), DVec3::new(-0.2, 0.4, 1.3));
         let cut = s.cut(lo, hi);
         assert!(cut.patches.len() < s.patches.len() && !cut.patches.is_empty());
-        let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let points: Vec<DVec3> = (0..2000)
-            .map(|_| lo + (hi - lo) * DVec3::new(next(), next(), next()))
+        let points: Vec<DVec3> = random_points(2000, 0.0, 1.0, 11)
+            .into_iter()
+            .map(|q| lo + (hi - lo) * q)
             .chain([lo, hi])
             .collect();
         let (mut a, mut b) = (vec![0.0; points.len()], vec![0.0; points.len()]);
         s.values(&points, &mut a);
         cut.values(&points, &mut b);
-        assert_eq!(
-            a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-            b.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
-        );
+        assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
         let (mut ga, mut gb) = (
             vec![DVec3::ZERO; points.len()],
             vec![DVec3::ZERO; points.len()],
