@@ -77,7 +77,7 @@ def assert_same_mesh(tiled: im.Mesh, whole: im.Mesh) -> None:
     assert tiled.euler_number == whole.euler_number
 
 
-@pytest.mark.parametrize("method", ["sparse", "dense", "octree"])
+@pytest.mark.parametrize("method", ["sparse", "dense", "octree", "tracking"])
 def test_blobs_equal_one_machine(client, blobs, method):
     whole = im.polygonize(blobs, bounds=BOX, resolution=48, method=method)
     tiled = imd.polygonize(blobs, bounds=BOX, resolution=48, method=method, client=client, tile=16)
@@ -184,11 +184,12 @@ def test_bad_arguments(client, blobs):
     for tile in (0, -3, 2.5, True, (4, 4), "8"):
         with pytest.raises(ValueError, match="tile"):
             imd.polygonize(blobs, bounds=BOX, resolution=8, client=client, tile=tile)
-    for method in ("tracking", "marching", 3):
+    for method in ("marching", 3):
         with pytest.raises(ValueError, match="method"):
             imd.polygonize(blobs, bounds=BOX, resolution=8, client=client, method=method)
-    with pytest.raises(ValueError, match="method"):
-        imd.polygonize(lambda p: p[:, 0], bounds=BOX, resolution=8, client=client, method="sparse")
+    for method in ("sparse", "tracking"):
+        with pytest.raises(ValueError, match="method"):
+            imd.polygonize(lambda p: p[:, 0], bounds=BOX, resolution=8, client=client, method=method)
     with pytest.raises(ValueError, match="resolution"):
         imd.polygonize(blobs, bounds=BOX, resolution=0, client=client)
     with pytest.raises(ValueError, match="window"):

@@ -26,8 +26,8 @@ from ._weld import tile_box, weld_tiles
 
 __all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
 
-#: Methods :func:`polygonize` runs per tile.
-TILE_METHODS = ("dense", "sparse", "octree")
+#: Methods :func:`polygonize` runs per tile (``"sparse"`` and ``"tracking"``: BlobField only).
+TILE_METHODS = ("dense", "sparse", "octree", "tracking")
 
 #: Name of the manifest ``output=DIR`` writes.
 MANIFEST = "manifest.json"
@@ -177,10 +177,11 @@ def polygonize(
         As for :func:`implicitmesh.polygonize` (defaults to ``field.bounds``).
     resolution : int or (3,) ints
         As for :func:`implicitmesh.polygonize`: the whole lattice.
-    method : {"sparse", "dense", "octree"}
-        The polygonizer each tile runs. ``"sparse"`` (the default) needs a :class:`BlobField`.
-        ``"octree"`` starts its hierarchy from each tile, so it meets the single-machine octree
-        wherever both find the surface (the dense mesh on the components found).
+    method : {"sparse", "dense", "octree", "tracking"}
+        The polygonizer each tile runs. ``"sparse"`` (the default) and ``"tracking"`` need a
+        :class:`BlobField` (for which both find every component, the dense mesh). ``"octree"``
+        starts its hierarchy from each tile, so it meets the single-machine octree wherever
+        both find the surface (the dense mesh on the components found).
     client : distributed.Client, optional
         Default: the current client, else a local cluster started (and closed) for this call.
     tile : int or (3,) ints
@@ -219,8 +220,11 @@ def polygonize(
     if not isinstance(method, str) or method.lower() not in TILE_METHODS:
         raise ValueError(f"method: expected one of {TILE_METHODS} per tile, got {method!r}")
     method = method.lower()
-    if method == "sparse" and not isinstance(field, _core.BlobField):
-        raise ValueError('method: "sparse" needs a BlobField; use "dense" or "octree"')
+    if method in ("sparse", "tracking") and not isinstance(field, _core.BlobField):
+        raise ValueError(
+            f'method: "{method}" per tile needs a BlobField (tracking other fields finds only the '
+            'components seeded in each tile); use "dense" or "octree"'
+        )
     for name in ("seeds", "window"):
         if name in options:
             raise ValueError(f"{name}: not an option of implicitmesh.distributed.polygonize")
