@@ -120,6 +120,13 @@ def test_callable_and_uneven_tiles(client):
         assert genus_of(tiled.euler_number) == 0
 
 
+def test_options_reach_every_tile(client, blobs):
+    whole = im.polygonize(blobs, bounds=BOX, resolution=24, method="dense", ambiguity="join", normals=False)
+    tiled = imd.polygonize(blobs, bounds=BOX, resolution=24, method="dense", client=client, tile=7, ambiguity=im.Ambiguity.JOIN, normals=False)
+    assert len(tiled.normals) == 0
+    assert np.array_equal(triangles(tiled), triangles(whole)) and len(tiled.vertices) == len(whole.vertices)
+
+
 def test_zeros_on_tile_faces(client):
     """The field is exactly zero at lattice points on tile faces, where several edges give one
     position and so several vertices: the weld still joins each to its own."""
@@ -194,6 +201,8 @@ def test_bad_arguments(client, blobs):
         imd.polygonize(blobs, bounds=BOX, resolution=0, client=client)
     with pytest.raises(ValueError, match="window"):
         im._core.polygonize(blobs, BOX, 8, window=[[0, 0, 0], [9, 1, 1]])
+    with pytest.raises(TypeError, match="seeds"):
+        imd.polygonize(blobs, bounds=BOX, resolution=8, client=client, seeds=[[0, 0, 0]])
     with pytest.raises(TypeError, match="field"):
         imd.polygonize(object(), bounds=BOX, resolution=8, client=client, method="dense")
     lock = threading.Lock()

@@ -29,6 +29,9 @@ __all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
 #: Methods :func:`polygonize` runs per tile (``"sparse"`` and ``"tracking"``: BlobField only).
 TILE_METHODS = ("dense", "sparse", "octree", "tracking")
 
+#: Keywords passed to each tile's polygonizer.
+_TILE_OPTIONS = ("ambiguity", "normals", "batch_size", "memory_limit", "start_level", "safety", "corner_test")
+
 #: Name of the manifest ``output=DIR`` writes.
 MANIFEST = "manifest.json"
 
@@ -225,9 +228,9 @@ def polygonize(
             f'method: "{method}" per tile needs a BlobField (tracking other fields finds only the '
             'components seeded in each tile); use "dense" or "octree"'
         )
-    for name in ("seeds", "window"):
-        if name in options:
-            raise ValueError(f"{name}: not an option of implicitmesh.distributed.polygonize")
+    unknown = sorted(set(options) - set(_TILE_OPTIONS))
+    if unknown:
+        raise TypeError(f"polygonize() got unexpected keyword arguments {unknown}; per tile it takes {_TILE_OPTIONS}")
     bounds, ambiguity = _check_common(
         field, bounds, options.get("ambiguity", "separate"), options.get("batch_size", 262144), options.get("memory_limit")
     )
