@@ -3,6 +3,11 @@
 //! `0 ≤ i ≤ cells[0]` and so on, and packed into one `u64` key. All polygonizers compute the position
 //! of a lattice point and of an edge vertex with the same arithmetic, so that they produce
 //! bit-identical vertices for the same field and lattice.
+//!
+//! A [`Lattice::window`] is the lattice of a box of cells of a larger lattice: its points are
+//! numbered from its own corner, but their positions are computed from the larger lattice's
+//! origin and indices, so a polygonizer run on a window makes the same vertices, bit for bit,
+//! as on the whole lattice (tiled polygonization welds windows' meshes exactly).
 
 use crate::error::{Error, Result};
 use glam::DVec3;
@@ -19,6 +24,10 @@ pub struct Lattice {
     pub cell: DVec3,
     /// Number of cells along each axis.
     pub cells: [u32; 3],
+    /// Origin of the whole lattice this one is a window of (`origin` itself when it is whole).
+    pub base: DVec3,
+    /// Indices in the whole lattice of this lattice's point `[0, 0, 0]` (zero when whole).
+    pub offset: [u32; 3],
 }
 
 /// A point as Python writes a list of floats: `[1.0, -0.5, 2.0]`.
@@ -57,6 +66,34 @@ impl Lattice {
             origin: min,
             cell: (max - min) / n,
             cells,
+            base: min,
+            offset: [0; 3],
+        })
+    }
+
+    /// The window of this lattice over the cells `lo[a] ≤ i < hi[a]` on each axis: a lattice of
+    /// `hi − lo` cells whose point `[0, 0, 0]` is this lattice's point `lo`, and whose every
+    /// point is at the same position, bit for bit, as the point of this lattice it stands for.
+    ///
+    /// Errors (naming `window`) unless `lo < hi ≤ cells` on every axis.
+    pub fn window(&self, lo: [u32; 3], hi: [u32; 3]) -> Result<Self> {
+        for a in 0..3 {
+            if !(lo[a] < hi[a] && hi[a] <= self.cells[a]) {
+                return Err(Error::invalid(
+                    "window",
+                    format!(
+                        "cells [{lo:?}, {hi:?}) must satisfy lo < hi <= {:?} on every axis",
+                        self.cells
+                    ),
+                ));
+            }
+        }
+        Ok(Lattice {
+            origin: self.point(lo),
+            cell: self.cell,
+            cells: std::array::from_fn(|a| hi[a] - lo[a]),
+            base: self.base,
+            offset: std::array::from_fn(|a| self.offset[a] + lo[a]),
         })
     }
 
@@ -105,13 +142,15 @@ impl Lattice {
         self.point([self.cells[0], self.cells[1], self.cells[2]])
     }
 
-    /// Position of the lattice point with integer coordinates `i`.
+    /// Position of the lattice point with integer coordinates `i`, computed from the whole
+    /// lattice's origin and indices (for a window, `offset + i`).
     #[inline]
     pub fn point(&self, i: [u32; 3]) -> DVec3 {
+        let [x, y, z] = std::array::from_fn(|a| (self.offset[a] + i[a]) as f64);
         DVec3::new(
-            self.origin.x + i[0] as f64 * self.cell.x,
-            self.origin.y + i[1] as f64 * self.cell.y,
-            self.origin.z + i[2] as f64 * self.cell.z,
+            self.base.x + x * self.cell.x,
+            self.base.y + y * self.cell.y,
+            self.base.z + z * self.cell.z,
         )
     }
 
@@ -217,6 +256,26 @@ mod tests {
         assert_eq!(l.cells, [64, 32, 7]);
         assert!((l.cell.x - l.cell.y).abs() < 1e-15 && (l.cell.x - l.cell.z).abs() < 1e-15);
         assert!(l.origin.z <= -0.1 && l.max().z >= 0.1);
+    }
+
+    #[test]
+    fn windows_keep_the_positions_of_the_whole_lattice() {
+        let l = Lattice::cubic(DVec3::splat(-1.1), DVec3::new(0.7, 0.3, 0.9), 97).unwrap();
+        let w = l.window([13, 5, 29], [50, 41, 54]).unwrap();
+        assert_eq!(w.cells, [37, 36, 25]);
+        assert_eq!(w.num_points(), 38 * 37 * 26);
+        for i in [[0, 0, 0], [1, 2, 3], [37, 36, 25]] {
+            let whole = l.point([13 + i[0], 5 + i[1], 29 + i[2]]);
+            assert_eq!(
+                w.point(i).to_array().map(f64::to_bits),
+                whole.to_array().map(f64::to_bits)
+            );
+        }
+        assert_eq!(w.origin, l.point([13, 5, 29]));
+        let ww = w.window([1, 1, 1], [2, 2, 2]).unwrap();
+        assert_eq!(ww.point([1, 1, 1]), l.point([15, 7, 31]));
+        assert!(l.window([0, 0, 0], [98, 1, 1]).is_err());
+        assert!(l.window([3, 0, 0], [3, 1, 1]).is_err());
     }
 
     #[test]

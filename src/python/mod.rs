@@ -29,6 +29,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<blob::PyBlobField>()?;
     m.add_class::<polygonize::PyTessellator>()?;
     m.add_function(wrap_pyfunction!(polygonize::polygonize, m)?)?;
+    m.add_function(wrap_pyfunction!(polygonize::lattice, m)?)?;
     subdivision::register(m)?;
     Ok(())
 }

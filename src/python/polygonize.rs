@@ -132,6 +132,41 @@ pub fn stats_to_py<'py>(
     Ok(d)
 }
 
+/// The lattice :func:`polygonize` builds from ``bounds`` and ``resolution``, as
+/// ``(cells (3,) int, origin (3,) float, cell (3,) float)``: lattice point ``[i, j, k]`` is at
+/// ``origin + [i, j, k] * cell`` (each coordinate one product and one sum, as the core computes
+/// it).
+#[pyfunction]
+pub fn lattice(
+    bounds: &Bound<'_, PyAny>,
+    resolution: &Bound<'_, PyAny>,
+) -> PyResult<([u32; 3], [f64; 3], [f64; 3])> {
+    let l = parse_lattice(bounds, resolution)?;
+    Ok((l.cells, l.base.to_array(), l.cell.to_array()))
+}
+
+/// Cell range `[[i0, j0, k0], [i1, j1, k1]]` of a window (checked against the lattice by
+/// [`Lattice::window`]).
+fn parse_window(obj: &Bound<'_, PyAny>) -> PyResult<[[u32; 3]; 2]> {
+    let bad = || {
+        value_error(
+            "window",
+            "expected cell indices [[i0, j0, k0], [i1, j1, k1]] (non-negative integers)",
+        )
+    };
+    let rows: Vec<Vec<i128>> = obj.extract().map_err(|_| bad())?;
+    if rows.len() != 2 || rows.iter().any(|r| r.len() != 3) {
+        return Err(bad());
+    }
+    let mut out = [[0u32; 3]; 2];
+    for (o, r) in out.iter_mut().zip(&rows) {
+        for (oa, &v) in o.iter_mut().zip(r) {
+            *oa = u32::try_from(v).map_err(|_| bad())?;
+        }
+    }
+    Ok(out)
+}
+
 /// Settings shared by every method, from the Python arguments.
 fn shared_settings(
     ambiguity: &str,
@@ -239,10 +274,14 @@ fn unknown_method(method: &str) -> PyErr {
 
 /// Low-level polygonizer entry point; use :func:`implicitmesh.polygonize`.
 ///
+/// ``window=[[i0, j0, k0], [i1, j1, k1]]`` polygonizes only the cells ``i0 <= i < i1`` (and so
+/// on) of the lattice, with the vertices the whole lattice gives there, bit for bit (what
+/// :func:`implicitmesh.distributed.polygonize` runs per tile).
+///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
 /// stats dict)``.
 #[pyfunction]
-#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None))]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn polygonize<'py>(
     py: Python<'py>,
@@ -259,9 +298,14 @@ pub fn polygonize<'py>(
     corner_test: Option<bool>,
     seeds: Option<&Bound<'py, PyAny>>,
     progress: Option<&Bound<'py, PyAny>>,
+    window: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
-    let lattice = parse_lattice(bounds, resolution)?;
+    let mut lattice = parse_lattice(bounds, resolution)?;
+    if let Some(w) = window {
+        let [lo, hi] = parse_window(w)?;
+        lattice = lattice.window(lo, hi)?;
+    }
     let settings = shared_settings(ambiguity, normals, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
     if !METHODS.contains(&method.as_str()) {

@@ -16,6 +16,7 @@
 
 pub mod blend;
 pub mod coarse;
+mod cut;
 pub mod octree;
 mod parts;
 pub mod patches;

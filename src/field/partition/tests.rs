@@ -15,7 +15,7 @@ fn torus_data(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
         .unzip()
 }
 
-fn torus_surface() -> PartitionSurface {
+pub(super) fn torus_surface() -> PartitionSurface {
     let (p, n) = torus_data(3000, 5);
     PartitionSurface::fit(&p, &n, &Default::default(), &Default::default()).unwrap()
 }

@@ -1,0 +1,337 @@
+"""Tiled polygonization on Dask: the lattice cut into tiles of cells, one task per tile, the
+tiles' meshes welded into the mesh :func:`implicitmesh.polygonize` makes on one machine.
+
+Every tile is a window of the one lattice (``_core.polygonize(..., window=)``): its lattice
+points and edge vertices are computed from the whole lattice's origin and indices, so a vertex on
+a face two tiles share is the same number in both, and the weld joins them by their exact
+coordinates, without tolerance.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+import numpy as np
+
+from . import _core
+from ._progress import reporter
+from .mesh import Mesh
+from .polygonize import _check_common
+from ._weld import tile_box, weld_tiles
+
+__all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
+
+#: Methods :func:`polygonize` runs per tile (``"sparse"`` and ``"tracking"``: BlobField only).
+TILE_METHODS = ("dense", "sparse", "octree", "tracking")
+
+#: Keywords passed to each tile's polygonizer.
+_TILE_OPTIONS = ("ambiguity", "normals", "batch_size", "memory_limit", "start_level", "safety", "corner_test")
+
+#: Name of the manifest ``output=DIR`` writes.
+MANIFEST = "manifest.json"
+
+#: Relative margin on a primitive's radius when cutting a blob field to a tile, far above
+#: rounding, so that no primitive adding a non-zero term at a point of the tile is left out.
+_RADIUS_MARGIN = 1e-6
+
+#: Statistics of the tiles that add up to the whole run's.
+_SUMMED = ("evaluations", "normal_evaluations", "lattice_points", "cells_visited", "cells_crossed", "cells_repaired")
+
+
+def _import_distributed():
+    try:
+        import distributed
+    except ImportError as e:  # pragma: no cover - the test extra installs it
+        raise ImportError(
+            "implicitmesh.distributed needs Dask: pip install 'implicitmesh[distributed]' "
+            "(dask[distributed])"
+        ) from e
+    return distributed
+
+
+def _check_tile(tile: Any) -> tuple[int, int, int]:
+    values = [tile] if np.ndim(tile) == 0 else list(np.asarray(tile, dtype=object).ravel())
+    if len(values) == 1:
+        values = values * 3
+    if len(values) != 3:
+        raise ValueError(f"tile: expected one positive integer or three, got {tile!r}")
+    for v in values:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v <= 0:
+            raise ValueError(f"tile: cells per tile edge must be positive integers, got {tile!r}")
+    return tuple(int(v) for v in values)  # type: ignore[return-value]
+
+
+def tiles(cells: Sequence[int], tile: Sequence[int]) -> Iterator[tuple[tuple[int, int, int], tuple[int, int, int]]]:
+    """The windows ``(lo, hi)`` of cells, ``lo <= i < hi`` per axis, that cut a lattice of
+    ``cells`` cells into tiles of ``tile`` cells (the last tile along an axis holds what is
+    left), z slowest, then y, then x."""
+    ranges = [[(s, min(s + t, n)) for s in range(0, n, t)] for n, t in zip(cells, tile)]
+    for rz, ry, rx in itertools.product(ranges[2], ranges[1], ranges[0]):
+        yield (rx[0], ry[0], rz[0]), (rx[1], ry[1], rz[1])
+
+
+def cut_blobs(field: "_core.BlobField", lo: np.ndarray, hi: np.ndarray) -> "_core.BlobField | None":
+    """The blob field of the primitives of ``field`` whose sphere of influence reaches the box
+    ``[lo, hi]``, in their order (so values and gradients in the box are the same bits as the
+    whole field's), or None when no primitive reaches it (the field is positive there)."""
+    centers, radii = field.centers, field.radii
+    near = np.maximum(np.maximum(lo - centers, centers - hi), 0.0)
+    reach = radii * (1.0 + _RADIUS_MARGIN)
+    keep = np.einsum("ij,ij->i", near, near) <= reach * reach
+    if not keep.any():
+        return None
+    _, kwargs = field.__getnewargs_ex__()
+    return _core.BlobField(
+        centers[keep], radii[keep], field.strengths[keep], field.threshold, voxel_size=kwargs["voxel_size"]
+    )
+
+
+def _cut_per_tile(field: Any) -> bool:
+    return isinstance(field, _core.BlobField) or (
+        isinstance(field, _core.VariationalSurface) and field.method == "partition"
+    )
+
+
+def cut_field(field: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
+    """What a tile ``[lo, hi]`` (its box) needs of ``field``: for a :class:`BlobField` the
+    primitives reaching the box (None when none does), for a partition
+    :class:`VariationalSurface` the patches its points use; other fields whole. Values and
+    gradients in the box are the same bits as the whole field's."""
+    if isinstance(field, _core.BlobField):
+        return cut_blobs(field, lo, hi)
+    if isinstance(field, _core.VariationalSurface):
+        return field._cut(np.stack([lo, hi]))
+    return field
+
+
+def _run_tile(field, bounds, resolution, window, method, options, output):
+    """One task: polygonizes the cells ``window`` of the lattice; returns the tile's mesh, or
+    with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the manifest."""
+    v, f, n, stats = _core.polygonize(field, bounds, resolution, method=method, window=window, **options)
+    stats = {k: stats[k] for k in _SUMMED}
+    entry = {"window": [list(window[0]), list(window[1])], "vertices": len(v), "faces": len(f), "stats": stats}
+    if output is None:
+        entry.update(v=v, f=f, n=n)
+        return entry
+    name = "tile-{}-{}-{}.npz".format(*window[0])
+    tmp = os.path.join(output, name + ".part")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, vertices=v, faces=f, normals=n)
+    os.replace(tmp, os.path.join(output, name))
+    entry["file"] = name
+    return entry
+
+
+def _pickled(field: Any) -> Callable[[], Any]:
+    """A function returning ``field``, for a task; a TypeError naming ``field`` when it does not
+    pickle (Dask sends it with cloudpickle)."""
+    import cloudpickle
+
+    try:
+        data = cloudpickle.dumps(field)
+    except Exception as e:
+        raise TypeError(f"field: cannot be sent to the workers, it does not pickle: {e}") from e
+    return functools.partial(cloudpickle.loads, data)
+
+
+def _get_client(client):
+    distributed = _import_distributed()
+    if client is not None:
+        return client, None
+    try:
+        return distributed.get_client(), None
+    except ValueError:
+        own = distributed.Client()
+        return own, own
+
+
+def polygonize(
+    field: Any,
+    *,
+    bounds: Any = None,
+    resolution: int | Sequence[int],
+    method: str = "sparse",
+    client: Any = None,
+    tile: int | Sequence[int] = 256,
+    output: str | os.PathLike[str] | None = None,
+    progress: bool | Callable[[int], object] = False,
+    **options: Any,
+) -> Mesh | Path:
+    """Polygonizes ``field`` on a Dask cluster, one task per tile of ``tile³`` cells, and welds
+    the tiles into the mesh :func:`implicitmesh.polygonize` makes on one machine.
+
+    The mesh has the same triangles, vertex for vertex and bit for bit, and the same normals;
+    only the order of vertices and triangles differs (tile by tile).
+
+    Parameters
+    ----------
+    field : VariationalSurface, BlobField or callable
+        As for :func:`implicitmesh.polygonize`; it must pickle (a callable is sent with
+        cloudpickle). Each task receives what its tile needs (:func:`cut_field`): for a
+        :class:`BlobField` the primitives reaching the tile (tiles no primitive reaches are not
+        run), for a partition :class:`VariationalSurface` the patches covering it (and the
+        constraints, whole); other fields are sent to the workers once, whole.
+    bounds : (2, 3) array_like, optional
+        As for :func:`implicitmesh.polygonize` (defaults to ``field.bounds``).
+    resolution : int or (3,) ints
+        As for :func:`implicitmesh.polygonize`: the whole lattice.
+    method : {"sparse", "dense", "octree", "tracking"}
+        The polygonizer each tile runs. ``"sparse"`` (the default) and ``"tracking"`` need a
+        :class:`BlobField` (for which both find every component, the dense mesh). ``"octree"``
+        starts its hierarchy from each tile, so it meets the single-machine octree wherever
+        both find the surface (the dense mesh on the components found).
+    client : distributed.Client, optional
+        Default: the current client, else a local cluster started (and closed) for this call.
+    tile : int or (3,) ints
+        Cells per tile edge (default 256); the last tile along an axis holds what is left.
+    output : path, optional
+        A directory: each task writes its tile as ``tile-i-j-k.npz`` (``vertices``, ``faces``,
+        ``normals``) when it finishes, and ``manifest.json`` is written last; nothing is
+        gathered and the directory's path is returned; :func:`weld` joins the tiles. The
+        workers must see the directory (one machine, or a shared file system).
+    progress : bool or callable
+        ``True``: show the tiles done (a tqdm bar or a line on standard error); a callable is
+        called with the number of tiles done.
+    **options
+        Passed to :func:`implicitmesh.polygonize` per tile: ``ambiguity``, ``normals``,
+        ``batch_size``, ``memory_limit`` (checked per tile), and the octree's ``start_level``,
+        ``safety``, ``corner_test``.
+
+    Returns
+    -------
+    Mesh or pathlib.Path
+        ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64, ``normals`` (V, 3) float64, and
+        ``stats`` with the tiles' counts summed and ``tiles`` (tasks run); with ``output``, the
+        directory.
+
+    Raises
+    ------
+    ValueError
+        For a bad ``tile``, ``method`` or ``output``, and as :func:`implicitmesh.polygonize`.
+    ImportError
+        When Dask is not installed (the ``distributed`` extra).
+    KeyboardInterrupt
+        On Ctrl-C: the tasks not yet finished are cancelled.
+    """
+    distributed = _import_distributed()
+    tile3 = _check_tile(tile)
+    if not isinstance(method, str) or method.lower() not in TILE_METHODS:
+        raise ValueError(f"method: expected one of {TILE_METHODS} per tile, got {method!r}")
+    method = method.lower()
+    if method in ("sparse", "tracking") and not isinstance(field, _core.BlobField):
+        raise ValueError(
+            f'method: "{method}" per tile needs a BlobField (tracking other fields finds only the '
+            'components seeded in each tile); use "dense" or "octree"'
+        )
+    unknown = sorted(set(options) - set(_TILE_OPTIONS))
+    if unknown:
+        raise TypeError(f"polygonize() got unexpected keyword arguments {unknown}; per tile it takes {_TILE_OPTIONS}")
+    bounds, ambiguity = _check_common(
+        field, bounds, options.get("ambiguity", "separate"), options.get("batch_size", 262144), options.get("memory_limit")
+    )
+    options["ambiguity"] = ambiguity
+    bounds = np.asarray(bounds, dtype=np.float64)
+    cells, origin, cell = _core.lattice(bounds, resolution)
+    origin, cell = np.asarray(origin), np.asarray(cell)
+    if not (isinstance(field, (_core.BlobField, _core.VariationalSurface)) or callable(field)):
+        raise TypeError(f"field: expected a VariationalSurface, a BlobField or a callable, got {type(field).__name__}")
+    if output is not None:
+        output = Path(output)
+        output.mkdir(parents=True, exist_ok=True)
+        if not output.is_dir():
+            raise ValueError(f"output: {str(output)!r} is not a directory")
+    client, own = _get_client(client)
+    futures = []
+    report, end = reporter(progress, "tiles", None, "tiles")
+    try:
+        # Blob fields and partition fits are cut per tile; any other field is one task's result
+        # that the tiles share (a task, not scattered data, so that Dask recomputes it if its
+        # worker dies).
+        shared = None if _cut_per_tile(field) else client.submit(_pickled(field), pure=False)
+        for lo, hi in tiles(cells, tile3):
+            if shared is None:
+                part = cut_field(field, *tile_box(origin, cell, lo, hi))
+                if part is None:
+                    continue
+            else:
+                part = shared
+            futures.append(
+                client.submit(
+                    _run_tile, part, bounds, resolution, (lo, hi), method, options,
+                    None if output is None else str(output), pure=False,
+                )
+            )
+        entries = []
+        for done, fut in enumerate(distributed.as_completed(futures), 1):
+            entries.append(fut.result())
+            if report is not None:
+                report(done)
+    except BaseException:
+        client.cancel(futures)
+        raise
+    finally:
+        end()
+        if own is not None:
+            own.close()
+    entries.sort(key=lambda e: (e["window"][0][2], e["window"][0][1], e["window"][0][0]))
+    info = {"cells": list(cells), "origin": origin.tolist(), "cell": cell.tolist(), "method": method}
+    if output is not None:
+        manifest = dict(info, bounds=bounds.tolist(), resolution=np.asarray(resolution).tolist(), tiles=entries)
+        tmp = output / (MANIFEST + ".part")
+        tmp.write_text(json.dumps(manifest, indent=1))
+        os.replace(tmp, output / MANIFEST)
+        return output
+    return _weld([(e, e["v"], e["f"], e["n"]) for e in entries], info)
+
+
+def weld(directory: str | os.PathLike[str]) -> Mesh:
+    """Joins the tiles that :func:`polygonize` wrote with ``output=directory`` into one mesh
+    (the mesh :func:`polygonize` returns without ``output``).
+
+    Parameters
+    ----------
+    directory : path
+        The directory holding ``manifest.json`` and the tiles' ``.npz`` files.
+
+    Returns
+    -------
+    Mesh
+        ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64, ``normals`` (V, 3) float64.
+
+    Raises
+    ------
+    ValueError
+        When the directory has no manifest (the run did not finish) or a tile is missing.
+    """
+    directory = Path(directory)
+    path = directory / MANIFEST
+    if not path.is_file():
+        raise ValueError(f"directory: no {MANIFEST} in {str(directory)!r} (a run that did not finish?)")
+    manifest = json.loads(path.read_text())
+    parts = []
+    for e in manifest["tiles"]:
+        file = directory / e["file"]
+        if not file.is_file():
+            raise ValueError(f"directory: tile {e['file']} listed in the manifest is missing")
+        with np.load(file) as z:
+            parts.append((e, z["vertices"], z["faces"], z["normals"]))
+    return _weld(parts, manifest)
+
+
+def _weld(parts: list, info: dict) -> Mesh:
+    """The mesh of the tiles ``parts`` (``(manifest entry, vertices, faces, normals)`` each),
+    welded, with the tiles' statistics summed."""
+    v, f, n = weld_tiles(
+        [(p[0]["window"], p[1], p[2], p[3]) for p in parts], np.asarray(info["origin"]), np.asarray(info["cell"])
+    )
+    stats: dict[str, Any] = {k: sum(int(p[0]["stats"][k]) for p in parts) for k in _SUMMED}
+    stats["lattice_points"] = int(np.prod(np.asarray(info["cells"], dtype=np.int64) + 1))
+    stats.update(
+        tiles=len(parts), triangles=len(f), vertices=len(v), method=info["method"], resolution=tuple(info["cells"])
+    )
+    return Mesh(v, f, n, stats)

@@ -1,0 +1,256 @@
+"""implicitmesh.distributed: tiled polygonization on a Dask LocalCluster of two worker processes
+gives the single-machine mesh, triangle for triangle and bit for bit (vertices, normals, vertex
+count, watertight), for blob fields and variational surfaces, with output=DIR and weld, tiles
+that do not divide the lattice, tiles of one cell, a worker memory limit, and bad input."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+distributed = pytest.importorskip("distributed")
+
+import implicitmesh as im
+from implicitmesh import distributed as imd
+from implicitmesh import shapes
+
+from conftest import genus_of
+
+BOX = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]
+
+#: Memory limit of each worker: below the dense values of the 512³ lattice of
+#: test_tiles_fit_where_the_whole_lattice_does_not (513³ × 8 bytes ≈ 1.08 GB).
+WORKER_MEMORY = 900 * 2**20
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, memory_limit=WORKER_MEMORY, dashboard_address=":0"
+    )
+    with distributed.Client(cluster) as c:
+        yield c
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def blobs():
+    rng = np.random.default_rng(5)
+    return im.BlobField(rng.uniform(-0.6, 0.6, (60, 3)), rng.uniform(0.2, 0.35, 60), rng.uniform(0.8, 1.2, 60))
+
+
+@pytest.fixture(scope="module")
+def knot():
+    v, f = shapes.load_model("knot")
+    return im.VariationalSurface.from_mesh(v, f, method="global"), im.VariationalSurface.from_mesh(v, f, method="partition")
+
+
+def triangles(mesh: im.Mesh) -> np.ndarray:
+    """The mesh's triangles as rows of nine coordinate bit patterns, each rotated to start at its
+    smallest corner (orientation kept), sorted: equal for equal triangle multisets."""
+    t = mesh.vertices[mesh.faces].view(np.uint64).reshape(-1, 3, 3)
+    keys = [tuple(map(tuple, tri)) for tri in t]
+    rows = []
+    for k in keys:
+        m = min(range(3), key=lambda i: k[i])
+        rows.append(k[m:] + k[:m])
+    return np.array(sorted(rows), dtype=np.uint64).reshape(-1, 9)
+
+
+def normals_by_position(mesh: im.Mesh) -> dict:
+    return {tuple(p): tuple(n) for p, n in zip(mesh.vertices.view(np.uint64).reshape(-1, 3), mesh.normals.view(np.uint64).reshape(-1, 3))}
+
+
+def assert_same_mesh(tiled: im.Mesh, whole: im.Mesh) -> None:
+    assert len(whole.faces) > 0
+    assert len(tiled.faces) == len(whole.faces)
+    assert len(tiled.vertices) == len(whole.vertices)
+    assert np.array_equal(triangles(tiled), triangles(whole))
+    assert normals_by_position(tiled) == normals_by_position(whole)
+    assert im.compare(whole, tiled) == {"missing": 0, "extra": 0, "common": len(whole.faces)}
+    assert tiled.euler_number == whole.euler_number
+
+
+@pytest.mark.parametrize("method", ["sparse", "dense", "octree", "tracking"])
+def test_blobs_equal_one_machine(client, blobs, method):
+    whole = im.polygonize(blobs, bounds=BOX, resolution=48, method=method)
+    tiled = imd.polygonize(blobs, bounds=BOX, resolution=48, method=method, client=client, tile=16)
+    assert_same_mesh(tiled, whole)
+    assert tiled.to_trimesh().is_watertight
+    assert tiled.stats["tiles"] > 1
+
+
+@pytest.mark.parametrize("kind", ["global", "partition"])
+def test_variational_surface_equals_one_machine(client, knot, kind):
+    surface = knot[0] if kind == "global" else knot[1]
+    assert surface.method == kind
+    for method in ("dense", "octree"):
+        whole = im.polygonize(surface, resolution=40, method=method)
+        tiled = imd.polygonize(surface, resolution=40, method=method, client=client, tile=13)
+        assert_same_mesh(tiled, whole)
+        assert tiled.to_trimesh().is_watertight
+        assert genus_of(tiled.euler_number) == 1
+
+
+def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
+    lo, hi = np.array([-0.5, -0.2, 0.0]), np.array([0.1, 0.3, 0.4])
+    points = lo + (hi - lo) * np.random.default_rng(2).random((500, 3))
+    points = np.vstack([points, lo, hi])
+    for field in (blobs, knot[1]):
+        part = imd.cut_field(field, lo, hi)
+        assert np.array_equal(part(points).view(np.uint64), field(points).view(np.uint64))
+        assert np.array_equal(part.gradient(points).view(np.uint64), field.gradient(points).view(np.uint64))
+    assert 0 < len(imd.cut_field(blobs, lo, hi)) < len(blobs)
+    assert 0 < len(imd.cut_field(knot[1], lo, hi).patches["radii"]) < len(knot[1].patches["radii"])
+    assert imd.cut_field(blobs, lo + 5, hi + 5) is None
+
+
+def test_callable_and_uneven_tiles(client):
+    sphere = lambda p: np.linalg.norm(p - 0.05, axis=1) - 0.7  # noqa: E731
+    whole = im.polygonize(sphere, bounds=[[-1, -1, -1], [1, 0.9, 0.8]], resolution=(23, 19, 17))
+    for tile in (7, (5, 19, 4), 100):
+        tiled = imd.polygonize(sphere, bounds=[[-1, -1, -1], [1, 0.9, 0.8]], resolution=(23, 19, 17), method="dense", client=client, tile=tile)
+        assert_same_mesh(tiled, whole)
+        assert genus_of(tiled.euler_number) == 0
+
+
+def test_options_reach_every_tile(client, blobs):
+    whole = im.polygonize(blobs, bounds=BOX, resolution=24, method="dense", ambiguity="join", normals=False)
+    tiled = imd.polygonize(blobs, bounds=BOX, resolution=24, method="dense", client=client, tile=7, ambiguity=im.Ambiguity.JOIN, normals=False)
+    assert len(tiled.normals) == 0
+    assert np.array_equal(triangles(tiled), triangles(whole)) and len(tiled.vertices) == len(whole.vertices)
+
+
+def test_zeros_on_tile_faces(client):
+    """The field is exactly zero at lattice points on tile faces, where several edges give one
+    position and so several vertices: the weld still joins each to its own."""
+    diagonal = lambda p: p[:, 0] + p[:, 1] - 0.5  # noqa: E731
+    octahedron = lambda p: np.abs(p).sum(axis=1) - 0.75  # noqa: E731
+    for field, tiles in ((diagonal, [(16, 16, 3), (4, 2, 5), 3]), (octahedron, [(16, 16, 3), (2, 16, 16)])):
+        whole = im.polygonize(field, bounds=BOX, resolution=16)
+        assert len(np.unique(whole.vertices, axis=0)) < len(whole.vertices)
+        for tile in tiles:
+            tiled = imd.polygonize(field, bounds=BOX, resolution=16, method="dense", client=client, tile=tile)
+            assert_same_mesh(tiled, whole)
+    # Where tile edges meet at the octahedron's zeros (up to six vertices at one point) the
+    # triangles are the same; which of those vertices are one is not known to the weld.
+    whole = im.polygonize(octahedron, bounds=BOX, resolution=16)
+    tiled = imd.polygonize(octahedron, bounds=BOX, resolution=16, method="dense", client=client, tile=3)
+    assert np.array_equal(triangles(tiled), triangles(whole))
+
+
+def test_tiles_of_one_cell(client, blobs):
+    small = im.BlobField(blobs.centers[:3] * 0.5, 0.4)
+    whole = im.polygonize(small, bounds=[[-0.7] * 3, [0.7] * 3], resolution=9, method="dense")
+    tiled = imd.polygonize(small, bounds=[[-0.7] * 3, [0.7] * 3], resolution=9, method="sparse", client=client, tile=1)
+    assert_same_mesh(tiled, whole)
+    assert tiled.stats["tiles"] <= 9**3
+
+
+def test_output_directory_and_weld(client, blobs, tmp_path):
+    whole = im.polygonize(blobs, bounds=BOX, resolution=40, method="sparse")
+    out = imd.polygonize(blobs, bounds=BOX, resolution=40, client=client, tile=15, output=tmp_path / "run")
+    assert out == tmp_path / "run"
+    files = sorted(p.name for p in out.iterdir())
+    assert "manifest.json" in files and any(f.endswith(".npz") for f in files)
+    assert not any(f.endswith(".part") for f in files)
+    assert_same_mesh(imd.weld(out), whole)
+    with pytest.raises(ValueError, match="directory"):
+        imd.weld(tmp_path)
+
+
+def test_empty_result_and_progress(client, blobs):
+    seen = []
+    far = im.BlobField([[5.0, 5.0, 5.0]], 0.3)
+    mesh = imd.polygonize(far, bounds=BOX, resolution=16, client=client, tile=8, progress=seen.append)
+    assert len(mesh.faces) == 0 and len(mesh.vertices) == 0 and mesh.stats["tiles"] == 0
+    imd.polygonize(blobs, bounds=BOX, resolution=16, client=client, tile=8, progress=seen.append)
+    assert seen and seen[-1] == 8 and seen == sorted(seen)
+
+
+def test_tiles_fit_where_the_whole_lattice_does_not(client):
+    """512³: the whole lattice's dense values (1.08 GB) exceed each worker's memory limit, and
+    its memory estimate exceeds memory_limit, which every tile of 256³ meets."""
+    sphere = im.BlobField([[0.0, 0.0, 0.0], [0.2, 0.1, 0.0]], 0.5)
+    limit = 150 * 2**20
+    with pytest.raises(ValueError, match="resolution"):
+        im.polygonize(sphere, bounds=BOX, resolution=512, method="dense", memory_limit=limit, normals=False)
+    mesh = imd.polygonize(sphere, bounds=BOX, resolution=512, method="sparse", client=client, memory_limit=limit, normals=False)
+    assert 513**3 * 8 > WORKER_MEMORY
+    assert mesh.stats["tiles"] == 8
+    assert mesh.to_trimesh().is_watertight and genus_of(mesh.euler_number) == 0
+
+
+def test_bad_arguments(client, blobs):
+    for tile in (0, -3, 2.5, True, (4, 4), "8"):
+        with pytest.raises(ValueError, match="tile"):
+            imd.polygonize(blobs, bounds=BOX, resolution=8, client=client, tile=tile)
+    for method in ("marching", 3):
+        with pytest.raises(ValueError, match="method"):
+            imd.polygonize(blobs, bounds=BOX, resolution=8, client=client, method=method)
+    for method in ("sparse", "tracking"):
+        with pytest.raises(ValueError, match="method"):
+            imd.polygonize(lambda p: p[:, 0], bounds=BOX, resolution=8, client=client, method=method)
+    with pytest.raises(ValueError, match="resolution"):
+        imd.polygonize(blobs, bounds=BOX, resolution=0, client=client)
+    with pytest.raises(ValueError, match="window"):
+        im._core.polygonize(blobs, BOX, 8, window=[[0, 0, 0], [9, 1, 1]])
+    with pytest.raises(TypeError, match="seeds"):
+        imd.polygonize(blobs, bounds=BOX, resolution=8, client=client, seeds=[[0, 0, 0]])
+    with pytest.raises(TypeError, match="field"):
+        imd.polygonize(object(), bounds=BOX, resolution=8, client=client, method="dense")
+    lock = threading.Lock()
+    with pytest.raises(TypeError, match="field: .*pickle"):
+        imd.polygonize(lambda p: p[:, 0] + 0 * bool(lock), bounds=BOX, resolution=8, client=client, method="dense")
+
+
+def test_without_dask_the_error_names_the_extra(monkeypatch, blobs):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(ImportError, match=r"implicitmesh\[distributed\]"):
+        imd.polygonize(blobs, bounds=BOX, resolution=8)
+
+
+def test_ctrl_c_cancels_the_tasks(client, knot):
+    def interrupt(done: int) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        imd.polygonize(knot[0], resolution=40, method="dense", client=client, tile=10, progress=interrupt)
+    left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+    for _ in range(50):
+        if left == 0:
+            break
+        time.sleep(0.1)
+        left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+    assert left == 0
+
+
+def test_the_current_client_is_the_default(client, blobs):
+    assert distributed.get_client() is client
+    whole = im.polygonize(blobs, bounds=BOX, resolution=16, method="sparse")
+    assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=16, tile=7), whole)
+
+
+def test_a_worker_killed_mid_run_changes_nothing(client, knot):
+    """One worker process is killed when the first tile is done; Dask recomputes its tasks (and
+    the shared field) on the worker left and on the one its nanny restarts."""
+    surface = knot[1]
+    whole = im.polygonize(surface, resolution=40, method="dense")
+    pids = client.run(os.getpid)
+    killed = []
+
+    def kill_one(done: int) -> None:
+        if not killed:
+            pid = next(iter(pids.values()))
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+    tiled = imd.polygonize(surface, resolution=40, method="dense", client=client, tile=8, progress=kill_one)
+    assert killed
+    assert_same_mesh(tiled, whole)
