@@ -8,9 +8,9 @@
 //! over a ball reaching one support radius past the nearest data, taken from the finest of
 //! these levels where they fit the patch's budget. Level `L` keeps every data point `j` (with
 //! its normal constraint) whose hash is divisible by 2^L: about one in 2^L, wherever it is, and
-//! each level is a subset of the one before. Patches of (nearly) empty leaves, whose completion
-//! must carry the surface over their whole support, choose among all levels; the others among
-//! the levels 3, 6, 9, … (one in 8^k).
+//! each level is a subset of the one before. Patches that see the data only near the edge of their
+//! support, whose completion must carry the surface over the rest of it, choose among all
+//! levels; the others among the levels 3, 6, 9, … (one in 8^k).
 
 use super::octree::Octree;
 use glam::DVec3;

@@ -50,9 +50,10 @@ impl Support {
 /// [`super::coarse`]).
 pub const SPARSE_LEAF: usize = 16;
 
-/// Leaves holding fewer constraints than this complete their patch's system from any coarse
-/// level, the others from one in 8^k (see [`super::coarse`]).
-pub const EMPTY_LEAF: usize = 4;
+/// Patches whose nearest constraint lies further from their centre than this fraction of
+/// their radius see the data only near the edge of their support: they complete their system
+/// from any coarse level, the others from one in 8^k (see [`super::coarse`]).
+pub const FAR_DATA: f64 = 0.95;
 
 /// The support of each leaf's patch.
 pub fn supports(
@@ -97,7 +98,8 @@ pub fn supports(
             };
             let full = count_outside(points, tree);
             // The levels this patch may take its completion from (see `coarse`).
-            let step = if own >= EMPTY_LEAF { 3 } else { 1 };
+            let far = tree.kth_nearest_distance(points, n.centre, 1) > FAR_DATA * r;
+            let step = if far { 1 } else { 3 };
             let candidates: Vec<usize> = (step - 1..levels.len()).step_by(step).collect();
             // The finest level whose share of the ball fits the budget; a finer one when that
             // leaves too few constraints for a fit.
