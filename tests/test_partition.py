@@ -117,7 +117,7 @@ def test_patches_describe_the_partition(knot_fits):
     assert patches["centers"].shape == (m, 3) and patches["sizes"].dtype == np.int64
     assert m > 10 and np.all(patches["radii"] > 0)
     # At most 3/2 of the default max_patch constraints each; the constraints inside first.
-    assert np.all(patches["sizes"] >= patches["inside"]) and np.all(patches["sizes"] <= 384)
+    assert np.all(patches["sizes"] >= patches["inside"]) and np.all(patches["sizes"] <= 600)
     assert np.any(patches["sizes"] > patches["inside"])
     c = s.constraints["points"]
     tree = cKDTree(c)

@@ -290,9 +290,9 @@ impl PyVariationalSurface {
     ///     partition fit counts patch by patch; the global fit counts the columns of its system
     ///     factorized, in steps of 2048.
     /// partition_options : dict, optional
-    ///     The partition fit's patches: ``"max_per_leaf"`` (int, default 64: the octree splits
-    ///     leaves holding more constraints), ``"max_patch"`` (int, default 256: and leaves whose
-    ///     patch would hold more), ``"min_points"`` (int, default 128: smaller patches complete
+    ///     The partition fit's patches: ``"max_per_leaf"`` (int, default 96: the octree splits
+    ///     leaves holding more constraints), ``"max_patch"`` (int, default 400: and leaves whose
+    ///     patch would hold more), ``"min_points"`` (int, default 256: smaller patches complete
     ///     their system with constraints from further away) and ``"overlap"`` (float, default
     ///     1.25: a patch's radius over its leaf's half-diagonal). Smaller patches fit faster and
     ///     risk spurious surface away from sparse data.

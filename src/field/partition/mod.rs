@@ -35,7 +35,7 @@ use patches::Patch;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PartitionSettings {
     /// Leaves split until they hold at most this many constraints. With the defaults a patch's
-    /// support then holds about 50 constraints, and its completed system about 130.
+    /// support then holds about 80 constraints, and its completed system about 200.
     pub max_per_leaf: usize,
     /// Support radius of a leaf's patch over the leaf's half-diagonal (> 1, so that the supports
     /// overlap and each covers its leaf).
@@ -54,10 +54,10 @@ pub struct PartitionSettings {
 impl Default for PartitionSettings {
     fn default() -> Self {
         PartitionSettings {
-            max_per_leaf: 64,
+            max_per_leaf: 96,
             overlap: 1.25,
-            max_patch: 256,
-            min_points: 128,
+            max_patch: 400,
+            min_points: 256,
             fit: super::rbf::FitSettings::default(),
         }
     }
