@@ -86,6 +86,18 @@ def test_blobs_equal_one_machine(client, blobs, method):
     assert tiled.stats["tiles"] > 1
 
 
+def test_sph_colour_field_equals_one_machine(client):
+    # The tiles keep the field's kernel (cubic spline) and per-particle strengths.
+    rng = np.random.default_rng(5)
+    g = np.stack(np.meshgrid(*[np.arange(8) * 0.1] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    field = im.BlobField.from_particles(g + rng.uniform(-0.01, 0.01, g.shape) - 0.35, 0.05)
+    assert field.kernel == "cubic_spline"
+    whole = im.polygonize(field, bounds=BOX, resolution=40, method="sparse")
+    tiled = imd.polygonize(field, bounds=BOX, resolution=40, method="sparse", client=client, tile=16)
+    assert_same_mesh(tiled, whole)
+    assert tiled.to_trimesh().is_watertight
+
+
 @pytest.mark.parametrize("kind", ["global", "partition"])
 def test_variational_surface_equals_one_machine(client, knot, kind):
     surface = knot[0] if kind == "global" else knot[1]

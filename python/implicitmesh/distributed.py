@@ -85,10 +85,8 @@ def cut_blobs(field: "_core.BlobField", lo: np.ndarray, hi: np.ndarray) -> "_cor
     keep = np.einsum("ij,ij->i", near, near) <= reach * reach
     if not keep.any():
         return None
-    _, kwargs = field.__getnewargs_ex__()
-    return _core.BlobField(
-        centers[keep], radii[keep], field.strengths[keep], field.threshold, voxel_size=kwargs["voxel_size"]
-    )
+    _, kwargs = field.__getnewargs_ex__()  # voxel_size and kernel
+    return _core.BlobField(centers[keep], radii[keep], field.strengths[keep], field.threshold, **kwargs)
 
 
 def _cut_per_tile(field: Any) -> bool:
