@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from functools import lru_cache
 
 from benchmarks.bench_scale import median, vmhwm_mib
-from benchmarks.timing import ROOT, RunRecord, fmt_ratio, fmt_s, md_table, run_markdown, run_section
+from benchmarks.timing import RunRecord, run_case_process, fmt_ratio, fmt_s, md_table, run_markdown, run_section
 
 #: Particle spacing.
 S = 0.01
@@ -169,12 +168,8 @@ def one(layout: str, method: str, n: int) -> dict:
 
 def run_one(layout: str, method: str, n: int) -> dict:
     """:func:`one` in a fresh process."""
-    r = subprocess.run([sys.executable, "-m", "benchmarks.bench_particles", "one", layout, method, str(n)],
-                       capture_output=True, text=True, cwd=ROOT)
-    if r.returncode != 0:
-        return {"layout": layout, "method": method, "n": n,
-                "error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"}
-    return json.loads(r.stdout)
+    return run_case_process("benchmarks.bench_particles", [layout, method, str(n)],
+                            {"layout": layout, "method": method, "n": n})
 
 
 def log(msg: str) -> None:

@@ -17,12 +17,11 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-from benchmarks.timing import ROOT, RunRecord, fmt_ratio, fmt_s, md_table, run_markdown, run_section
+from benchmarks.timing import ROOT, RunRecord, run_case_process, fmt_ratio, fmt_s, md_table, run_markdown, run_section
 
 MESH = ROOT / "tests" / "data" / "meshes"
 MODEL = "knot"
@@ -154,11 +153,7 @@ def distances(ref, mesh, samples: int = 500_000) -> dict:
 
 def run_one(method: str, n: int) -> dict:
     """:func:`one` in a fresh process."""
-    r = subprocess.run([sys.executable, "-m", "benchmarks.bench_scale", "one", method, str(n)],
-                       capture_output=True, text=True, cwd=ROOT)
-    if r.returncode != 0:
-        return {"method": method, "n": n, "error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"}
-    return json.loads(r.stdout)
+    return run_case_process("benchmarks.bench_scale", [method, str(n)], {"method": method, "n": n})
 
 
 def log(msg: str) -> None:

@@ -105,6 +105,15 @@ class Timing:
         return cls(list(d["times"]), int(d["warmup"]), None, list(d.get("cpu_times", [])), d.get("foreign_load"))
 
 
+def run_case_process(module: str, args: Sequence[str], case: dict) -> dict:
+    """``python -m module one *args`` in a fresh process (its peak memory its own): the JSON
+    line it prints, or ``case`` with the last line of its error output under ``"error"``."""
+    r = subprocess.run([sys.executable, "-m", module, "one", *args], capture_output=True, text=True, cwd=ROOT)
+    if r.returncode != 0:
+        return {**case, "error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"}
+    return json.loads(r.stdout)
+
+
 def timeit_median(fn: Callable[[], Any], runs: int = 5, warmup: int = 1) -> Timing:
     """Calls ``fn()`` ``warmup`` times untimed, then ``runs`` times timed with
     :func:`time.perf_counter`; returns a :class:`Timing` (``.median``, ``.times``, ``.result``)."""
