@@ -35,7 +35,10 @@ fn main() {
         PerPrimitive::All(r),
         PerPrimitive::All(1.0),
         0.5,
-        BlobSettings { voxel_size },
+        BlobSettings {
+            voxel_size,
+            ..Default::default()
+        },
     )
     .unwrap();
     let g = field.grid();

@@ -11,16 +11,6 @@ pub enum Error {
     /// A coordinate or value that must be finite is NaN or infinite.
     #[error("{name}: entry {index} is not finite (NaN or infinity)")]
     NotFinite { name: &'static str, index: usize },
-    /// Two input points coincide (or nearly), which makes an interpolation problem singular.
-    #[error(
-        "{name}: points {first} and {second} coincide (distance {distance:.3e}); remove duplicates"
-    )]
-    DuplicatePoints {
-        name: &'static str,
-        first: usize,
-        second: usize,
-        distance: f64,
-    },
     /// A request whose memory estimate exceeds the allowed limit.
     #[error("{name}: this needs about {needed_mib} MiB, over the limit of {limit_mib} MiB (memory_limit); lower it or raise `memory_limit`")]
     TooMuchMemory {
@@ -29,7 +19,7 @@ pub enum Error {
         limit_mib: u64,
     },
     /// The interpolation system could not be solved to the required accuracy.
-    #[error("the interpolation system is singular or too ill-conditioned (residual {residual:.3e}); check for near-duplicate or degenerate points")]
+    #[error("the interpolation system is singular or too ill-conditioned (residual {residual:.3e}); points much closer together than the rest (merge them with a larger `merge_distance`) or degenerate data cause this")]
     SingularSystem { residual: f64 },
     /// A field returned NaN or infinity at a point the polygonizer needed.
     #[error("field: returned a non-finite value at point ({x}, {y}, {z})")]

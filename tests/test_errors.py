@@ -117,14 +117,25 @@ def test_coplanar_points():
         VariationalSurface.fit(line, np.tile([0.0, 0.0, 1.0], (10, 1)))
 
 
-def test_duplicate_points(data):
+def test_duplicate_points_are_merged_with_a_warning(data):
     p, n = data
     dup = p.copy()
     dup[40] = dup[3]
-    with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(dup, n)
-    with pytest.raises(ValueError, match="points"):
-        VariationalSurface.interpolate(dup, np.zeros(len(p)))
+    dup[41] = dup[5] + 1e-12
+    with pytest.warns(UserWarning, match="2 data points"):
+        s = VariationalSurface.fit(dup, n)
+    assert s.merged_points == 2
+    kept = np.delete(dup, [40, 41], axis=0)
+    assert np.abs(s.evaluate(kept)).max() < 1e-9
+    with pytest.warns(UserWarning, match="merged"):
+        s = VariationalSurface.interpolate(dup, np.arange(len(p), dtype=float))
+    assert s.merged_points == 2
+    # Merged values are averaged: points 3 and 40 had the values 3 and 40.
+    assert s.evaluate(dup[3:4])[0] == pytest.approx(21.5, abs=1e-6)
+    with pytest.raises(ValueError, match="merge_distance"):
+        VariationalSurface.fit(p, n, merge_distance=-1.0)
+    with pytest.raises(ValueError, match="merge_distance"):
+        VariationalSurface.interpolate(p, np.zeros(len(p)), merge_distance=np.nan)
 
 
 def test_zero_length_normal(data):

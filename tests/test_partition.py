@@ -192,8 +192,11 @@ def test_method_and_bad_input_errors():
         VariationalSurface.fit(bad, n, method="partition")
     with pytest.raises(ValueError, match="normals"):
         VariationalSurface.fit(p, n[:-1], method="partition")
-    with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(np.vstack([p, p[:1]]), np.vstack([n, n[:1]]), method="partition")
+    with pytest.warns(UserWarning, match="1 data point"):
+        s = VariationalSurface.fit(np.vstack([p, p[:1]]), np.vstack([n, n[:1]]), method="partition")
+    assert s.merged_points == 1
+    with pytest.raises(ValueError, match="merge_distance"):
+        VariationalSurface.fit(p, n, method="partition", merge_distance=-0.1)
     with pytest.raises(ValueError, match="memory_limit"):
         VariationalSurface.fit(p, n, method="partition", memory_limit=1000)
     with pytest.raises(ValueError, match="values"):
@@ -212,3 +215,38 @@ def test_partition_options_change_the_patches_and_are_checked():
         im.VariationalSurface.fit(p, n, partition_options={"overlap": "big"})
     with pytest.raises(ValueError, match="overlap"):
         im.VariationalSurface.fit(p, n, method="partition", partition_options={"overlap": 0.5})
+
+
+def test_near_duplicates_from_overlapping_scans_are_merged():
+    # A second scan repeats 5 % of the points a millionth of the data's size away: without the
+    # merge the partition fit is refused as ill-conditioned.
+    rng = np.random.default_rng(7)
+    p, n = im.shapes.fibonacci_sphere(10_000)
+    again = rng.choice(len(p), 500, replace=False)
+    q = np.vstack([p, p[again] + 1e-6 * rng.normal(size=(500, 3))])
+    m = np.vstack([n, n[again]])
+    with pytest.warns(UserWarning, match="500 data points"):
+        s = VariationalSurface.fit(q, m, method="partition")
+    assert s.merged_points == 500
+    assert np.abs(s.evaluate(p)).max() < 1e-9
+    assert np.abs(s.evaluate(q[len(p):])).max() < 1e-5
+    t = VariationalSurface.from_state(s.to_state())
+    assert t.merged_points == 500
+    with pytest.raises(ValueError, match="ill-conditioned"):
+        VariationalSurface.fit(q, m, method="partition", merge_distance=0.0)
+
+
+def test_smoothing_partition_fit_approximates_noisy_points():
+    rng = np.random.default_rng(3)
+    p, n = im.shapes.fibonacci_sphere(8_000)
+    radius = 0.8 * np.linalg.norm(p[0])
+    noisy = 0.8 * p + 0.003 * rng.normal(size=p.shape)
+    exact = VariationalSurface.fit(noisy, n, method="partition")
+    smooth = VariationalSurface.fit(noisy, n, method="partition", smoothing=1e-3)
+    assert np.abs(exact.evaluate(noisy)).max() < 1e-9
+    # The smoothed surface leaves the noisy points and lies closer to the sphere they came from.
+    assert np.abs(smooth.evaluate(noisy)).max() > 1e-3
+    meshes = [im.polygonize(s, resolution=96) for s in (exact, smooth)]
+    deviation = [np.abs(np.linalg.norm(m.vertices, axis=1) - radius).max() for m in meshes]
+    assert deviation[1] < 0.7 * deviation[0], deviation
+    assert meshes[1].euler_number == 2 and meshes[1].to_trimesh().is_watertight

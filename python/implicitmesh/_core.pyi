@@ -15,7 +15,7 @@ FitMethod = Literal["auto", "global", "partition"]
 class _FitOptions(TypedDict, total=False):
     """The keywords every fit takes; defaults: ``kernel="triharmonic"``, ``smoothing=0.0``,
     ``memory_limit=None`` (8 GiB), ``method="auto"``, ``progress=None``,
-    ``partition_options=None``."""
+    ``partition_options=None``, ``merge_distance=None`` (0.1 % of the data's typical spacing)."""
 
     kernel: Kernel
     smoothing: float
@@ -23,6 +23,7 @@ class _FitOptions(TypedDict, total=False):
     method: FitMethod
     progress: bool | Callable[[int], object] | None
     partition_options: dict[str, int | float] | None
+    merge_distance: float | None
 
 class VariationalSurface:
     @staticmethod
@@ -74,6 +75,8 @@ class VariationalSurface:
     def patches(self) -> dict[str, npt.NDArray[Any]]: ...
     @property
     def residual(self) -> float: ...
+    @property
+    def merged_points(self) -> int: ...
     @property
     def bounds(self) -> npt.NDArray[np.float64]: ...
 

@@ -4,6 +4,7 @@
 //! `q_i` itself. Also the checks on the data (count, finiteness, duplicates, coplanarity) and
 //! vertex normals of triangle meshes.
 
+use super::duplicates;
 use super::grid::Grid;
 use crate::error::{check_finite_points, Error, Result};
 use glam::DVec3;
@@ -21,6 +22,9 @@ pub struct ConstraintSettings {
     pub w_over_d: f64,
     /// Apply Cuno's rule: shrink `d_i` until no other data point is nearer to the normal constraint.
     pub shrink: bool,
+    /// Data points at most this far apart are merged (see [`super::duplicates`]). `None`:
+    /// [`duplicates::default_tolerance`], 0.1 % of the data's typical spacing.
+    pub merge_distance: Option<f64>,
 }
 
 impl Default for ConstraintSettings {
@@ -30,6 +34,7 @@ impl Default for ConstraintSettings {
             w: None,
             w_over_d: 0.75,
             shrink: true,
+            merge_distance: None,
         }
     }
 }
@@ -42,8 +47,10 @@ pub struct Constraints {
     pub values: Vec<f64>,
     /// The offset `d_i` used for each data point (after shrinking).
     pub offsets: Vec<f64>,
-    /// Number of boundary constraints (= data points).
+    /// Number of boundary constraints (= data points, after merging near-duplicates).
     pub boundary: usize,
+    /// Number of data points merged into others (see [`super::duplicates`]).
+    pub merged: usize,
 }
 
 /// Largest side of the axis-aligned bounding box.
@@ -120,34 +127,38 @@ pub fn check_points_and_values(points: &[DVec3], values: &[f64]) -> Result<()> {
     crate::error::check_finite_values("values", values)
 }
 
-/// Errors on the first pair of points closer than `tol`: the smallest `first`, and for it the
-/// smallest `second > first`.
-pub fn check_duplicates(name: &'static str, points: &[DVec3], tol: f64) -> Result<()> {
-    // The grid compares squared distances; a slightly larger radius keeps every pair that the
-    // exact test below accepts.
-    let reach = tol * (1.0 + 1e-9) + f64::MIN_POSITIVE;
-    let grid = Grid::new(points, reach);
-    let found = points.par_iter().enumerate().find_map_first(|(i, p)| {
-        let mut second: Option<u32> = None;
-        grid.for_each_within(*p, reach, |j| {
-            if j as usize > i
-                && (points[j as usize] - *p).length() <= tol
-                && second.is_none_or(|s| j < s)
-            {
-                second = Some(j);
-            }
-        });
-        second.map(|j| (i, j as usize, (points[j as usize] - *p).length()))
-    });
-    match found {
-        Some((first, second, distance)) => Err(Error::DuplicatePoints {
-            name,
-            first,
-            second,
-            distance,
-        }),
-        None => Ok(()),
+/// `merge_distance` if it is `None` or finite and non-negative.
+pub fn check_merge_distance(merge_distance: Option<f64>) -> Result<Option<f64>> {
+    match merge_distance {
+        Some(t) if !(t.is_finite() && t >= 0.0) => Err(Error::invalid(
+            "merge_distance",
+            format!("must be finite and non-negative, got {t}"),
+        )),
+        t => Ok(t),
     }
+}
+
+/// Interpolation data with near-duplicate points merged (their values averaged, see
+/// [`duplicates`]): constraints with no normal constraints.
+pub fn interpolation_data(
+    points: &[DVec3],
+    values: &[f64],
+    merge_distance: Option<f64>,
+) -> Result<Constraints> {
+    check_points_and_values(points, values)?;
+    let merge = duplicates::merge(points, check_merge_distance(merge_distance)?);
+    let (points, values) = if merge.merged() > 0 {
+        (merge.points(points), merge.means(values))
+    } else {
+        (points.to_vec(), values.to_vec())
+    };
+    Ok(Constraints {
+        boundary: points.len(),
+        points,
+        values,
+        offsets: vec![],
+        merged: merge.merged(),
+    })
 }
 
 /// Unit normals from `normals`, refusing non-finite or zero-length ones.
@@ -196,8 +207,30 @@ pub fn place_capped(
         ));
     }
     let normals = unit_normals("normals", normals)?;
+    let merge = duplicates::merge(points, check_merge_distance(settings.merge_distance)?);
+    if merge.merged() > 0 {
+        let points = merge.points(points);
+        let normals: Vec<DVec3> = merge
+            .normals(&normals)
+            .iter()
+            .map(|n| n.normalize())
+            .collect();
+        let caps = caps.map(|c| merge.minima(c));
+        let mut c = place_distinct(&points, &normals, settings, caps.as_deref())?;
+        c.merged = merge.merged();
+        return Ok(c);
+    }
+    place_distinct(points, &normals, settings, caps)
+}
+
+/// As [`place_capped`], for distinct points with unit normals.
+fn place_distinct(
+    points: &[DVec3],
+    normals: &[DVec3],
+    settings: &ConstraintSettings,
+    caps: Option<&[f64]>,
+) -> Result<Constraints> {
     let extent = largest_side(points);
-    check_duplicates("points", points, 1e-9 * extent)?;
     let d = settings.d.unwrap_or(0.0075 * extent);
     if !(d.is_finite() && d > 0.0) {
         return Err(Error::invalid(
@@ -254,6 +287,7 @@ pub fn place_capped(
         values,
         offsets,
         boundary: n,
+        merged: 0,
     })
 }
 
@@ -401,13 +435,28 @@ mod tests {
             .collect();
         assert!(check_points("points", &flat).is_err());
         assert!(check_points("points", &cube_points()).is_ok());
-        let mut dup = cube_points();
-        dup.push(dup[3]);
+    }
+
+    #[test]
+    fn merges_duplicates_before_placing() {
+        let mut pts = cube_points();
+        let mut normals: Vec<DVec3> = pts.iter().map(|p| *p - DVec3::splat(0.5)).collect();
+        pts.push(pts[3] + DVec3::splat(1e-12));
+        normals.push(normals[3]);
+        let c = place(&pts, &normals, &ConstraintSettings::default()).unwrap();
+        assert_eq!((c.boundary, c.merged), (8, 1));
+        assert_eq!(&c.points[..8], &cube_points()[..]);
         assert!(matches!(
-            check_duplicates("points", &dup, 1e-12),
-            Err(Error::DuplicatePoints {
-                first: 3,
-                second: 8,
+            place(
+                &pts,
+                &normals,
+                &ConstraintSettings {
+                    merge_distance: Some(-1.0),
+                    ..Default::default()
+                }
+            ),
+            Err(Error::InvalidArgument {
+                name: "merge_distance",
                 ..
             })
         ));
@@ -451,18 +500,12 @@ mod tests {
             shrunk += (di < d) as usize;
         }
         assert!(shrunk > 100, "{shrunk}");
-        // Duplicates: the first pair in (first, second) order, as all pairs find it.
+        // Duplicates: each joins its group's smallest index, as all pairs find it.
         let mut dup = pts.clone();
         dup.push(pts[2000] + DVec3::splat(1e-13));
         dup.push(pts[17]);
-        assert!(matches!(
-            check_duplicates("points", &dup, 1e-12),
-            Err(Error::DuplicatePoints {
-                first: 17,
-                second: 3001,
-                ..
-            })
-        ));
+        let m = super::duplicates::merge(&dup, Some(1e-12));
+        assert_eq!((m.into[3000], m.into[3001], m.merged()), (2000, 17, 2));
     }
 
     #[test]

@@ -10,6 +10,7 @@ pub mod blob;
 pub mod blob_kernel;
 pub mod constraints;
 pub mod differences;
+pub mod duplicates;
 pub mod grid;
 pub mod kernel;
 pub mod particles;

@@ -124,16 +124,16 @@ impl VariationalSurface {
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
-    pub fn interpolate(points: &[DVec3], values: &[f64], settings: &FitSettings) -> Result<Self> {
-        constraints::check_points_and_values(points, values)?;
+    /// Points at most `merge_distance` apart are merged, their values averaged (`None`: the
+    /// default tolerance of [`constraints::ConstraintSettings::merge_distance`]).
+    pub fn interpolate(
+        points: &[DVec3],
+        values: &[f64],
+        merge_distance: Option<f64>,
+        settings: &FitSettings,
+    ) -> Result<Self> {
         check_system_memory(points.len(), settings.memory_limit)?;
-        constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
-        let c = Constraints {
-            points: points.to_vec(),
-            values: values.to_vec(),
-            offsets: vec![],
-            boundary: points.len(),
-        };
+        let c = constraints::interpolation_data(points, values, merge_distance)?;
         Self::solve(c, settings, faer::get_global_parallelism())
     }
 
@@ -429,6 +429,7 @@ impl VariationalSurface {
             values,
             offsets: vec![],
             boundary,
+            merged: 0,
         };
         let mut s = Self::solve(c, settings, par)?;
         s.centers = vec![];

@@ -62,7 +62,8 @@ fn put_constraints(py: Python<'_>, d: &Bound<'_, PyDict>, c: &Constraints) -> Py
     d.set_item("constraint_points", points_to_py(py, c.points.clone())?)?;
     d.set_item("constraint_values", values_to_py(py, c.values.clone()))?;
     d.set_item("constraint_offsets", values_to_py(py, c.offsets.clone()))?;
-    d.set_item("constraint_boundary", c.boundary)
+    d.set_item("constraint_boundary", c.boundary)?;
+    d.set_item("merged_points", c.merged)
 }
 
 fn constraints_of(d: &Bound<'_, PyDict>) -> PyResult<Constraints> {
@@ -71,6 +72,10 @@ fn constraints_of(d: &Bound<'_, PyDict>) -> PyResult<Constraints> {
         values: values_of(d, "constraint_values")?,
         offsets: values_of(d, "constraint_offsets")?,
         boundary: number(d, "constraint_boundary")?,
+        merged: match d.get_item("merged_points")? {
+            Some(_) => number(d, "merged_points")?,
+            None => 0,
+        },
     })
 }
 

@@ -12,6 +12,7 @@ use crate::field::rbf::{self, VariationalSurface};
 use crate::field::Field;
 use glam::DVec3;
 use numpy::PyArray1;
+use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
@@ -53,6 +54,12 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.residual(),
             Fitted::Partition(s) => s.residual(),
+        }
+    }
+    fn merged(&self) -> usize {
+        match self {
+            Fitted::Global(s) => s.constraints().merged,
+            Fitted::Partition(s) => s.constraints().merged,
         }
     }
     fn data_bounding_box(&self) -> (DVec3, DVec3) {
@@ -106,11 +113,12 @@ fn parse_method(method: &str) -> PyResult<Method> {
 
 /// The keyword arguments that `fit`, `from_mesh` and `interpolate` share, converted and checked
 /// in this order: `method`, then `kernel`, `smoothing` and `memory_limit`, then
-/// `partition_options`.
+/// `partition_options`, then `merge_distance`.
 struct FitOptions<'a, 'py> {
     method: Method,
     global: rbf::FitSettings,
     partition: partition::PartitionSettings,
+    merge_distance: Option<f64>,
     progress: Option<&'a Bound<'py, PyAny>>,
 }
 
@@ -122,14 +130,17 @@ fn fit_options<'a, 'py>(
     memory_limit: Option<u64>,
     progress: Option<&'a Bound<'py, PyAny>>,
     partition_options: Option<&Bound<'_, PyDict>>,
+    merge_distance: Option<f64>,
 ) -> PyResult<FitOptions<'a, 'py>> {
     let method = parse_method(method)?;
     let global = fit_settings(kernel, smoothing, memory_limit)?;
     let partition = partition_settings(partition_options, global)?;
+    let merge_distance = constraints::check_merge_distance(merge_distance)?;
     Ok(FitOptions {
         method,
         global,
         partition,
+        merge_distance,
         progress,
     })
 }
@@ -161,6 +172,7 @@ impl<'a, 'py> FitOptions<'a, 'py> {
             end.call0()?;
             Fitted::Global(Arc::new(fitted?))
         };
+        warn_merged(py, inner.merged())?;
         Ok(PyVariationalSurface { inner })
     }
 }
@@ -240,12 +252,35 @@ fn fit_settings(
     })
 }
 
-fn placement(d: Option<f64>, w: Option<f64>) -> constraints::ConstraintSettings {
+fn placement(
+    d: Option<f64>,
+    w: Option<f64>,
+    merge_distance: Option<f64>,
+) -> constraints::ConstraintSettings {
     constraints::ConstraintSettings {
         d,
         w,
+        merge_distance,
         ..Default::default()
     }
+}
+
+/// A `UserWarning` saying how many data points were merged, when any were.
+fn warn_merged(py: Python<'_>, merged: usize) -> PyResult<()> {
+    if merged == 0 {
+        return Ok(());
+    }
+    let (noun, verb) = if merged == 1 {
+        ("point", "was")
+    } else {
+        ("points", "were")
+    };
+    let message = std::ffi::CString::new(format!(
+        "{merged} data {noun} lay within merge_distance of another and {verb} merged into it \
+         (see VariationalSurface.merged_points)"
+    ))
+    .expect("no NUL in the message");
+    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
 }
 
 fn global_only(name: &str) -> PyErr {
@@ -266,7 +301,9 @@ impl PyVariationalSurface {
     /// Parameters
     /// ----------
     /// points : (N, 3) float64
-    ///     Points on the surface; N ≥ 4, not all in one plane, no duplicates.
+    ///     Points on the surface; N ≥ 4, not all in one plane. Points closer together than
+    ///     ``merge_distance`` are merged (with a ``UserWarning``): the first keeps its position,
+    ///     the normals are summed.
     /// normals : (N, 3) float64
     ///     Outward normals, any non-zero length (they are normalised).
     /// d : float, optional
@@ -296,6 +333,12 @@ impl PyVariationalSurface {
     ///     their system with constraints from further away) and ``"overlap"`` (float, default
     ///     1.25: a patch's radius over its leaf's half-diagonal). Smaller patches fit faster and
     ///     risk spurious surface away from sparse data.
+    /// merge_distance : float, optional
+    ///     Data points at most this far apart are merged into the one with the smallest index
+    ///     (:attr:`merged_points` counts them). Default: 0.1 % of the data's typical spacing (the
+    ///     median distance from a point to its nearest neighbour): repeated samples, as where
+    ///     scans overlap, are merged and the rest kept. Raise it when a fit is refused as
+    ///     ill-conditioned.
     ///
     /// Returns
     /// -------
@@ -307,11 +350,11 @@ impl PyVariationalSurface {
     ///     On Ctrl-C: the partition fit stops between patches, the global fit between steps of
     ///     its factorization.
     /// ValueError
-    ///     For wrong shapes, NaN/inf, fewer than 4 points, coplanar or duplicate points,
-    ///     zero-length normals, a singular system, a system over the memory limit or an unknown
+    ///     For wrong shapes, NaN/inf, fewer than 4 points, coplanar points, a negative
+    ///     ``merge_distance``, zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None))]
+    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
@@ -325,6 +368,7 @@ impl PyVariationalSurface {
         method: &str,
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
+        merge_distance: Option<f64>,
     ) -> PyResult<Self> {
         let fit = fit_options(
             method,
@@ -333,6 +377,7 @@ impl PyVariationalSurface {
             memory_limit,
             progress,
             partition_options,
+            merge_distance,
         )?;
         let p = self::points(points, "points")?;
         let n = self::points(normals, "normals")?;
@@ -346,7 +391,7 @@ impl PyVariationalSurface {
                 ),
             ));
         }
-        let pl = placement(d, w);
+        let pl = placement(d, w, fit.merge_distance);
         fit.run(
             py,
             2 * p.len(),
@@ -369,7 +414,7 @@ impl PyVariationalSurface {
     /// vertices : (V, 3) float64
     /// faces : (F, 3) int
     ///     Vertex indices of each triangle.
-    /// d, w, kernel, smoothing, memory_limit, method, progress, partition_options
+    /// d, w, kernel, smoothing, memory_limit, method, progress, partition_options, merge_distance
     ///     As for :meth:`fit` (``"auto"``: global below 1000 vertices).
     ///
     /// Raises
@@ -377,7 +422,7 @@ impl PyVariationalSurface {
     /// ValueError
     ///     For out-of-range or repeated indices, unused vertices, and everything :meth:`fit` refuses.
     #[staticmethod]
-    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None))]
+    #[pyo3(signature = (vertices, faces, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_mesh(
         py: Python<'_>,
@@ -391,6 +436,7 @@ impl PyVariationalSurface {
         method: &str,
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
+        merge_distance: Option<f64>,
     ) -> PyResult<Self> {
         let fit = fit_options(
             method,
@@ -399,10 +445,11 @@ impl PyVariationalSurface {
             memory_limit,
             progress,
             partition_options,
+            merge_distance,
         )?;
         let v = points(vertices, "vertices")?;
         let f = triangles(faces, "faces")?;
-        let pl = placement(d, w);
+        let pl = placement(d, w, fit.merge_distance);
         fit.run(
             py,
             2 * v.len(),
@@ -417,14 +464,15 @@ impl PyVariationalSurface {
     /// ----------
     /// points : (N, 3) float64
     /// values : (N,) float64
-    /// kernel, smoothing, memory_limit, method, progress, partition_options
-    ///     As for :meth:`fit` (``"auto"``: global below 2000 points).
+    /// kernel, smoothing, memory_limit, method, progress, partition_options, merge_distance
+    ///     As for :meth:`fit` (``"auto"``: global below 2000 points); merged points get the
+    ///     mean of their values.
     ///
     /// Returns
     /// -------
     /// VariationalSurface
     #[staticmethod]
-    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None))]
+    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None))]
     fn interpolate(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
@@ -435,6 +483,7 @@ impl PyVariationalSurface {
         method: &str,
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
+        merge_distance: Option<f64>,
     ) -> PyResult<Self> {
         let fit = fit_options(
             method,
@@ -443,14 +492,16 @@ impl PyVariationalSurface {
             memory_limit,
             progress,
             partition_options,
+            merge_distance,
         )?;
         let p = self::points(points, "points")?;
         let v = self::values(values, "values")?;
+        let merge = fit.merge_distance;
         fit.run(
             py,
             p.len(),
-            |s| VariationalSurface::interpolate(&p, &v, s),
-            |s| PartitionSurface::interpolate(&p, &v, s),
+            |s| VariationalSurface::interpolate(&p, &v, merge, s),
+            |s| PartitionSurface::interpolate(&p, &v, merge, s),
         )
     }
 
@@ -585,10 +636,20 @@ impl PyVariationalSurface {
     }
 
     /// float: largest ``|f(c_i) − v_i|`` over the constraints after the fit (for a partition fit,
-    /// the largest over the patches and their constraints, which bounds the blend's).
+    /// the largest over the patches and their constraints, which bounds the blend's). With
+    /// ``smoothing > 0`` it is the residual of the regularised system,
+    /// ``|f(c_i) + smoothing · λ_i − v_i|``; the distance of f from the data is then larger, by
+    /// design (evaluate f at the points to see it).
     #[getter]
     fn residual(&self) -> f64 {
         self.inner.residual()
+    }
+
+    /// int: how many data points were merged into a nearby point before the fit (points at most
+    /// ``merge_distance`` apart; see :meth:`fit`). 0 when every point was kept.
+    #[getter]
+    fn merged_points(&self) -> usize {
+        self.inner.merged()
     }
 
     /// (2, 3) float64: a cube holding the surface — centred on the data's bounding box, with

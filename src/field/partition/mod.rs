@@ -152,17 +152,11 @@ impl PartitionSurface {
     pub fn interpolate(
         points: &[DVec3],
         values: &[f64],
+        merge_distance: Option<f64>,
         settings: &PartitionSettings,
     ) -> Result<Self> {
         settings.check()?;
-        constraints::check_points_and_values(points, values)?;
-        constraints::check_duplicates("points", points, 1e-9 * constraints::largest_side(points))?;
-        let c = Constraints {
-            points: points.to_vec(),
-            values: values.to_vec(),
-            offsets: vec![],
-            boundary: points.len(),
-        };
+        let c = constraints::interpolation_data(points, values, merge_distance)?;
         Self::solve(c, settings)
     }
 

@@ -45,7 +45,7 @@ fn interpolates_every_constraint() {
 fn interpolate_reproduces_values() {
     let p = random_points(2000, -1.0, 1.0, 8);
     let v: Vec<f64> = p.iter().map(|q| (3.0 * q.x).sin() + q.y * q.z).collect();
-    let s = PartitionSurface::interpolate(&p, &v, &Default::default()).unwrap();
+    let s = PartitionSurface::interpolate(&p, &v, None, &Default::default()).unwrap();
     let mut f = vec![0.0; p.len()];
     s.values(&p, &mut f);
     let err = f
