@@ -473,6 +473,7 @@ impl PyVariationalSurface {
     /// VariationalSurface
     #[staticmethod]
     #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None))]
+    #[allow(clippy::too_many_arguments)]
     fn interpolate(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
