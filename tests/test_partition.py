@@ -149,6 +149,13 @@ def test_fifty_thousand_scan_points():
     assert c["missing"] == 0 and c["extra"] == 0
     back = pickle.loads(pickle.dumps(s))
     assert np.array_equal(back.evaluate(p[:2000]), s.evaluate(p[:2000]))
+    # Subdivision of a control mesh of 10⁵ vertices: the new vertices lie on the zero set.
+    control = im.polygonize(s, resolution=232, method="octree", normals=False)
+    assert len(control.vertices) >= 100_000
+    fine = im.subdivide(control.vertices, control.faces, levels=1, surface=s)[-1]
+    assert len(fine.faces) == 4 * len(control.faces)
+    assert np.max(np.abs(s.evaluate(fine.vertices[len(control.vertices):]))) < 1e-6
+    closed_with_genus(fine, 1)
 
 
 def test_interpolate_and_from_mesh_partition():
