@@ -102,7 +102,8 @@ def _report(surface, fit_s, mesh) -> str:
     return _summary(
         [
             ("constraints", f"{len(surface)}"),
-            ("fit", f"{fit_s:.3f} s (residual {surface.residual:.1e})"),
+            ("merged", f"{surface.merged_points} data points within merge_distance of another"),
+            ("fit", f"{fit_s:.3f} s ({surface.method}, residual {surface.residual:.1e})"),
             ("method", f"{st['method']} at {'x'.join(map(str, st['resolution']))} cells"),
             ("evaluations", f"{st['evaluations']:,} ({st['evaluation_percent']:.2f} % of plain marching cubes)"),
             ("polygonize", f"{st['seconds']['total']:.3f} s"),
