@@ -16,10 +16,13 @@ spheres of influence cover the cube about 1.6 times: a foam of merged blobs), me
 ``"sparse"``; ``variational``, a partition fit (``VariationalSurface.fit(method="partition")``)
 of points sampled on the knot's ``_hires`` mesh with their face normals (as in bench_scale),
 method ``"octree"``, ``normals=False``. Each field is made once, saved with
-:func:`implicitmesh.save`, and loaded by every case.
+:func:`implicitmesh.save`, and loaded by every case. ``many``: a small blob field in about 10⁴
+tiles of 4³ cells on 2 workers, and 10⁴ no-op tasks, for the scheduler's and the weld's cost per
+tile.
 
     python -m benchmarks.bench_distributed [--quick] [--results DIR]
     python -m benchmarks.bench_distributed one FIELD SETUP FILE RESOLUTION TILE RUNS   # one JSON line
+    (SETUP ``many``: RUNS is the number of no-op tasks)
 """
 
 from __future__ import annotations
@@ -50,6 +53,12 @@ BLOB_RADIUS = 0.02
 SETUPS = ("single", "dask-1", "dask-2")
 METHOD = {"blobs": "sparse", "variational": "octree"}
 OPTIONS = {"blobs": {}, "variational": {"normals": False}}
+#: Many small tiles, for the scheduler's and the weld's cost per tile: the quick blob field over
+#: MANY_BOUNDS (every tile reached by primitives), lattice cells and cells per tile edge.
+MANY = {False: (88, 4), True: (40, 4)}
+MANY_BOUNDS = [[-0.75] * 3, [0.75] * 3]
+#: No-op tasks, for the scheduler's cost per task alone.
+NOOP_TASKS = {False: 10_000, True: 1_000}
 #: Timed runs per case (after one warm-up on a small lattice); the median is reported.
 RUNS = {False: 3, True: 1}
 #: Targets of issue 25.
@@ -74,25 +83,27 @@ def make_field(name: str, size: int):
 
 
 class Phases:
-    """Wraps ``cut_field`` and ``weld_tiles`` of :mod:`implicitmesh.distributed` to count the
-    client's seconds in each and the vertices the weld joins."""
+    """Wraps ``_tile_fields`` and ``weld_tiles`` of :mod:`implicitmesh.distributed` to count the
+    client's seconds cutting the field for the tiles and welding, and the vertices the weld
+    joins (the tiles' fields are cut before the first is submitted)."""
 
     def __init__(self, imd):
-        self.imd = imd
-        self.cut, self.weld = imd.cut_field, imd.weld_tiles
+        self.cut, self.weld = imd._tile_fields, imd.weld_tiles
         self.reset()
-        imd.cut_field = self._cut
+        imd._tile_fields = self._cut
         imd.weld_tiles = self._weld
 
     def reset(self) -> None:
         self.cut_s = self.weld_s = 0.0
         self.tile_vertices = self.welded_vertices = 0
 
-    def _cut(self, *a):
+    def _cut(self, field, shared, *a):
+        if shared is not None:
+            return self.cut(field, shared, *a)
         t = time.perf_counter()
-        part = self.cut(*a)
+        parts = list(self.cut(field, shared, *a))
         self.cut_s += time.perf_counter() - t
-        return part
+        return parts
 
     def _weld(self, tiles, *a):
         t = time.perf_counter()
@@ -123,6 +134,8 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
         os.environ["RAYON_NUM_THREADS"] = "1"  # inherited by the worker processes, not used here
     import implicitmesh as im
 
+    if setup == "many":
+        return many(file, resolution, tile, runs)
     field = im.load(file)
     method, options = METHOD[name], OPTIONS[name]
     out: dict = {"field": name, "setup": setup, "resolution": resolution, "tile": tile}
@@ -176,6 +189,41 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
     return out
 
 
+def many(file: str, resolution: int, tile: int, noop_tasks: int) -> dict:
+    """Tiles of a few cells on 2 worker processes: the scheduler's and the weld's cost per tile,
+    and no-op tasks for the scheduler's cost alone."""
+    os.environ["RAYON_NUM_THREADS"] = "1"
+    import distributed
+
+    import implicitmesh as im
+    from implicitmesh import distributed as imd
+
+    field = im.load(file)
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, memory_limit=0)
+    with distributed.Client(cluster) as client:
+        phases = Phases(imd)
+        imd.polygonize(field, bounds=MANY_BOUNDS, resolution=16, client=client, tile=8)  # warm-up
+        client.gather(client.map(int, range(100), pure=False))
+        t = time.perf_counter()
+        client.gather(client.map(int, range(noop_tasks), pure=False))
+        noop_s = time.perf_counter() - t
+        phases.reset()
+        t = time.perf_counter()
+        mesh = imd.polygonize(field, bounds=MANY_BOUNDS, resolution=resolution, client=client, tile=tile)
+        tiled_s = time.perf_counter() - t
+        out = {"field": "many", "setup": "many", "resolution": resolution, "tile": tile, "tiles": mesh.stats["tiles"],
+               "triangles": len(mesh.faces), "seconds": tiled_s, "noop_tasks": noop_tasks, "noop_s": noop_s,
+               "cut_s": phases.cut_s, "weld_s": phases.weld_s, "tile_vertices": phases.tile_vertices,
+               "welded_vertices": phases.welded_vertices}
+    cluster.close()
+    t = time.perf_counter()
+    whole = im.polygonize(field, bounds=MANY_BOUNDS, resolution=resolution, method="sparse")
+    out.update(single_s=time.perf_counter() - t, peak_mib=vmhwm_mib())
+    assert len(whole.faces) == out["triangles"]
+    return out
+
+
 def run_one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int) -> dict:
     """:func:`one` in a fresh process."""
     args = [name, setup, file, str(resolution), str(tile), str(runs)]
@@ -197,6 +245,13 @@ def measure(a: argparse.Namespace) -> dict:
                 log(f"{name}, {resolution}³, tile {tile}, {setup}")
                 r = run_one(name, setup, file, resolution, tile, RUNS[a.quick])
                 cases.append({**r, "size": size})
+            if name == "blobs":
+                quick_size = CASES[True]["blobs"][0]
+                im.save(file, make_field(name, quick_size))
+                resolution, tile = MANY[a.quick]
+                log(f"{quick_size:,} blobs, {resolution}³, tile {tile}: many small tiles")
+                r = run_one(name, "many", file, resolution, tile, NOOP_TASKS[a.quick])
+                cases.append({**r, "size": quick_size})
     return {"cases": cases, "run": run.finish(("numpy", "dask", "distributed", "implicitmesh"))}
 
 
@@ -210,7 +265,7 @@ def render(raw: dict) -> str:
     run = raw["run"]
     rows, checks = [], []
     by = {(c["field"], c["setup"]): c for c in raw["cases"]}
-    for name in dict.fromkeys(c["field"] for c in raw["cases"]):
+    for name in dict.fromkeys(c["field"] for c in raw["cases"] if c["field"] != "many"):
         single, d1, d2 = (by.get((name, s), {}) for s in SETUPS)
         t = {s: statistics.median(c["times"]) if "times" in c else None for s, c in zip(SETUPS, (single, d1, d2))}
         for setup, c in zip(SETUPS, (single, d1, d2)):
@@ -261,6 +316,7 @@ def render(raw: dict) -> str:
         "",
         run_markdown(run),
         "",
+        *many_lines([c for c in raw["cases"] if c["field"] == "many"]),
         md_table(["field, size, lattice", "setup", "seconds", "speed-up vs dask-1", "overhead vs single",
                   "triangles", "tiles", "per tile: seconds (mean / max)",
                   "per tile: MB field / MB result (mean / max each)", "client: cut / weld (s)", "welded vertices",
@@ -269,6 +325,28 @@ def render(raw: dict) -> str:
         *checks,
         "",
     ])
+
+
+def many_lines(cases: list[dict]) -> list[str]:
+    """The paragraph on many small tiles."""
+    lines = []
+    for c in cases:
+        if "error" in c:
+            lines += [f"Many small tiles: failed: {c['error']}", ""]
+            continue
+        rest = c["seconds"] - c["cut_s"] - c["weld_s"]
+        lines += [
+            f"Many small tiles ({c['size']:,} blobs over [-0.75, 0.75]³, {c['resolution']}³ in tiles of "
+            f"{c['tile']}³, 2 workers): {c['tiles']:,} tasks, {c['triangles']:,} triangles in "
+            f"{fmt_s(c['seconds'])} s (one process, one rayon thread: {fmt_s(c['single_s'])} s): the client cut "
+            f"the field in {fmt_s(c['cut_s'])} s ({c['cut_s'] / c['tiles'] * 1e3:.2f} ms per tile) and welded "
+            f"{c['tile_vertices']:,} vertices ({c['welded_vertices']:,} joined) in {fmt_s(c['weld_s'])} s "
+            f"({c['weld_s'] / c['tiles'] * 1e3:.2f} ms per tile); the rest, {fmt_s(rest)} s, is "
+            f"{rest / c['tiles'] * 1e3:.2f} ms per task. {c['noop_tasks']:,} no-op tasks took "
+            f"{fmt_s(c['noop_s'])} s ({c['noop_s'] / c['noop_tasks'] * 1e3:.2f} ms per task).",
+            "",
+        ]
+    return lines
 
 
 def main() -> int:

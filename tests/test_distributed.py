@@ -123,6 +123,27 @@ def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
     assert imd.cut_field(blobs, lo + 5, hi + 5) is None
 
 
+def test_tiles_get_the_primitives_cut_blobs_gives_them():
+    """The primitives of every tile, found for all tiles at once, are those cut_blobs finds for
+    the tile alone (uneven tiles, radii from a tenth of a tile to several tiles, centres outside
+    the lattice)."""
+    rng = np.random.default_rng(8)
+    field = im.BlobField(rng.uniform(-1.2, 1.2, (800, 3)), rng.uniform(0.01, 0.5, 800), kernel="wendland")
+    cells, origin, cell = im._core.lattice(np.asarray(BOX), (37, 20, 11))
+    origin, cell = np.asarray(origin), np.asarray(cell)
+    tile = (6, 20, 4)
+    parts = imd._blob_tiles(field, cells, origin, cell, tile)
+    windows = list(imd.tiles(cells, tile))
+    assert len(parts) == len(windows) == 7 * 1 * 3
+    for (lo, hi), part in zip(windows, parts):
+        alone = imd.cut_blobs(field, *imd.tile_box(origin, cell, lo, hi))
+        assert (part is None) == (alone is None)
+        if part is not None:
+            assert part.kernel == "wendland"
+            for name in ("centers", "radii", "strengths"):
+                assert np.array_equal(getattr(part, name), getattr(alone, name))
+
+
 def test_callable_and_uneven_tiles(client):
     sphere = lambda p: np.linalg.norm(p - 0.05, axis=1) - 0.7  # noqa: E731
     whole = im.polygonize(sphere, bounds=[[-1, -1, -1], [1, 0.9, 0.8]], resolution=(23, 19, 17))
