@@ -45,7 +45,7 @@ BOX = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]
 #: The quick blob field is the full one scaled by 1/4 in cells (1/64 of the primitives, 4 times
 #: the radius): the same foam, coarser.
 CASES = {
-    False: {"blobs": (200_000, 512, 128), "variational": (100_000, 256, 64)},
+    False: {"blobs": (200_000, 512, 128), "variational": (100_000, 256, 128)},
     True: {"blobs": (3_125, 128, 64), "variational": (10_000, 64, 32)},
 }
 #: Blob radius at 200,000 primitives; it scales with the cube root of 1 / primitives.

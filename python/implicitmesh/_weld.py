@@ -122,20 +122,22 @@ def weld_tiles(tiles: Sequence[Tile], origin: np.ndarray, cell: np.ndarray) -> t
     total = int(starts[-1])
     if total == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
-    v = np.concatenate(verts)
-    at_point, on_face = [], []
+    at_point, on_face, face_bits = [], [], []
     for (window, _, _, _), x, start in zip(tiles, verts, starts):
         a, b = tile_box(origin, cell, *window)
-        face = np.flatnonzero(((x == a) | (x == b)).any(axis=1))
+        on = x == a
+        on |= x == b
+        face = np.flatnonzero(on[:, 0] | on[:, 1] | on[:, 2])
         point = _at_lattice_points(x[face], origin, cell)
         at_point.append(np.zeros(len(x), dtype=bool))
         at_point[-1][face[point]] = True
         on_face.append(start + face[~point])
+        face_bits.append(x[face[~point]].view(np.uint64).reshape(-1, 3))
     rep = np.arange(total)
     ids = np.concatenate(on_face)
     if len(ids):
         tile_of = np.searchsorted(starts, ids, side="right") - 1
-        rep[ids] = _rank_within(v[ids].view(np.uint64).reshape(-1, 3), tile_of, ids)
+        rep[ids] = _rank_within(np.concatenate(face_bits), tile_of, ids)
     parent = _lattice_point_links(tiles, starts, at_point, origin, cell)
     roots: dict = {}
     for gid in parent:
@@ -144,8 +146,12 @@ def weld_tiles(tiles: Sequence[Tile], origin: np.ndarray, cell: np.ndarray) -> t
     for gid in parent:
         rep[gid] = roots[_find(parent, gid)]
     keep = rep == np.arange(total)
-    remap = (np.cumsum(keep) - 1)[rep]
-    return v[keep], _renumbered(tris, starts, remap), _kept_normals(norms, verts, keep)
+    remap = np.cumsum(keep) - 1
+    remap = remap[rep]
+    v = _kept_rows(verts, starts, keep)
+    has_normals = all(len(n) == len(x) for n, x in zip(norms, verts))
+    n = _kept_rows(norms, starts, keep) if has_normals else np.zeros((0, 3))
+    return v, _renumbered(tris, starts, remap), n
 
 
 def _renumbered(tris: list, starts: np.ndarray, remap: np.ndarray) -> np.ndarray:
@@ -154,13 +160,17 @@ def _renumbered(tris: list, starts: np.ndarray, remap: np.ndarray) -> np.ndarray
     f = np.empty((sum(len(t) for t in tris), 3), dtype=np.int64)
     at = 0
     for t, s, e in zip(tris, starts[:-1], starts[1:]):
-        np.take(remap[s:e], t, out=f[at : at + len(t)])
+        np.take(remap[s:e], t, out=f[at : at + len(t)], mode="clip")  # indices are in range
         at += len(t)
     return f
 
 
-def _kept_normals(norms: list, verts: list, keep: np.ndarray) -> np.ndarray:
-    """The normals of the vertices ``keep`` marks, or none unless every tile has normals."""
-    if not all(len(n) == len(x) for n, x in zip(norms, verts)):
-        return np.zeros((0, 3))
-    return np.concatenate(norms)[keep]
+def _kept_rows(rows: list, starts: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The rows of the tiles' ``(n, 3)`` arrays that ``keep`` marks, one tile after another."""
+    out = np.empty((int(np.count_nonzero(keep)), 3), dtype=np.float64)
+    at = 0
+    for r, s, e in zip(rows, starts[:-1], starts[1:]):
+        k = int(np.count_nonzero(keep[s:e]))
+        np.compress(keep[s:e], r, axis=0, out=out[at : at + k])
+        at += k
+    return out
