@@ -108,15 +108,15 @@ def cut_blobs(field: "_core.BlobField", lo: np.ndarray, hi: np.ndarray) -> "_cor
 def _blob_tiles(field: "_core.BlobField", cells, origin: np.ndarray, cell: np.ndarray, tile) -> list:
     """:func:`cut_blobs` for every tile of :func:`tiles` at once, in its order (None for a tile
     no primitive reaches): each primitive is tested against the tiles its sphere's bounding box
-    meets (widened by a billionth of a tile against rounding), not against every tile, with
+    meets (widened by a millionth of a tile against rounding), not against every tile, with
     :func:`cut_blobs`'s test, so each tile gets the same primitives."""
     cells, tile = np.asarray(cells, dtype=np.int64), np.asarray(tile, dtype=np.int64)
     counts = -(-cells // tile)
     arrays = _blob_arrays(field)
     centers, reach = arrays[0], arrays[1] * (1.0 + _RADIUS_MARGIN)
     side = tile * cell
-    first = np.floor((centers - reach[:, None] - origin) / side - 1e-9).astype(np.int64)
-    last = np.floor((centers + reach[:, None] - origin) / side + 1e-9).astype(np.int64)
+    first = np.floor((centers - reach[:, None] - origin) / side - 1e-6).astype(np.int64)
+    last = np.floor((centers + reach[:, None] - origin) / side + 1e-6).astype(np.int64)
     first, last = np.clip(first, 0, counts - 1), np.clip(last, 0, counts - 1)
     span = np.maximum(last - first + 1, 0)
     pairs = span.prod(axis=1)
