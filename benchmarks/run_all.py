@@ -39,9 +39,9 @@ from benchmarks.timing import (
 
 #: The sections of BENCHMARKS.md, in order: ``benchmarks.bench_NAME`` modules with
 #: ``measure(args) -> dict`` and ``render(raw) -> str``.
-SECTIONS = ("blobs", "octree", "particles", "partition", "rbf", "scale", "subdivision")
+SECTIONS = ("blobs", "distributed", "octree", "particles", "partition", "rbf", "scale", "subdivision")
 #: The packages whose versions the header names.
-PACKAGES = ("numpy", "scipy", "scikit-image", "ferreus_rbf", "pysplashsurf", "implicitmesh")
+PACKAGES = ("numpy", "scipy", "scikit-image", "ferreus_rbf", "pysplashsurf", "distributed", "implicitmesh")
 
 
 def wait_idle(max_seconds: float, threshold: float = 0.3, window: float = 20.0) -> str:

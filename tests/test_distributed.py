@@ -123,6 +123,36 @@ def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
     assert imd.cut_field(blobs, lo + 5, hi + 5) is None
 
 
+def test_tiles_get_the_primitives_cut_blobs_gives_them():
+    """The primitives of every tile, found for all tiles at once, are those cut_blobs finds for
+    the tile alone (uneven tiles, radii from a tenth of a tile to several tiles, centres outside
+    the lattice, and a lattice far from the origin with centres on tile faces and spheres
+    ending on them)."""
+    rng = np.random.default_rng(8)
+    far = np.array([[1e4, -3e3, 7e2], [1e4 + 2.0, -3e3 + 2.0, 7e2 + 2.0]])
+    cells, origin, cell = im._core.lattice(far, 16)
+    faces = np.asarray(origin) + np.asarray(cell) * rng.integers(0, 5, (200, 3)) * 4
+    cases = [
+        (rng.uniform(-1.2, 1.2, (800, 3)), rng.uniform(0.01, 0.5, 800), np.asarray(BOX), (37, 20, 11), (6, 20, 4)),
+        (faces, np.asarray(cell)[0] * rng.integers(1, 6, 200), far, 16, (4, 4, 4)),
+    ]
+    for centers, radii, bounds, resolution, tile in cases:
+        field = im.BlobField(centers, radii, kernel="wendland")
+        cells, origin, cell = im._core.lattice(bounds, resolution)
+        origin, cell = np.asarray(origin), np.asarray(cell)
+        parts = imd._blob_tiles(field, cells, origin, cell, tile)
+        windows = list(imd.tiles(cells, tile))
+        assert len(parts) == len(windows) > 1
+        assert any(p is not None for p in parts)
+        for (lo, hi), part in zip(windows, parts):
+            alone = imd.cut_blobs(field, *imd.tile_box(origin, cell, lo, hi))
+            assert (part is None) == (alone is None)
+            if part is not None:
+                assert part.kernel == "wendland"
+                for name in ("centers", "radii", "strengths"):
+                    assert np.array_equal(getattr(part, name), getattr(alone, name))
+
+
 def test_callable_and_uneven_tiles(client):
     sphere = lambda p: np.linalg.norm(p - 0.05, axis=1) - 0.7  # noqa: E731
     whole = im.polygonize(sphere, bounds=[[-1, -1, -1], [1, 0.9, 0.8]], resolution=(23, 19, 17))

@@ -115,26 +115,29 @@ def weld_tiles(tiles: Sequence[Tile], origin: np.ndarray, cell: np.ndarray) -> t
     (V, 3) float64)``, normals empty unless every tile has them. Vertices keep the order of the
     tiles and, within a tile, their order; a joined vertex takes its first tile's place."""
     verts = [np.asarray(t[1], dtype=np.float64).reshape(-1, 3) for t in tiles]
-    tris = [np.asarray(t[2], dtype=np.int64).reshape(-1, 3) for t in tiles]
+    tris = [np.asarray(t[2], dtype=np.intp).reshape(-1, 3) for t in tiles]
     norms = [np.asarray(t[3], dtype=np.float64).reshape(-1, 3) for t in tiles]
     counts = np.array([len(v) for v in verts], dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     total = int(starts[-1])
     if total == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
-    v = np.concatenate(verts)
-    tile_of = np.repeat(np.arange(len(tiles)), counts)
-    on_face, at_point = [], []
-    for (window, _, _, _), x in zip(tiles, verts):
+    at_point, on_face, face_bits = [], [], []
+    for (window, _, _, _), x, start in zip(tiles, verts, starts):
         a, b = tile_box(origin, cell, *window)
-        face = ((x == a) | (x == b)).any(axis=1)
-        point = face & _at_lattice_points(x, origin, cell)
-        on_face.append(face & ~point)
-        at_point.append(point)
+        on = x == a
+        on |= x == b
+        face = np.flatnonzero(on[:, 0] | on[:, 1] | on[:, 2])
+        point = _at_lattice_points(x[face], origin, cell)
+        at_point.append(np.zeros(len(x), dtype=bool))
+        at_point[-1][face[point]] = True
+        on_face.append(start + face[~point])
+        face_bits.append(x[face[~point]].view(np.uint64).reshape(-1, 3))
     rep = np.arange(total)
-    ids = np.flatnonzero(np.concatenate(on_face))
+    ids = np.concatenate(on_face)
     if len(ids):
-        rep[ids] = _rank_within(v[ids].view(np.uint64).reshape(-1, 3), tile_of[ids], ids)
+        tile_of = np.searchsorted(starts, ids, side="right") - 1
+        rep[ids] = _rank_within(np.concatenate(face_bits), tile_of, ids)
     parent = _lattice_point_links(tiles, starts, at_point, origin, cell)
     roots: dict = {}
     for gid in parent:
@@ -143,8 +146,31 @@ def weld_tiles(tiles: Sequence[Tile], origin: np.ndarray, cell: np.ndarray) -> t
     for gid in parent:
         rep[gid] = roots[_find(parent, gid)]
     keep = rep == np.arange(total)
-    remap = (np.cumsum(keep) - 1)[rep]
-    f = remap[np.concatenate([t + s for t, s in zip(tris, starts[:-1])])]
+    remap = np.cumsum(keep) - 1
+    remap = remap[rep]
+    v = _kept_rows(verts, starts, keep)
     has_normals = all(len(n) == len(x) for n, x in zip(norms, verts))
-    n = np.concatenate(norms)[keep] if has_normals else np.zeros((0, 3))
-    return v[keep], f, n
+    n = _kept_rows(norms, starts, keep) if has_normals else np.zeros((0, 3))
+    return v, _renumbered(tris, starts, remap), n
+
+
+def _renumbered(tris: list, starts: np.ndarray, remap: np.ndarray) -> np.ndarray:
+    """The tiles' triangles, one after another, with each tile's vertex indices mapped through
+    its slice of ``remap`` (the welded mesh's index of every tile vertex)."""
+    f = np.empty((sum(len(t) for t in tris), 3), dtype=np.int64)
+    at = 0
+    for t, s, e in zip(tris, starts[:-1], starts[1:]):
+        np.take(remap[s:e], t, out=f[at : at + len(t)], mode="clip")  # indices are in range
+        at += len(t)
+    return f
+
+
+def _kept_rows(rows: list, starts: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The rows of the tiles' ``(n, 3)`` arrays that ``keep`` marks, one tile after another."""
+    out = np.empty((int(np.count_nonzero(keep)), 3), dtype=np.float64)
+    at = 0
+    for r, s, e in zip(rows, starts[:-1], starts[1:]):
+        k = int(np.count_nonzero(keep[s:e]))
+        np.compress(keep[s:e], r, axis=0, out=out[at : at + k])
+        at += k
+    return out

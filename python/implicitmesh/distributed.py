@@ -75,18 +75,68 @@ def tiles(cells: Sequence[int], tile: Sequence[int]) -> Iterator[tuple[tuple[int
         yield (rx[0], ry[0], rz[0]), (rx[1], ry[1], rz[1])
 
 
+def _blob_arrays(field: "_core.BlobField") -> tuple:
+    """``field``'s centers, radii and strengths (copies, read once) and its other constructor
+    arguments: threshold and the keywords (voxel size, kernel)."""
+    _, kwargs = field.__getnewargs_ex__()
+    return field.centers, field.radii, field.strengths, field.threshold, kwargs
+
+
+def _blob_subset(arrays: tuple, keep: np.ndarray) -> "_core.BlobField":
+    """The blob field of the primitives ``keep`` (increasing indices) of the field whose
+    :func:`_blob_arrays` are ``arrays``."""
+    centers, radii, strengths, threshold, kwargs = arrays
+    return _core.BlobField(centers[keep], radii[keep], strengths[keep], threshold, **kwargs)
+
+
+def _reaches(centers: np.ndarray, reach: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Whether each sphere (``centers``, ``reach``) meets the box ``[lo, hi]`` (rows of boxes
+    or one box)."""
+    near = np.maximum(np.maximum(lo - centers, centers - hi), 0.0)
+    return np.einsum("ij,ij->i", near, near) <= reach * reach
+
+
 def cut_blobs(field: "_core.BlobField", lo: np.ndarray, hi: np.ndarray) -> "_core.BlobField | None":
     """The blob field of the primitives of ``field`` whose sphere of influence reaches the box
     ``[lo, hi]``, in their order (so values and gradients in the box are the same bits as the
     whole field's), or None when no primitive reaches it (the field is positive there)."""
-    centers, radii = field.centers, field.radii
-    near = np.maximum(np.maximum(lo - centers, centers - hi), 0.0)
-    reach = radii * (1.0 + _RADIUS_MARGIN)
-    keep = np.einsum("ij,ij->i", near, near) <= reach * reach
-    if not keep.any():
-        return None
-    _, kwargs = field.__getnewargs_ex__()  # voxel_size and kernel
-    return _core.BlobField(centers[keep], radii[keep], field.strengths[keep], field.threshold, **kwargs)
+    arrays = _blob_arrays(field)
+    keep = _reaches(arrays[0], arrays[1] * (1.0 + _RADIUS_MARGIN), lo, hi)
+    return _blob_subset(arrays, np.flatnonzero(keep)) if keep.any() else None
+
+
+def _blob_tiles(field: "_core.BlobField", cells, origin: np.ndarray, cell: np.ndarray, tile) -> list:
+    """:func:`cut_blobs` for every tile of :func:`tiles` at once, in its order (None for a tile
+    no primitive reaches): each primitive is tested against the tiles its sphere's bounding box
+    meets (widened by a millionth of a tile against rounding), not against every tile, with
+    :func:`cut_blobs`'s test, so each tile gets the same primitives."""
+    cells, tile = np.asarray(cells, dtype=np.int64), np.asarray(tile, dtype=np.int64)
+    counts = -(-cells // tile)
+    arrays = _blob_arrays(field)
+    centers, reach = arrays[0], arrays[1] * (1.0 + _RADIUS_MARGIN)
+    side = tile * cell
+    first = np.floor((centers - reach[:, None] - origin) / side - 1e-6).astype(np.int64)
+    last = np.floor((centers + reach[:, None] - origin) / side + 1e-6).astype(np.int64)
+    first, last = np.clip(first, 0, counts - 1), np.clip(last, 0, counts - 1)
+    span = np.maximum(last - first + 1, 0)
+    pairs = span.prod(axis=1)
+    prim = np.repeat(np.arange(len(centers)), pairs)
+    k = np.arange(len(prim)) - np.repeat(np.cumsum(pairs) - pairs, pairs)
+    t = np.empty((len(prim), 3), dtype=np.int64)
+    for axis in range(3):
+        n = span[prim, axis]
+        t[:, axis] = first[prim, axis] + k % n
+        k //= n
+    lo = t * tile
+    box_lo = origin + lo.astype(np.float64) * cell
+    box_hi = origin + np.minimum(lo + tile, cells).astype(np.float64) * cell
+    hit = _reaches(centers[prim], reach[prim], box_lo, box_hi)
+    prim, t = prim[hit], t[hit]
+    ids = (t[:, 2] * counts[1] + t[:, 1]) * counts[0] + t[:, 0]
+    order = np.argsort(ids, kind="stable")
+    prim, ids = prim[order], ids[order]
+    bounds = np.searchsorted(ids, np.arange(int(counts.prod()) + 1))
+    return [_blob_subset(arrays, prim[a:b]) if b > a else None for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 def _cut_per_tile(field: Any) -> bool:
@@ -105,6 +155,16 @@ def cut_field(field: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
     if isinstance(field, _core.VariationalSurface):
         return field._cut(np.stack([lo, hi]))
     return field
+
+
+def _tile_fields(field: Any, shared: Any, cells, origin: np.ndarray, cell: np.ndarray, tile) -> Iterator[Any]:
+    """What each tile of :func:`tiles` receives, in its order: ``shared`` (the whole field's
+    future) when given, else :func:`cut_field` of the tile (None: not run)."""
+    if shared is not None:
+        return itertools.repeat(shared)
+    if isinstance(field, _core.BlobField):
+        return iter(_blob_tiles(field, cells, origin, cell, tile))
+    return (cut_field(field, *tile_box(origin, cell, lo, hi)) for lo, hi in tiles(cells, tile))
 
 
 def _run_tile(field, bounds, resolution, window, method, options, output):
@@ -251,13 +311,9 @@ def polygonize(
         # that the tiles share (a task, not scattered data, so that Dask recomputes it if its
         # worker dies).
         shared = None if _cut_per_tile(field) else client.submit(_pickled(field), pure=False)
-        for lo, hi in tiles(cells, tile3):
-            if shared is None:
-                part = cut_field(field, *tile_box(origin, cell, lo, hi))
-                if part is None:
-                    continue
-            else:
-                part = shared
+        for (lo, hi), part in zip(tiles(cells, tile3), _tile_fields(field, shared, cells, origin, cell, tile3)):
+            if part is None:
+                continue
             futures.append(
                 client.submit(
                     _run_tile, part, bounds, resolution, (lo, hi), method, options,

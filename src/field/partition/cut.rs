@@ -15,17 +15,14 @@ impl PartitionSurface {
         // Points are clamped into the root cube before their leaf is looked up.
         let (clo, chi) = self.tree.cube();
         let (blo, bhi) = (lo.clamp(clo, chi), hi.clamp(clo, chi));
-        let centre = 0.5 * (blo + bhi);
         let mut keep = vec![false; self.patches.len()];
-        self.tree
-            .for_each_leaf_meeting(centre, (bhi - centre).length(), |k| {
-                let l = self.tree.leaf_slot[k as usize] as usize;
-                let cover =
-                    &self.cover[self.cover_start[l] as usize..self.cover_start[l + 1] as usize];
-                for &i in cover {
-                    keep[i as usize] = true;
-                }
-            });
+        self.tree.for_each_leaf_meeting_box(blo, bhi, |k| {
+            let l = self.tree.leaf_slot[k as usize] as usize;
+            let cover = &self.cover[self.cover_start[l] as usize..self.cover_start[l + 1] as usize];
+            for &i in cover {
+                keep[i as usize] = true;
+            }
+        });
         let patches: Vec<_> = self
             .patches
             .iter()

@@ -187,6 +187,26 @@ impl Octree {
         }
     }
 
+    /// Calls `visit(node)` for every leaf whose cube meets the closed box `[lo, hi]` (cubes
+    /// widened by a millionth of the root's half side, so that a leaf a point of the box
+    /// descends into is never left out by rounding of its corners).
+    pub fn for_each_leaf_meeting_box(&self, lo: DVec3, hi: DVec3, mut visit: impl FnMut(u32)) {
+        let margin = 1e-6 * self.nodes[0].half;
+        let mut stack = vec![0u32];
+        while let Some(k) = stack.pop() {
+            let n = &self.nodes[k as usize];
+            let reach = DVec3::splat(n.half + margin);
+            if (n.centre - reach).cmpgt(hi).any() || (n.centre + reach).cmplt(lo).any() {
+                continue;
+            }
+            if n.is_leaf() {
+                visit(k);
+            } else {
+                stack.extend((0..8).rev().map(|o| n.children + o));
+            }
+        }
+    }
+
     /// Number of `points` within the closed ball (`c`, `r`).
     pub fn count_within(&self, points: &[DVec3], c: DVec3, r: f64) -> usize {
         let mut count = 0;
@@ -275,6 +295,31 @@ impl Octree {
 mod tests {
     use super::*;
     use crate::field::testing::random_points;
+
+    /// The leaves meeting a box hold every point of it (its corners and faces included) and
+    /// are fewer than those meeting the ball around it.
+    #[test]
+    fn leaves_meeting_a_box_hold_its_points() {
+        let pts = random_points(3000, -0.9, 0.9, 21);
+        let t = Octree::new(&pts, DVec3::ZERO, 1.0, 20);
+        let (lo, hi) = (DVec3::new(-0.5, 0.0, -1.0), DVec3::new(0.0, 0.25, -0.25));
+        let (mut in_box, mut in_ball) = (Vec::new(), 0);
+        t.for_each_leaf_meeting_box(lo, hi, |k| in_box.push(t.leaf_slot[k as usize]));
+        t.for_each_leaf_meeting(0.5 * (lo + hi), 0.5 * (hi - lo).length(), |_| in_ball += 1);
+        assert!(in_box.len() < in_ball);
+        let inside = random_points(2000, 0.0, 1.0, 5)
+            .into_iter()
+            .map(|q| lo + (hi - lo) * q)
+            .chain([
+                lo,
+                hi,
+                DVec3::new(-0.5, 0.25, -0.25),
+                DVec3::new(-0.25, 0.0, -0.5),
+            ]);
+        for p in inside {
+            assert!(in_box.contains(&t.leaf_of(p)), "{p}");
+        }
+    }
 
     #[test]
     fn leaves_tile_the_cube_and_hold_their_points() {
