@@ -48,8 +48,10 @@ pub struct BlobField {
     /// 1 / R² per primitive.
     inv_r2: Vec<f64>,
     strengths: Vec<f64>,
-    /// The same numbers packed per primitive for point queries (one cache line each).
-    packed: Vec<Packed>,
+    /// The same numbers packed per primitive for point queries (one cache line each), built on
+    /// the first point query ([`BlobField::packed`]) and refilled in place once built: block
+    /// values and gradients read the arrays above.
+    packed: std::sync::OnceLock<Vec<Packed>>,
     threshold: f64,
     settings: BlobSettings,
     /// The voxel lists, built by [`BlobField::grid`] on first use and rebuilt in place by
@@ -66,8 +68,6 @@ struct Packed {
     inv_r2: f64,
     /// A.
     strength: f64,
-    /// c·A / R² (c: the profile's [`Profile::GRADIENT_SCALE`]), the gradient's factor.
-    grad: f64,
 }
 
 /// A scalar or one value per primitive.
@@ -192,7 +192,7 @@ impl BlobField {
         self.centers.extend_from_slice(centers);
         self.inv_r2.clear();
         self.inv_r2.extend(self.radii.iter().map(|r| 1.0 / (r * r)));
-        self.pack();
+        self.repack();
         let side = self.voxel_side();
         if let Some(grid) = self.grid.get_mut() {
             grid.rebuild(&self.centers, &self.radii, side);
@@ -218,32 +218,42 @@ impl BlobField {
         let res = strengths.fill("strengths", self.centers.len(), &mut a, false);
         if res.is_ok() {
             self.strengths = a;
-            self.pack();
+            self.repack();
         } else {
             self.strengths = a;
         }
         res
     }
 
-    /// Fills [`BlobField::packed`] from the per-primitive arrays.
-    fn pack(&mut self) {
-        let scale = self.settings.kernel.gradient_scale();
-        self.packed.clear();
-        for i in 0..self.centers.len() {
-            self.packed.push(Packed {
+    /// Refills [`BlobField::packed`] in place from the per-primitive arrays when it is built.
+    fn repack(&mut self) {
+        if let Some(packed) = self.packed.get_mut() {
+            packed.clear();
+            packed.extend((0..self.centers.len()).map(|i| Packed {
                 center: self.centers[i],
                 inv_r2: self.inv_r2[i],
                 strength: self.strengths[i],
-                grad: scale * self.strengths[i] * self.inv_r2[i],
-            });
+            }));
         }
+    }
+
+    /// The primitives packed for point queries, built on the first call.
+    fn packed(&self) -> &[Packed] {
+        self.packed.get_or_init(|| {
+            (0..self.centers.len())
+                .map(|i| Packed {
+                    center: self.centers[i],
+                    inv_r2: self.inv_r2[i],
+                    strength: self.strengths[i],
+                })
+                .collect()
+        })
     }
 
     /// Potential F(p) by brute force over all primitives (the reference for tests).
     pub fn potential_brute_force(&self, p: DVec3) -> f64 {
-        with_profile!(self.settings.kernel, K => (0..self.centers.len())
-            .map(|i| self.term::<K>(i, p))
-            .sum())
+        let packed = self.packed();
+        with_profile!(self.settings.kernel, K => packed.iter().map(|q| term::<K>(q, p)).sum())
     }
 
     /// Centre, 1/R², A and R of primitive `i`.
@@ -258,10 +268,11 @@ impl BlobField {
         )
     }
 
+    /// c·A / R² of primitive `i` (c: the profile's [`Profile::GRADIENT_SCALE`]), the factor of
+    /// its gradient.
     #[inline(always)]
-    fn term<K: Profile>(&self, i: usize, p: DVec3) -> f64 {
-        let q = &self.packed[i];
-        q.strength * K::value(unit_t(p - q.center, q.inv_r2))
+    fn gradient_factor<K: Profile>(&self, i: usize) -> f64 {
+        K::GRADIENT_SCALE * self.strengths[i] * self.inv_r2[i]
     }
 
     /// ∇f(p) = −∇F(p) from the voxel lists.
@@ -276,10 +287,10 @@ impl BlobField {
     fn gradient_over<K: Profile>(&self, list: &[u32], p: DVec3) -> DVec3 {
         let mut g = DVec3::ZERO;
         for &i in list {
-            let q = &self.packed[i as usize];
-            let d = p - q.center;
-            let s = K::slope(1.0 - d.length_squared() * q.inv_r2);
-            g += d * (q.grad * s);
+            let i = i as usize;
+            let d = p - self.centers[i];
+            let s = K::slope(1.0 - d.length_squared() * self.inv_r2[i]);
+            g += d * (self.gradient_factor::<K>(i) * s);
         }
         g
     }
@@ -294,11 +305,27 @@ impl BlobField {
     /// [`BlobField::potential`] with the profile `K`.
     #[inline(always)]
     fn potential_with<K: Profile>(&self, p: DVec3) -> f64 {
+        let packed = self.packed();
         let mut f = 0.0;
         for &i in self.grid().candidates(p) {
-            f += self.term::<K>(i as usize, p);
+            f += term::<K>(&packed[i as usize], p);
         }
         f
+    }
+
+    /// `threshold − F` at each of `points`, from `grid`: voxel lists of this field's primitives
+    /// with any voxel side (the same terms in the same order as [`Field::values`], so the same
+    /// bits). Reads the per-primitive arrays: neither the field's voxel lists nor its packed
+    /// primitives are built.
+    pub(crate) fn values_over_grid(&self, grid: &VoxelGrid, points: &[DVec3], out: &mut [f64]) {
+        with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+            let mut f = 0.0;
+            for &i in grid.candidates(p) {
+                let i = i as usize;
+                f += self.strengths[i] * K::value(unit_t(p - self.centers[i], self.inv_r2[i]));
+            }
+            self.threshold - f
+        }));
     }
 
     /// Fills one z-plane of lattice values (`xs`, `ys`: the lattice's coordinates; `z`: the
@@ -697,13 +724,14 @@ impl BlobField {
                 let (px, py, pz) = (V::load(&x), V::load(&y), V::load(&z));
                 let (mut gx, mut gy, mut gz) = (zero, zero, zero);
                 for &i in list {
-                    let q = &self.packed[i as usize];
-                    let dx = px.sub(V::splat(q.center.x));
-                    let dy = py.sub(V::splat(q.center.y));
-                    let dz = pz.sub(V::splat(q.center.z));
+                    let i = i as usize;
+                    let c = self.centers[i];
+                    let dx = px.sub(V::splat(c.x));
+                    let dy = py.sub(V::splat(c.y));
+                    let dz = pz.sub(V::splat(c.z));
                     let s = dx.mul(dx).add(dy.mul(dy)).add(dz.mul(dz));
-                    let t = one.sub(s.mul(V::splat(q.inv_r2))).max(zero);
-                    let k = V::splat(q.grad).mul(t);
+                    let t = one.sub(s.mul(V::splat(self.inv_r2[i]))).max(zero);
+                    let k = V::splat(self.gradient_factor::<Triquet>(i)).mul(t);
                     gx = gx.add(dx.mul(k));
                     gy = gy.add(dy.mul(k));
                     gz = gz.add(dz.mul(k));
@@ -773,7 +801,13 @@ impl BlobField {
     }
 }
 
-/// Block lists longer than this take the voxel lists for gradients.
+/// The term A·w(t) of the packed primitive `q` at `p`.
+#[inline(always)]
+fn term<K: Profile>(q: &Packed, p: DVec3) -> f64 {
+    q.strength * K::value(unit_t(p - q.center, q.inv_r2))
+}
+
+/// Block lists longer than this take the voxel lists for gradients, when they are built.
 const LONG_BLOCK_LIST: usize = 64;
 
 /// Point batches smaller than this are evaluated on the calling thread (about 0.1 ms of work).
@@ -1220,8 +1254,10 @@ impl BlockField for BlobField {
     ) {
         let list = blocks.list(block.index);
         // A block much larger than the primitives (a coarse lattice) lists far more of them than
-        // reach any one point: the voxel lists are shorter then (the same terms, the same bits).
-        if list.len() > LONG_BLOCK_LIST {
+        // reach any one point: the voxel lists are shorter then (the same terms, the same bits),
+        // when they are built (they are not built for this: at particle scale they take several
+        // times the memory of the block lists).
+        if list.len() > LONG_BLOCK_LIST && self.grid.get().is_some() {
             self.gradients(points, out);
             return;
         }
