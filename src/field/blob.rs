@@ -1097,6 +1097,34 @@ impl BlobField {
     }
 }
 
+/// The primitives per z-layer of blocks, in index order, as compressed rows (`start` has one
+/// more entry than there are `layers`): primitive i in every layer of `layers_of(i)`, a range
+/// holding every layer its sphere may reach.
+fn layer_candidates(
+    layers: u32,
+    primitives: usize,
+    layers_of: impl Fn(usize) -> std::ops::Range<u32>,
+) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; layers as usize + 1];
+    for i in 0..primitives {
+        for z in layers_of(i) {
+            start[z as usize + 1] += 1;
+        }
+    }
+    for z in 0..layers as usize {
+        start[z + 1] += start[z];
+    }
+    let mut cursor = start.clone();
+    let mut items = vec![0u32; start[layers as usize] as usize];
+    for i in 0..primitives {
+        for z in layers_of(i) {
+            items[cursor[z as usize] as usize] = i as u32;
+            cursor[z as usize] += 1;
+        }
+    }
+    (start, items)
+}
+
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
@@ -1119,10 +1147,28 @@ impl BlockField for BlobField {
 
     /// Lists, per block, the primitives whose sphere of influence reaches its box (with a
     /// relative margin of 1e-9 on R², so that rounding never leaves out a primitive that adds
-    /// a non-zero term at one of its points). Built per z-layer of blocks in parallel.
+    /// a non-zero term at one of its points). Built per z-layer of blocks in parallel, each
+    /// layer from the primitives whose candidate layers hold it ([`layer_candidates`]).
     fn blocks(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
         let step = (BLOCK_POINTS - 1) as f64;
         let h = lattice.cell;
+        // The radius with the margin, in every test here.
+        let margin = |r: f64| r * (1.0 + 1e-9);
+        // Candidate blocks along axis a (one more on each side for rounding), for the exact
+        // sphere-box test.
+        let range = |c: DVec3, rm: f64, a: usize| -> std::ops::Range<u32> {
+            let span = h[a] * step;
+            let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
+            let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
+            let hi = hi.min((dims[a] - 1) as f64);
+            if hi < 0.0 || lo > hi {
+                return 0..0;
+            }
+            lo.max(0.0) as u32..hi as u32 + 1
+        };
+        let (start, candidates) = layer_candidates(dims[2], self.centers.len(), |i| {
+            range(self.centers[i], margin(self.radii[i]), 2)
+        });
         let layers = (0..dims[2])
             .into_par_iter()
             .map(|bz| {
@@ -1132,31 +1178,20 @@ impl BlockField for BlobField {
                     let (a, b) = block_box(lattice, [0, 0, bz]);
                     (a.z, b.z)
                 };
-                for (i, (c, r)) in self.centers.iter().zip(&self.radii).enumerate() {
-                    // The radius with the margin, in every test here.
-                    let rm = r * (1.0 + 1e-9);
+                let here =
+                    &candidates[start[bz as usize] as usize..start[bz as usize + 1] as usize];
+                for &i in here {
+                    let (c, rm) = (self.centers[i as usize], margin(self.radii[i as usize]));
                     if c.z + rm < zlo || c.z - rm > zhi {
                         continue;
                     }
-                    // Candidate blocks along x and y (one more on each side for rounding), then
-                    // the exact sphere-box test.
-                    let range = |a: usize| -> std::ops::Range<u32> {
-                        let span = h[a] * step;
-                        let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
-                        let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
-                        let hi = hi.min((dims[a] - 1) as f64);
-                        if hi < 0.0 || lo > hi {
-                            return 0..0;
-                        }
-                        lo.max(0.0) as u32..hi as u32 + 1
-                    };
-                    let (xs, ys) = (range(0), range(1));
+                    let (xs, ys) = (range(c, rm, 0), range(c, rm, 1));
                     let r2 = rm * rm;
                     for by in ys {
                         for bx in xs.clone() {
                             let (lo, hi) = block_box(lattice, [bx, by, bz]);
-                            if box_distances2(*c, lo, hi).0 <= r2 {
-                                pairs.push((bx + dims[0] * by, i as u32));
+                            if box_distances2(c, lo, hi).0 <= r2 {
+                                pairs.push((bx + dims[0] * by, i));
                             }
                         }
                     }
