@@ -1134,6 +1134,14 @@ fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     (lattice.point(lo), lattice.point(hi))
 }
 
+/// The squared gap between `c` and the interval `(lo, hi)` along one axis, as
+/// [`box_distances2`] computes it (0 inside).
+#[inline(always)]
+fn gap2(c: f64, (lo, hi): (f64, f64)) -> f64 {
+    let g = (lo - c).max(c - hi).max(0.0);
+    g * g
+}
+
 /// Squared distances from `c` to the nearest and the farthest point of the box `[lo, hi]`.
 #[inline(always)]
 fn box_distances2(c: DVec3, lo: DVec3, hi: DVec3) -> (f64, f64) {
@@ -1166,6 +1174,15 @@ impl BlockField for BlobField {
             }
             lo.max(0.0) as u32..hi as u32 + 1
         };
+        // The lowest and highest coordinate of the blocks' boxes per axis ([`block_box`]).
+        let sides: [Vec<(f64, f64)>; 3] = std::array::from_fn(|a| {
+            (0..dims[a])
+                .map(|k| {
+                    let (lo, hi) = block_box(lattice, [k; 3]);
+                    (lo[a], hi[a])
+                })
+                .collect()
+        });
         let (start, candidates) = layer_candidates(dims[2], self.centers.len(), |i| {
             range(self.centers[i], margin(self.radii[i]), 2)
         });
@@ -1187,10 +1204,18 @@ impl BlockField for BlobField {
                     }
                     let (xs, ys) = (range(c, rm, 0), range(c, rm, 1));
                     let r2 = rm * rm;
+                    // The squared distance to each block's box as `box_distances2` sums it,
+                    // (x² + y²) + z², from the gaps per axis; a row whose y² + z² exceeds r²
+                    // has no block within reach (the rounded sums are monotone).
+                    let gz2 = gap2(c.z, sides[2][bz as usize]);
                     for by in ys {
+                        let gy2 = gap2(c.y, sides[1][by as usize]);
+                        if gy2 + gz2 > r2 {
+                            continue;
+                        }
                         for bx in xs.clone() {
-                            let (lo, hi) = block_box(lattice, [bx, by, bz]);
-                            if box_distances2(c, lo, hi).0 <= r2 {
+                            let gx2 = gap2(c.x, sides[0][bx as usize]);
+                            if (gx2 + gy2) + gz2 <= r2 {
                                 pairs.push((bx + dims[0] * by, i));
                             }
                         }
