@@ -1505,21 +1505,24 @@ mod tests {
     }
 
     #[test]
-    fn sparse_without_normals_builds_no_voxel_lists() {
+    fn sparse_builds_neither_voxel_lists_nor_packed_primitives() {
         use crate::polygonize::{sparse, Settings};
-        let b = random_blobs(60, 23);
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 40).unwrap();
-        let settings = Settings {
-            normals: false,
-            ..Default::default()
-        };
-        let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
-        assert!(!m.triangles.is_empty());
-        assert!(b.grid.get().is_none());
-        // Built on the first point query, the same lists as a field built with them.
-        let p = DVec3::new(0.1, 0.2, 0.3);
-        assert_eq!(b.potential(p), b.potential_brute_force(p));
-        assert!(b.grid.get().is_some());
+        for normals in [false, true] {
+            let b = random_blobs(60, 23);
+            let settings = Settings {
+                normals,
+                ..Default::default()
+            };
+            let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
+            assert!(!m.triangles.is_empty());
+            assert_eq!(m.normals.len(), if normals { m.vertices.len() } else { 0 });
+            assert!(b.grid.get().is_none() && b.packed.get().is_none());
+            // Built on the first point query, the same lists as a field built with them.
+            let p = DVec3::new(0.1, 0.2, 0.3);
+            assert_eq!(b.potential(p), b.potential_brute_force(p));
+            assert!(b.grid.get().is_some() && b.packed.get().is_some());
+        }
     }
 
     #[test]
