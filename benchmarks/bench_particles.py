@@ -151,8 +151,18 @@ def reconstruct(method: str, p) -> tuple[object, object, dict]:
     return mesh.vertices, mesh.faces, out
 
 
+def check_case(layout: str, method: str) -> None:
+    """Refuses a layout or method this benchmark does not know (ValueError naming the choices)."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS)}")
+    if method not in PEERS + OURS:
+        raise ValueError(f"unknown method {method!r}; choose from {', '.join(PEERS + OURS)}")
+
+
 def one(layout: str, method: str, n: int) -> dict:
     import numpy as np
+
+    check_case(layout, method)
 
     p = particles(layout, n)
     if method.startswith("triquet"):
@@ -231,6 +241,11 @@ def render(raw: dict) -> str:
 
 def main() -> int:
     if len(sys.argv) == 5 and sys.argv[1] == "one":
+        try:
+            check_case(sys.argv[2], sys.argv[3])
+        except ValueError as e:
+            print(f"bench_particles: {e}", file=sys.stderr)
+            return 2
         print(json.dumps(one(sys.argv[2], sys.argv[3], int(sys.argv[4]))))
         return 0
     return run_section("particles", measure, render, __doc__.split("\n")[0],

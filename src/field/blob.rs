@@ -48,8 +48,10 @@ pub struct BlobField {
     /// 1 / R² per primitive.
     inv_r2: Vec<f64>,
     strengths: Vec<f64>,
-    /// The same numbers packed per primitive for point queries (one cache line each).
-    packed: Vec<Packed>,
+    /// The same numbers packed per primitive for point queries (one cache line each), built on
+    /// the first point query ([`BlobField::packed`]) and refilled in place once built: block
+    /// values and gradients read the arrays above.
+    packed: std::sync::OnceLock<Vec<Packed>>,
     threshold: f64,
     settings: BlobSettings,
     /// The voxel lists, built by [`BlobField::grid`] on first use and rebuilt in place by
@@ -66,8 +68,6 @@ struct Packed {
     inv_r2: f64,
     /// A.
     strength: f64,
-    /// c·A / R² (c: the profile's [`Profile::GRADIENT_SCALE`]), the gradient's factor.
-    grad: f64,
 }
 
 /// A scalar or one value per primitive.
@@ -192,7 +192,7 @@ impl BlobField {
         self.centers.extend_from_slice(centers);
         self.inv_r2.clear();
         self.inv_r2.extend(self.radii.iter().map(|r| 1.0 / (r * r)));
-        self.pack();
+        self.repack();
         let side = self.voxel_side();
         if let Some(grid) = self.grid.get_mut() {
             grid.rebuild(&self.centers, &self.radii, side);
@@ -218,32 +218,42 @@ impl BlobField {
         let res = strengths.fill("strengths", self.centers.len(), &mut a, false);
         if res.is_ok() {
             self.strengths = a;
-            self.pack();
+            self.repack();
         } else {
             self.strengths = a;
         }
         res
     }
 
-    /// Fills [`BlobField::packed`] from the per-primitive arrays.
-    fn pack(&mut self) {
-        let scale = self.settings.kernel.gradient_scale();
-        self.packed.clear();
-        for i in 0..self.centers.len() {
-            self.packed.push(Packed {
+    /// Refills [`BlobField::packed`] in place from the per-primitive arrays when it is built.
+    fn repack(&mut self) {
+        if let Some(packed) = self.packed.get_mut() {
+            packed.clear();
+            packed.extend((0..self.centers.len()).map(|i| Packed {
                 center: self.centers[i],
                 inv_r2: self.inv_r2[i],
                 strength: self.strengths[i],
-                grad: scale * self.strengths[i] * self.inv_r2[i],
-            });
+            }));
         }
+    }
+
+    /// The primitives packed for point queries, built on the first call.
+    fn packed(&self) -> &[Packed] {
+        self.packed.get_or_init(|| {
+            (0..self.centers.len())
+                .map(|i| Packed {
+                    center: self.centers[i],
+                    inv_r2: self.inv_r2[i],
+                    strength: self.strengths[i],
+                })
+                .collect()
+        })
     }
 
     /// Potential F(p) by brute force over all primitives (the reference for tests).
     pub fn potential_brute_force(&self, p: DVec3) -> f64 {
-        with_profile!(self.settings.kernel, K => (0..self.centers.len())
-            .map(|i| self.term::<K>(i, p))
-            .sum())
+        let packed = self.packed();
+        with_profile!(self.settings.kernel, K => packed.iter().map(|q| term::<K>(q, p)).sum())
     }
 
     /// Centre, 1/R², A and R of primitive `i`.
@@ -258,10 +268,11 @@ impl BlobField {
         )
     }
 
+    /// c·A / R² of primitive `i` (c: the profile's [`Profile::GRADIENT_SCALE`]), the factor of
+    /// its gradient.
     #[inline(always)]
-    fn term<K: Profile>(&self, i: usize, p: DVec3) -> f64 {
-        let q = &self.packed[i];
-        q.strength * K::value(unit_t(p - q.center, q.inv_r2))
+    fn gradient_factor<K: Profile>(&self, i: usize) -> f64 {
+        K::GRADIENT_SCALE * self.strengths[i] * self.inv_r2[i]
     }
 
     /// ∇f(p) = −∇F(p) from the voxel lists.
@@ -276,10 +287,10 @@ impl BlobField {
     fn gradient_over<K: Profile>(&self, list: &[u32], p: DVec3) -> DVec3 {
         let mut g = DVec3::ZERO;
         for &i in list {
-            let q = &self.packed[i as usize];
-            let d = p - q.center;
-            let s = K::slope(1.0 - d.length_squared() * q.inv_r2);
-            g += d * (q.grad * s);
+            let i = i as usize;
+            let d = p - self.centers[i];
+            let s = K::slope(1.0 - d.length_squared() * self.inv_r2[i]);
+            g += d * (self.gradient_factor::<K>(i) * s);
         }
         g
     }
@@ -294,11 +305,27 @@ impl BlobField {
     /// [`BlobField::potential`] with the profile `K`.
     #[inline(always)]
     fn potential_with<K: Profile>(&self, p: DVec3) -> f64 {
+        let packed = self.packed();
         let mut f = 0.0;
         for &i in self.grid().candidates(p) {
-            f += self.term::<K>(i as usize, p);
+            f += term::<K>(&packed[i as usize], p);
         }
         f
+    }
+
+    /// `threshold − F` at each of `points`, from `grid`: voxel lists of this field's primitives
+    /// with any voxel side (the same terms in the same order as [`Field::values`], so the same
+    /// bits). Reads the per-primitive arrays: neither the field's voxel lists nor its packed
+    /// primitives are built.
+    pub(crate) fn values_over_grid(&self, grid: &VoxelGrid, points: &[DVec3], out: &mut [f64]) {
+        with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+            let mut f = 0.0;
+            for &i in grid.candidates(p) {
+                let i = i as usize;
+                f += self.strengths[i] * K::value(unit_t(p - self.centers[i], self.inv_r2[i]));
+            }
+            self.threshold - f
+        }));
     }
 
     /// Fills one z-plane of lattice values (`xs`, `ys`: the lattice's coordinates; `z`: the
@@ -697,13 +724,14 @@ impl BlobField {
                 let (px, py, pz) = (V::load(&x), V::load(&y), V::load(&z));
                 let (mut gx, mut gy, mut gz) = (zero, zero, zero);
                 for &i in list {
-                    let q = &self.packed[i as usize];
-                    let dx = px.sub(V::splat(q.center.x));
-                    let dy = py.sub(V::splat(q.center.y));
-                    let dz = pz.sub(V::splat(q.center.z));
+                    let i = i as usize;
+                    let c = self.centers[i];
+                    let dx = px.sub(V::splat(c.x));
+                    let dy = py.sub(V::splat(c.y));
+                    let dz = pz.sub(V::splat(c.z));
                     let s = dx.mul(dx).add(dy.mul(dy)).add(dz.mul(dz));
-                    let t = one.sub(s.mul(V::splat(q.inv_r2))).max(zero);
-                    let k = V::splat(q.grad).mul(t);
+                    let t = one.sub(s.mul(V::splat(self.inv_r2[i]))).max(zero);
+                    let k = V::splat(self.gradient_factor::<Triquet>(i)).mul(t);
                     gx = gx.add(dx.mul(k));
                     gy = gy.add(dy.mul(k));
                     gz = gz.add(dz.mul(k));
@@ -773,7 +801,13 @@ impl BlobField {
     }
 }
 
-/// Block lists longer than this take the voxel lists for gradients.
+/// The term A·w(t) of the packed primitive `q` at `p`.
+#[inline(always)]
+fn term<K: Profile>(q: &Packed, p: DVec3) -> f64 {
+    q.strength * K::value(unit_t(p - q.center, q.inv_r2))
+}
+
+/// Block lists longer than this take the voxel lists for gradients, when they are built.
 const LONG_BLOCK_LIST: usize = 64;
 
 /// Point batches smaller than this are evaluated on the calling thread (about 0.1 ms of work).
@@ -1063,6 +1097,34 @@ impl BlobField {
     }
 }
 
+/// The primitives per z-layer of blocks, in index order, as compressed rows (`start` has one
+/// more entry than there are `layers`): primitive i in every layer of `layers_of(i)`, a range
+/// holding every layer its sphere may reach.
+fn layer_candidates(
+    layers: u32,
+    primitives: usize,
+    layers_of: impl Fn(usize) -> std::ops::Range<u32>,
+) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; layers as usize + 1];
+    for i in 0..primitives {
+        for z in layers_of(i) {
+            start[z as usize + 1] += 1;
+        }
+    }
+    for z in 0..layers as usize {
+        start[z + 1] += start[z];
+    }
+    let mut cursor = start.clone();
+    let mut items = vec![0u32; start[layers as usize] as usize];
+    for i in 0..primitives {
+        for z in layers_of(i) {
+            items[cursor[z as usize] as usize] = i as u32;
+            cursor[z as usize] += 1;
+        }
+    }
+    (start, items)
+}
+
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
@@ -1070,6 +1132,14 @@ fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let lo = [b[0] * step, b[1] * step, b[2] * step];
     let hi = std::array::from_fn(|a| (lo[a] + step).min(last[a]));
     (lattice.point(lo), lattice.point(hi))
+}
+
+/// The squared gap between `c` and the interval `(lo, hi)` along one axis, as
+/// [`box_distances2`] computes it (0 inside).
+#[inline(always)]
+fn gap2(c: f64, (lo, hi): (f64, f64)) -> f64 {
+    let g = (lo - c).max(c - hi).max(0.0);
+    g * g
 }
 
 /// Squared distances from `c` to the nearest and the farthest point of the box `[lo, hi]`.
@@ -1085,10 +1155,37 @@ impl BlockField for BlobField {
 
     /// Lists, per block, the primitives whose sphere of influence reaches its box (with a
     /// relative margin of 1e-9 on R², so that rounding never leaves out a primitive that adds
-    /// a non-zero term at one of its points). Built per z-layer of blocks in parallel.
+    /// a non-zero term at one of its points). Built per z-layer of blocks in parallel, each
+    /// layer from the primitives whose candidate layers hold it ([`layer_candidates`]).
     fn blocks(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
         let step = (BLOCK_POINTS - 1) as f64;
         let h = lattice.cell;
+        // The radius with the margin, in every test here.
+        let margin = |r: f64| r * (1.0 + 1e-9);
+        // Candidate blocks along axis a (one more on each side for rounding), for the exact
+        // sphere-box test.
+        let range = |c: DVec3, rm: f64, a: usize| -> std::ops::Range<u32> {
+            let span = h[a] * step;
+            let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
+            let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
+            let hi = hi.min((dims[a] - 1) as f64);
+            if hi < 0.0 || lo > hi {
+                return 0..0;
+            }
+            lo.max(0.0) as u32..hi as u32 + 1
+        };
+        // The lowest and highest coordinate of the blocks' boxes per axis ([`block_box`]).
+        let sides: [Vec<(f64, f64)>; 3] = std::array::from_fn(|a| {
+            (0..dims[a])
+                .map(|k| {
+                    let (lo, hi) = block_box(lattice, [k; 3]);
+                    (lo[a], hi[a])
+                })
+                .collect()
+        });
+        let (start, candidates) = layer_candidates(dims[2], self.centers.len(), |i| {
+            range(self.centers[i], margin(self.radii[i]), 2)
+        });
         let layers = (0..dims[2])
             .into_par_iter()
             .map(|bz| {
@@ -1098,31 +1195,28 @@ impl BlockField for BlobField {
                     let (a, b) = block_box(lattice, [0, 0, bz]);
                     (a.z, b.z)
                 };
-                for (i, (c, r)) in self.centers.iter().zip(&self.radii).enumerate() {
-                    // The radius with the margin, in every test here.
-                    let rm = r * (1.0 + 1e-9);
+                let here =
+                    &candidates[start[bz as usize] as usize..start[bz as usize + 1] as usize];
+                for &i in here {
+                    let (c, rm) = (self.centers[i as usize], margin(self.radii[i as usize]));
                     if c.z + rm < zlo || c.z - rm > zhi {
                         continue;
                     }
-                    // Candidate blocks along x and y (one more on each side for rounding), then
-                    // the exact sphere-box test.
-                    let range = |a: usize| -> std::ops::Range<u32> {
-                        let span = h[a] * step;
-                        let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
-                        let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
-                        let hi = hi.min((dims[a] - 1) as f64);
-                        if hi < 0.0 || lo > hi {
-                            return 0..0;
-                        }
-                        lo.max(0.0) as u32..hi as u32 + 1
-                    };
-                    let (xs, ys) = (range(0), range(1));
+                    let (xs, ys) = (range(c, rm, 0), range(c, rm, 1));
                     let r2 = rm * rm;
+                    // The squared distance to each block's box as `box_distances2` sums it,
+                    // (x² + y²) + z², from the gaps per axis; a row whose y² + z² exceeds r²
+                    // has no block within reach (the rounded sums are monotone).
+                    let gz2 = gap2(c.z, sides[2][bz as usize]);
                     for by in ys {
+                        let gy2 = gap2(c.y, sides[1][by as usize]);
+                        if gy2 + gz2 > r2 {
+                            continue;
+                        }
                         for bx in xs.clone() {
-                            let (lo, hi) = block_box(lattice, [bx, by, bz]);
-                            if box_distances2(*c, lo, hi).0 <= r2 {
-                                pairs.push((bx + dims[0] * by, i as u32));
+                            let gx2 = gap2(c.x, sides[0][bx as usize]);
+                            if (gx2 + gy2) + gz2 <= r2 {
+                                pairs.push((bx + dims[0] * by, i));
                             }
                         }
                     }
@@ -1220,8 +1314,10 @@ impl BlockField for BlobField {
     ) {
         let list = blocks.list(block.index);
         // A block much larger than the primitives (a coarse lattice) lists far more of them than
-        // reach any one point: the voxel lists are shorter then (the same terms, the same bits).
-        if list.len() > LONG_BLOCK_LIST {
+        // reach any one point: the voxel lists are shorter then (the same terms, the same bits),
+        // when they are built (they are not built for this: at particle scale they take several
+        // times the memory of the block lists).
+        if list.len() > LONG_BLOCK_LIST && self.grid.get().is_some() {
             self.gradients(points, out);
             return;
         }
@@ -1409,21 +1505,24 @@ mod tests {
     }
 
     #[test]
-    fn sparse_without_normals_builds_no_voxel_lists() {
+    fn sparse_builds_neither_voxel_lists_nor_packed_primitives() {
         use crate::polygonize::{sparse, Settings};
-        let b = random_blobs(60, 23);
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 40).unwrap();
-        let settings = Settings {
-            normals: false,
-            ..Default::default()
-        };
-        let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
-        assert!(!m.triangles.is_empty());
-        assert!(b.grid.get().is_none());
-        // Built on the first point query, the same lists as a field built with them.
-        let p = DVec3::new(0.1, 0.2, 0.3);
-        assert_eq!(b.potential(p), b.potential_brute_force(p));
-        assert!(b.grid.get().is_some());
+        for normals in [false, true] {
+            let b = random_blobs(60, 23);
+            let settings = Settings {
+                normals,
+                ..Default::default()
+            };
+            let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
+            assert!(!m.triangles.is_empty());
+            assert_eq!(m.normals.len(), if normals { m.vertices.len() } else { 0 });
+            assert!(b.grid.get().is_none() && b.packed.get().is_none());
+            // Built on the first point query, the same lists as a field built with them.
+            let p = DVec3::new(0.1, 0.2, 0.3);
+            assert_eq!(b.potential(p), b.potential_brute_force(p));
+            assert!(b.grid.get().is_some() && b.packed.get().is_some());
+        }
     }
 
     #[test]

@@ -1,9 +1,13 @@
 //! A uniform grid of voxels, each listing the primitives whose sphere of influence touches it
 //! (Triquet et al. §4.3). Stored flat (compressed rows: one offset array and one item array), so
 //! there is no allocation per voxel, and rebuilt in place when the primitives move: the arrays
-//! keep their capacity, so a steady-state animation allocates nothing.
+//! keep their capacity, so a steady-state animation allocates nothing. Both passes of a
+//! rebuild (counting and filling) run in parallel over slabs of voxel z-layers: a slab's voxels,
+//! counts and list entries are each one contiguous range, and every slab walks the primitives
+//! in index order, so the lists are the same whatever the number of threads.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Voxel grid over the spheres of influence of a set of primitives.
 #[derive(Clone, Debug, Default)]
@@ -59,14 +63,23 @@ impl VoxelGrid {
         self.start.clear();
         self.start.resize(nvox + 1, 0);
         let (origin, dims) = (self.origin, self.dims);
-        for (c, r) in centers.iter().zip(radii) {
-            let start = &mut self.start;
-            voxels_touching(origin, size, dims, *c, *r, |first, count| {
-                for s in &mut start[first..first + count] {
-                    *s += 1;
-                }
+        let slabs = slabs(dims);
+        let layer = dims[0] as usize * dims[1] as usize;
+        let counts = split(
+            &mut self.start[..nvox],
+            slabs.iter().map(|z| z.len() * layer),
+        );
+        counts
+            .into_par_iter()
+            .zip(slabs.par_iter())
+            .for_each(|(counts, z)| {
+                let base = z.start as usize * layer;
+                slab_runs(origin, size, dims, centers, radii, z, |_, first, count| {
+                    for s in &mut counts[first - base..first - base + count] {
+                        *s += 1;
+                    }
+                });
             });
-        }
         let mut total = 0u32;
         for s in self.start.iter_mut() {
             let c = *s;
@@ -77,15 +90,30 @@ impl VoxelGrid {
         self.items.resize(total as usize, 0);
         self.cursor.clear();
         self.cursor.extend_from_slice(&self.start[..nvox]);
-        for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
-            let (cursor, items) = (&mut self.cursor, &mut self.items);
-            voxels_touching(origin, size, dims, *c, *r, |first, count| {
-                for c in &mut cursor[first..first + count] {
-                    items[*c as usize] = i as u32;
-                    *c += 1;
-                }
+        let start = &self.start;
+        let items = split(
+            &mut self.items,
+            slabs.iter().map(|z| {
+                (start[z.end as usize * layer] - start[z.start as usize * layer]) as usize
+            }),
+        );
+        let cursors = split(&mut self.cursor, slabs.iter().map(|z| z.len() * layer));
+        items
+            .into_par_iter()
+            .zip(cursors)
+            .zip(slabs.par_iter())
+            .for_each(|((items, cursor), z)| {
+                let (base, first_item) = (
+                    z.start as usize * layer,
+                    start[z.start as usize * layer] as usize,
+                );
+                slab_runs(origin, size, dims, centers, radii, z, |i, first, count| {
+                    for c in &mut cursor[first - base..first - base + count] {
+                        items[*c as usize - first_item] = i as u32;
+                        *c += 1;
+                    }
+                });
             });
-        }
     }
 
     /// The primitives that may influence point `p` (empty outside the grid).
@@ -139,14 +167,59 @@ impl VoxelGrid {
     }
 }
 
-/// Calls `f(first, count)` for every run of consecutive voxels (along x) whose boxes intersect
-/// the sphere (c, r).
+/// Voxel z-layers per slab of a parallel rebuild: at most [`SLABS_PER_THREAD`] slabs per thread,
+/// each of at least one layer.
+fn slabs(dims: [u32; 3]) -> Vec<std::ops::Range<u32>> {
+    let count = (rayon::current_num_threads() * SLABS_PER_THREAD).clamp(1, dims[2].max(1) as usize);
+    (0..count as u32)
+        .map(|k| {
+            let cut = |k: u32| (k as u64 * dims[2] as u64 / count as u64) as u32;
+            cut(k)..cut(k + 1)
+        })
+        .collect()
+}
+
+/// Slabs per thread (uneven work: the primitives are rarely spread evenly in z).
+const SLABS_PER_THREAD: usize = 4;
+
+/// `v` cut into consecutive slices of the given lengths.
+fn split<T>(mut v: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
+    lengths
+        .map(|n| {
+            let (a, b) = std::mem::take(&mut v).split_at_mut(n);
+            v = b;
+            a
+        })
+        .collect()
+}
+
+/// Calls `f(i, first, count)` for every run of voxels of z-layers `z` that sphere i touches,
+/// in index order of the spheres.
+fn slab_runs(
+    origin: DVec3,
+    size: f64,
+    dims: [u32; 3],
+    centers: &[DVec3],
+    radii: &[f64],
+    z: &std::ops::Range<u32>,
+    mut f: impl FnMut(usize, usize, usize),
+) {
+    for (i, (c, r)) in centers.iter().zip(radii).enumerate() {
+        voxels_touching(origin, size, dims, *c, *r, z.clone(), |first, count| {
+            f(i, first, count)
+        });
+    }
+}
+
+/// Calls `f(first, count)` for every run of consecutive voxels (along x) in z-layers `layers`
+/// whose boxes intersect the sphere (c, r).
 fn voxels_touching(
     origin: DVec3,
     size: f64,
     dims: [u32; 3],
     c: DVec3,
     r: f64,
+    layers: std::ops::Range<u32>,
     mut f: impl FnMut(usize, usize),
 ) {
     // The radius gets a relative margin of 1e-9 so that rounding can only add a voxel (a
@@ -167,6 +240,10 @@ fn voxels_touching(
         clamp(hi.y, dims[1]),
         clamp(hi.z, dims[2]),
     );
+    let (z0, z1) = (z0.max(layers.start), z1.min(layers.end.saturating_sub(1)));
+    if layers.is_empty() || z0 > z1 {
+        return;
+    }
     // Row by row: the voxels of row (y, z) that the sphere reaches form one run in x, from the
     // distance between the centre and the row's box in y and z.
     let r2 = r * r;

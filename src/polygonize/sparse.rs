@@ -521,8 +521,8 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
         .iter()
         .map(|a| a.n.iter().map(|&v| v as u64 - 1).product::<u64>())
         .sum();
+    let mut mesh = gather_parts(&mut ws.parts, normals);
     let outputs: Vec<&BlockOutput> = ws.parts.iter().map(|p| &p.out).collect();
-    let mut mesh = gather_outputs(&outputs, normals);
     stats.add_time("evaluate", t);
 
     // Pass 2: triangles per evaluated block, each task into its own range of the final buffer.
@@ -542,17 +542,37 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     Ok((mesh, triangles, stats))
 }
 
-/// The vertices (and normals) of `outputs`, in order, as one mesh without triangles.
-fn gather_outputs(outputs: &[&BlockOutput], normals: bool) -> Mesh {
+/// The vertices (and normals) of the parts' outputs, in order, as one mesh without triangles.
+/// Outputs larger than [`KEEP_OUTPUT_BYTES`] in all are released as soon as they are copied
+/// (the vertices before the normals are gathered), so that the mesh and the outputs it is
+/// gathered from are not held twice; smaller ones keep their capacity for the next call.
+fn gather_parts(parts: &mut [Part], normals: bool) -> Mesh {
+    let release = parts.iter().map(|p| p.out.capacity_bytes()).sum::<usize>() > KEEP_OUTPUT_BYTES;
+    let vertices = gather(
+        &parts
+            .iter()
+            .map(|p| &p.out.vertices[..])
+            .collect::<Vec<_>>(),
+    );
+    if release {
+        parts.iter_mut().for_each(|p| p.out.vertices = Vec::new());
+    }
     let mut mesh = Mesh {
-        vertices: gather(&outputs.iter().map(|p| &p.vertices[..]).collect::<Vec<_>>()),
+        vertices,
         ..Default::default()
     };
     if normals {
-        mesh.normals = gather(&outputs.iter().map(|p| &p.normals[..]).collect::<Vec<_>>());
+        mesh.normals = gather(&parts.iter().map(|p| &p.out.normals[..]).collect::<Vec<_>>());
+        if release {
+            parts.iter_mut().for_each(|p| p.out.normals = Vec::new());
+        }
     }
     mesh
 }
+
+/// Bytes of block outputs (vertices and normals, all parts) above which [`gather_parts`]
+/// releases them: the mesh is at least that large then, and holding both would double it.
+const KEEP_OUTPUT_BYTES: usize = 16 << 20;
 
 /// Triangles of the evaluated blocks `active` (with their cells in `reach`, or all crossed
 /// cells), in block order, in parallel, straight into one buffer; and the number of cells.
