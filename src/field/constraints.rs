@@ -1,11 +1,13 @@
 //! Constraint placement for variational surfaces (Cuno et al. §4.1, Turk & O'Brien): every data
 //! point `q_i` is a boundary constraint (value 0) and `q_i + d_i n_i` a normal constraint (value
 //! `w_i`), with `d_i` shrunk until no other data point is closer to the normal constraint than
-//! `q_i` itself. Also the checks on the data (count, finiteness, duplicates, coplanarity) and
-//! vertex normals of triangle meshes.
+//! `q_i` itself; in thin parts of the body also inner constraints ([`super::thin`]). Also the
+//! checks on the data (count, finiteness, duplicates, coplanarity) and vertex normals of
+//! triangle meshes.
 
 use super::duplicates;
 use super::grid::Grid;
+use super::thin;
 use crate::error::{check_finite_points, Error, Result};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -25,7 +27,16 @@ pub struct ConstraintSettings {
     /// Data points at most this far apart are merged (see [`super::duplicates`]). `None`:
     /// [`duplicates::default_tolerance`], 0.1 % of the data's typical spacing.
     pub merge_distance: Option<f64>,
+    /// Inner constraints in thin parts ([`super::thin`]): another sheet of the surface is looked
+    /// for behind each data point within this multiple of `d`; 0 (default) places none. At 6
+    /// they keep legs thinner than 4d whole, but on such legs the fit grows sheets far from the
+    /// data (docs/variational.md, "Thin parts").
+    pub thin_reach_over_d: f64,
 }
+
+/// Normals facing each other more than this (cosine of the angle between them) belong to two
+/// sheets of the surface.
+const FACING_COS: f64 = -0.5;
 
 impl Default for ConstraintSettings {
     fn default() -> Self {
@@ -35,12 +46,14 @@ impl Default for ConstraintSettings {
             w_over_d: 0.75,
             shrink: true,
             merge_distance: None,
+            thin_reach_over_d: 0.0,
         }
     }
 }
 
 /// Constraint points and values: the first `boundary` entries are the data points (value 0), the
-/// rest the normal constraints, in the same order.
+/// next `boundary` the normal constraints, in the same order, and the rest the inner constraints
+/// of thin parts ([`super::thin`]), in the order of their data points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Constraints {
     pub points: Vec<DVec3>,
@@ -269,18 +282,31 @@ fn place_distinct(
         });
     }
 
+    let inner = if settings.thin_reach_over_d > 0.0 {
+        let depths =
+            thin::depths_behind(points, &normals, settings.thin_reach_over_d * d, FACING_COS);
+        let keep = thin::inner_points(points, &normals, &depths);
+        keep.into_iter().map(|i| (i, 0.5 * depths[i])).collect()
+    } else {
+        Vec::new()
+    };
+
     let n = points.len();
-    let mut cpoints = Vec::with_capacity(2 * n);
-    let mut values = Vec::with_capacity(2 * n);
+    let ratio_at = |i: usize| match caps {
+        Some(c) if ratio > 0.0 => ratio.min(c[i]),
+        _ => ratio,
+    };
+    let mut cpoints = Vec::with_capacity(2 * n + inner.len());
+    let mut values = Vec::with_capacity(2 * n + inner.len());
     cpoints.extend_from_slice(points);
     values.extend(std::iter::repeat_n(0.0, n));
     for i in 0..n {
         cpoints.push(points[i] + normals[i] * offsets[i]);
-        let r = match caps {
-            Some(c) if ratio > 0.0 => ratio.min(c[i]),
-            _ => ratio,
-        };
-        values.push(r * offsets[i]);
+        values.push(ratio_at(i) * offsets[i]);
+    }
+    for (i, half_depth) in inner {
+        cpoints.push(points[i] - normals[i] * half_depth);
+        values.push(-ratio_at(i) * half_depth);
     }
     Ok(Constraints {
         points: cpoints,
@@ -506,6 +532,43 @@ mod tests {
         dup.push(pts[17]);
         let m = super::duplicates::merge(&dup, Some(1e-12));
         assert_eq!((m.into[3000], m.into[3001], m.merged()), (2000, 17, 2));
+    }
+
+    #[test]
+    fn inner_constraints_follow_the_normal_ones_with_negative_values() {
+        use std::f64::consts::TAU;
+        // A cylinder 0.04 across with caps: thin for a reach of 6d = 0.09.
+        let mut pts = Vec::new();
+        let mut normals = Vec::new();
+        for k in 0..20 {
+            for a in 0..8 {
+                let phi = TAU * (a as f64 + 0.5 * (k % 2) as f64) / 8.0;
+                let dir = DVec3::new(phi.cos(), phi.sin(), 0.0);
+                pts.push(dir * 0.02 + DVec3::Z * (0.02 * k as f64));
+                normals.push(dir);
+            }
+        }
+        let settings = ConstraintSettings {
+            d: Some(0.015),
+            thin_reach_over_d: 6.0,
+            ..Default::default()
+        };
+        let c = place(&pts, &normals, &settings).unwrap();
+        let n = pts.len();
+        assert!(c.points.len() > 2 * n + 10, "{}", c.points.len() - 2 * n);
+        assert!(c.values[2 * n..].iter().all(|v| *v < 0.0));
+        // Off by default: Cuno's constraints only.
+        let plain = place(
+            &pts,
+            &normals,
+            &ConstraintSettings {
+                d: Some(0.015),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(plain.points.len(), 2 * n);
+        assert_eq!(plain.points[..], c.points[..2 * n]);
     }
 
     #[test]

@@ -17,6 +17,7 @@ pub mod particles;
 pub mod partition;
 pub mod rbf;
 pub mod saddle;
+pub mod thin;
 pub mod voxels;
 
 use crate::lattice::Lattice;

@@ -617,7 +617,8 @@ impl PyVariationalSurface {
         Ok(d)
     }
 
-    /// dict with ``points`` (M, 3), ``values`` (M,), ``d`` (N,) per-data-point offsets, and
+    /// dict with ``points`` (M, 3), ``values`` (M,) (the N boundary constraints, then the N
+    /// normal constraints), ``d`` (N,) per-data-point offsets, and
     /// ``boundary`` (int, number of boundary constraints N).
     #[getter]
     fn constraints<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
