@@ -33,6 +33,12 @@ impl Node {
         d.length_squared()
     }
 
+    /// Squared distance from `p` to the farthest corner of the cube widened by a millionth of
+    /// its half side: every point of the cube is nearer to `p`, rounding included.
+    fn farthest_squared(&self, p: DVec3) -> f64 {
+        ((p - self.centre).abs() + DVec3::splat(self.half * (1.0 + 1e-6))).length_squared()
+    }
+
     /// Half the diagonal of the cube.
     pub fn half_diagonal(&self) -> f64 {
         self.half * 3f64.sqrt()
@@ -209,14 +215,18 @@ impl Octree {
 
     /// Number of `points` within the closed ball (`c`, `r`).
     pub fn count_within(&self, points: &[DVec3], c: DVec3, r: f64) -> usize {
-        let mut count = 0;
-        self.for_each_within(points, c, r, |_| count += 1);
-        count
+        self.count_within_up_to(points, c, r, usize::MAX)
     }
 
     /// Whether more than `limit` of `points` lie within the closed ball (`c`, `r`); stops
     /// counting once they do.
     pub fn more_within_than(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> bool {
+        self.count_within_up_to(points, c, r, limit) > limit
+    }
+
+    /// The number of `points` within the closed ball (`c`, `r`), or some number above `limit`
+    /// once more than `limit` are found. Nodes inside the ball count whole.
+    fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
         let r2 = r * r;
         let mut count = 0;
         let mut stack = vec![0u32];
@@ -225,20 +235,23 @@ impl Octree {
             if n.distance_squared(c) > r2 {
                 continue;
             }
-            if n.is_leaf() {
+            if n.farthest_squared(c) <= r2 {
+                count += (n.end - n.start) as usize;
+            } else if n.is_leaf() {
                 let run = &self.order[n.start as usize..n.end as usize];
                 count += run
                     .iter()
                     .filter(|&&i| (points[i as usize] - c).length_squared() <= r2)
                     .count();
-                if count > limit {
-                    return true;
-                }
             } else {
                 stack.extend((0..8).map(|o| n.children + o));
+                continue;
+            }
+            if count > limit {
+                return count;
             }
         }
-        false
+        count
     }
 
     /// Distance from `c` to its `k`-th nearest point of `points` (`k` ≥ 1, at most the number

@@ -3,7 +3,8 @@
 //! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
 //! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], the
 //! system is completed with up to max(`max_patch` − inside, `max_patch` / 2) constraints outside
-//! it, spread over a larger ball (see [`super::coarse`]).
+//! it, spread over a larger ball (see [`super::coarse`]); a patch with no constraint in its ball,
+//! which only carries the field's sign away from the data, with up to `min_points` / 2.
 
 use super::coarse::Level;
 use super::octree::Octree;
@@ -83,20 +84,20 @@ pub fn supports(
             }
             // A ball reaching one support radius past the `want`-th nearest constraint.
             let reach = tree.kth_nearest_distance(points, n.centre, want).max(r) + r;
-            let budget = settings
-                .max_patch
-                .saturating_sub(inside)
-                .max(settings.max_patch / 2);
-            let count_outside = |pts: &[DVec3], t: &Octree| {
-                let mut m = 0;
-                t.for_each_within(pts, n.centre, reach, |i| {
-                    if (pts[i as usize] - n.centre).length_squared() > r * r {
-                        m += 1;
-                    }
-                });
-                m
+            let budget = if inside == 0 {
+                settings.min_points / 2
+            } else {
+                settings
+                    .max_patch
+                    .saturating_sub(inside)
+                    .max(settings.max_patch / 2)
             };
-            let full = count_outside(points, tree);
+            // The constraints between the two balls (the inner one's count is exact, so the
+            // difference counts those beyond `r` and within `reach`).
+            let count_outside = |pts: &[DVec3], t: &Octree| {
+                t.count_within(pts, n.centre, reach) - t.count_within(pts, n.centre, r)
+            };
+            let full = tree.count_within(points, n.centre, reach) - inside;
             // The levels this patch may take its completion from (see `coarse`).
             let far = tree.kth_nearest_distance(points, n.centre, 1) > FAR_DATA * r;
             let step = if far { 1 } else { 3 };
