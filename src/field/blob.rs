@@ -1156,7 +1156,7 @@ impl BlockField for BlobField {
     /// Lists, per block, the primitives whose sphere of influence reaches its box (with a
     /// relative margin of 1e-9 on R², so that rounding never leaves out a primitive that adds
     /// a non-zero term at one of its points). Built per z-layer of blocks in parallel, each
-    /// layer from the primitives whose candidate layers hold it ([`layer_candidates`]).
+    /// layer from the primitives whose candidate layers hold it (`layer_candidates`).
     fn blocks(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
         let step = (BLOCK_POINTS - 1) as f64;
         let h = lattice.cell;
