@@ -223,11 +223,7 @@ pub fn place_capped(
     let merge = duplicates::merge(points, check_merge_distance(settings.merge_distance)?);
     if merge.merged() > 0 {
         let points = merge.points(points);
-        let normals: Vec<DVec3> = merge
-            .normals(&normals)
-            .iter()
-            .map(|n| n.normalize())
-            .collect();
+        let normals = merge.normals(&normals);
         let caps = caps.map(|c| merge.minima(c));
         let mut c = place_distinct(&points, &normals, settings, caps.as_deref())?;
         c.merged = merge.merged();

@@ -41,15 +41,16 @@ impl Merge {
         self.kept.iter().map(|&k| points[k as usize]).collect()
     }
 
-    /// For each kept point, the sum of its group's normals, or its own where they cancel.
+    /// For each kept point, the normalised sum of its group's unit normals, or its own where
+    /// they cancel.
     pub fn normals(&self, normals: &[DVec3]) -> Vec<DVec3> {
         let sums = self.sums(normals, DVec3::ZERO);
         self.kept
             .iter()
             .zip(sums)
             .map(|(&k, s)| {
-                if s.length() > 1e-6 * normals[k as usize].length() {
-                    s
+                if s.length() > 1e-6 {
+                    s.normalize()
                 } else {
                     normals[k as usize]
                 }
@@ -60,12 +61,8 @@ impl Merge {
     /// For each kept point, the mean of its group's values.
     pub fn means(&self, values: &[f64]) -> Vec<f64> {
         let sums = self.sums(values, 0.0);
-        let mut counts = vec![0u32; self.kept.len()];
-        let slot = self.slots();
-        for &g in &self.into {
-            counts[slot[g as usize] as usize] += 1;
-        }
-        sums.iter().zip(counts).map(|(s, c)| s / c as f64).collect()
+        let counts = self.sums(&vec![1.0; values.len()], 0.0);
+        sums.iter().zip(counts).map(|(s, c)| s / c).collect()
     }
 
     /// For each kept point, the smallest of its group's values.
