@@ -70,7 +70,7 @@ def reconstruct(method: str, p, n) -> tuple[object, dict]:
         out["fit_s"] = time.perf_counter() - t
         out["fit_method"] = s.method
         t = time.perf_counter()
-        mesh = im.polygonize(s, resolution=OURS[method], method="octree", normals=False)
+        mesh = im.polygonize(s, resolution=OURS[method], method="octree", normals=False, project=True)
         out["polygonize_s"] = time.perf_counter() - t
         out["evaluations"] = int(mesh.stats["evaluations"])
         out["max_abs_f_at_points"] = float(np.max(np.abs(s.evaluate(p))))
@@ -215,7 +215,7 @@ def render(raw: dict) -> str:
         f"Run {run['date']} with `{run['command']}`. Points sampled uniformly on `{raw['model']}_hires` "
         "(`trimesh.sample.sample_surface`, seed 7) with their face normals; the same points for every method. "
         "Ours: `VariationalSurface.fit(points, normals)` (method \"auto\") then `polygonize(method=\"octree\", "
-        "normals=False)` at 128³, 256³ or 1024³ over the default bounds. ferreus-rbf: r³ with linear drift, its "
+        "normals=False, project=True)` at 128³, 256³ or 1024³ over the default bounds. ferreus-rbf: r³ with linear drift, its "
         "default solver, on the constraints our fit places, meshed by its `build_isosurface` at 128³. Open3D: "
         "`TriangleMesh.create_from_point_cloud_poisson(pcd, depth)` on a point cloud with the normals, its mesh "
         "untrimmed. Each case in a fresh process (peak resident size VmHWM its own); times are medians over the "

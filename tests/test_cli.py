@@ -83,6 +83,26 @@ def test_reconstruct_mesh_ply(mesh_dir, tmp_path):
     np.testing.assert_allclose(m.bounds, src_mesh.bounds, atol=0.05)
 
 
+def test_reconstruct_projects_vertices_unless_told_not_to(mesh_dir, tmp_path):
+    """reconstruct moves the vertices onto the fitted surface by default; --no-project keeps
+    marching cubes' vertices. Same faces either way."""
+    from implicitmesh import VariationalSurface
+
+    src = mesh_dir / "torus2_800.ply"
+    meshes = []
+    for flag in ("--project", "--no-project"):
+        out = tmp_path / f"out{flag}.ply"
+        r = run_cli("reconstruct", src, "-o", out, "--resolution", 32, flag, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        meshes.append(load_closed(out))
+    projected, plain = meshes
+    np.testing.assert_array_equal(projected.faces, plain.faces)
+    m = trimesh.load(src, process=False)
+    surface = VariationalSurface.from_mesh(np.asarray(m.vertices), np.asarray(m.faces))
+    err = [np.abs(surface(np.asarray(x.vertices))).mean() for x in (projected, plain)]
+    assert err[0] < err[1] / 10
+
+
 def test_reconstruct_xyz_points_with_normals(mesh_dir, tmp_path):
     src = trimesh.load(mesh_dir / "star_800.ply", process=False)
     v, f = np.asarray(src.vertices), np.asarray(src.faces)

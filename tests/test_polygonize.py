@@ -486,3 +486,65 @@ def test_every_method_reproduces_dense(sphere_32, method):
     )
     assert mesh.stats["method"] == method
     assert compare(sphere_32, mesh) == {"missing": 0, "extra": 0, "common": len(sphere_32.faces)}
+
+
+# --------------------------------------------------------------------------- projection
+
+
+class Quartic:
+    """A sphere of radius 0.6 whose field is far from a distance, f = |x|⁴ − 0.6⁴: linear
+    interpolation along lattice edges misplaces vertices by a visible fraction of a cell."""
+
+    bounds = BOX
+
+    def __call__(self, p):
+        return (np.asarray(p) ** 2).sum(axis=1) ** 2 - 0.6**4
+
+
+def _fields_for(method):
+    if method == "sparse":
+        return implicitmesh.BlobField([[0.01, 0.02, 0.03], [0.3, 0.1, 0.0]], 0.9), {}
+    extra = {"seeds": [[0.0, 0.0, 0.0]]} if method == "tracking" else {}
+    return Quartic(), extra
+
+
+@pytest.mark.parametrize("method", implicitmesh.METHODS)
+def test_projection_moves_vertices_onto_the_surface(method):
+    """project=True keeps the faces, brings every vertex closer to the zero set, and gives the
+    same mesh whichever polygonizer found the triangles."""
+    field, extra = _fields_for(method)
+    ref = polygonize(field, bounds=BOX, resolution=24, project=True)
+    plain = polygonize(field, bounds=BOX, resolution=24, method=method, **extra)
+    moved = polygonize(field, bounds=BOX, resolution=24, method=method, project=True, **extra)
+    assert compare(ref, moved) == {"missing": 0, "extra": 0, "common": len(ref.faces)}
+    assert np.array_equal(plain.faces, moved.faces)
+    before, after = np.abs(field(plain.vertices)), np.abs(field(moved.vertices))
+    assert after.max() < before.max() / 10
+    if isinstance(field, Quartic):  # distance to the exact sphere
+        radial = [np.abs(np.linalg.norm(m.vertices, axis=1) - 0.6).max() for m in (plain, moved)]
+        assert radial[0] > 1e-3 and radial[1] < radial[0] / 10
+    assert moved.stats["projection_evaluations"] > 0 and plain.stats["projection_evaluations"] == 0
+    # Normals are the gradient's direction at the moved vertices (central differences for a
+    # callable, the field's own gradient for a blob field).
+    g = field.gradient(moved.vertices) if method == "sparse" else 4 * moved.vertices
+    g /= np.linalg.norm(g, axis=1)[:, None]
+    assert np.abs((g * moved.normals).sum(axis=1) - 1).max() < 1e-6
+    closed_outward(moved)
+
+
+def test_projection_on_a_fitted_surface(shared):
+    """On a fitted shared mesh the octree's projected mesh is the dense one's, with |f| at the
+    vertices ten times smaller than without projection."""
+    surface = shared.surface("knot")
+    plain = polygonize(surface, resolution=64, method="octree")
+    moved = polygonize(surface, resolution=64, method="octree", project=True)
+    dense = polygonize(surface, resolution=64, method="dense", project=True)
+    assert compare(dense, moved) == {"missing": 0, "extra": 0, "common": len(dense.faces)}
+    assert compare(plain, moved)["common"] == 0 and np.array_equal(plain.faces, moved.faces)
+    err = [np.abs(surface(m.vertices)).mean() for m in (plain, moved)]
+    assert err[1] < err[0] / 10
+
+
+def test_projection_must_be_a_bool():
+    with pytest.raises(ValueError, match="project"):
+        polygonize(shapes.Sphere(), bounds=BOX, resolution=8, project="yes")

@@ -165,6 +165,7 @@ def polygonize(
     resolution: int | Sequence[int],
     *,
     method: str = "dense",
+    project: bool = False,
     start_level: int | None = None,
     safety: float | None = None,
     corner_test: bool | None = None,

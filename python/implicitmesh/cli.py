@@ -92,7 +92,9 @@ def _fit_and_polygonize(kind, a, b, args):
             surface = VariationalSurface.fit(a, b, d=args.d, w=args.w, kernel=args.kernel)
         fit_s = time.perf_counter() - t0
     with step(f"polygonizing at {args.resolution}³ ({args.method})"):
-        mesh = polygonize(surface, resolution=args.resolution, method=args.method, progress=sys.stderr.isatty())
+        mesh = polygonize(
+            surface, resolution=args.resolution, method=args.method, project=args.project, progress=sys.stderr.isatty()
+        )
     return surface, fit_s, mesh
 
 
@@ -146,6 +148,12 @@ def cmd_reconstruct(args) -> int:
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resolution", type=int, default=128, help="cells per axis (default 128)")
     p.add_argument("--method", choices=METHODS, default="octree", help="polygonizer (default octree)")
+    p.add_argument(
+        "--project",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="move the vertices onto the fitted surface by one Newton step (default: yes)",
+    )
     p.add_argument("--d", type=float, default=None, help="normal constraint offset (default: 0.0075 x largest side)")
     p.add_argument("--w", type=float, default=None, help="normal constraint value (default 0.75 d)")
     p.add_argument("--kernel", default="triharmonic", choices=["triharmonic", "biharmonic", "thin_plate"])

@@ -17,9 +17,7 @@
 //! with one group of planes, not with the lattice.
 
 use super::bits::{for_each_set_bit, sign_word};
-use super::{
-    check_memory, compute_normals, estimate_triangles, gather, CaseTable, Settings, Stats,
-};
+use super::{check_memory, estimate_triangles, finish_mesh, gather, CaseTable, Settings, Stats};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
@@ -472,7 +470,7 @@ pub fn polygonize<F: Field + ?Sized>(
         .iter()
         .flatten()
         .all(|&v| (v as usize) < mesh.vertices.len()));
-    compute_normals(field, &mut mesh, settings, &mut stats)?;
+    finish_mesh(field, &mut mesh, lattice, settings, &mut stats)?;
     Ok((mesh, stats))
 }
 

@@ -9,6 +9,7 @@ pub(crate) mod bricks;
 pub(crate) mod cell;
 pub mod dense;
 pub mod octree;
+pub mod project;
 pub mod sparse;
 pub(crate) mod table;
 pub mod tracking;
@@ -34,6 +35,9 @@ pub struct Settings {
     pub batch: usize,
     /// Refuse lattices whose memory estimate exceeds this many bytes.
     pub memory_limit: u64,
+    /// Move each vertex onto the zero set by one bounded Newton step ([`project`]) before the
+    /// normals are computed.
+    pub project: bool,
 }
 
 impl Default for Settings {
@@ -43,6 +47,7 @@ impl Default for Settings {
             normals: true,
             batch: 1 << 18,
             memory_limit: 8 << 30,
+            project: false,
         }
     }
 }
@@ -66,6 +71,8 @@ pub struct Stats {
     /// Field evaluations for normals: [`Field::values_per_gradient`] per vertex (1 for a field's
     /// own gradient, the 6 values of central differences for [`crate::field::Differences`]).
     pub normal_evaluations: u64,
+    /// Field evaluations for [`Settings::project`]: a value and a gradient per vertex.
+    pub projection_evaluations: u64,
     /// Lattice points, (nx+1)(ny+1)(nz+1): what plain marching cubes evaluates.
     pub lattice_points: u64,
     /// Cells examined.
@@ -151,6 +158,19 @@ pub fn fill_vanishing_normals(mesh: &mut Mesh) {
             *gi = fi;
         }
     }
+}
+
+/// Projects the vertices ([`Settings::project`]), then computes the normals: the last step of
+/// the polygonizers whose normals come from the field's gradient.
+pub fn finish_mesh<F: Field + ?Sized>(
+    field: &F,
+    mesh: &mut Mesh,
+    lattice: &Lattice,
+    settings: &Settings,
+    stats: &mut Stats,
+) -> Result<()> {
+    project::project_vertices(field, mesh, lattice, settings, stats)?;
+    compute_normals(field, mesh, settings, stats)
 }
 
 /// Fills `mesh.normals` from the field's gradient (batched), falling back to face normals where

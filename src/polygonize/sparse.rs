@@ -62,8 +62,8 @@ use super::bits::{
 };
 use super::bricks::Grid;
 use super::{
-    check_memory, estimate_triangles, fill_vanishing_normals, gather, normalize, CaseTable,
-    Settings, Stats, BYTES_PER_TRIANGLE,
+    check_memory, estimate_triangles, fill_vanishing_normals, finish_mesh, gather, normalize,
+    CaseTable, Settings, Stats, BYTES_PER_TRIANGLE,
 };
 use crate::error::{Error, Result};
 use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
@@ -404,13 +404,18 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-    let start = start_blocks(field, lattice, settings)?;
+    // With projection, the normals are the field's gradients at the moved vertices.
+    let inner = Settings {
+        normals: settings.normals && !settings.project,
+        ..*settings
+    };
+    let start = start_blocks(field, lattice, &inner)?;
     let mut ws = WORKSPACES
         .lock()
         .ok()
         .and_then(|mut w| w.pop())
         .unwrap_or_default();
-    let r = run(field, lattice, settings, start, &mut ws);
+    let r = run(field, lattice, &inner, start, &mut ws);
     if ws.bytes() <= KEEP_BYTES {
         if let Ok(mut pool) = WORKSPACES.lock() {
             if pool.len() < 2 {
@@ -418,7 +423,17 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
             }
         }
     }
-    r
+    let (mut mesh, triangles, mut stats) = r?;
+    if settings.project {
+        finish_mesh(field, &mut mesh, lattice, settings, &mut stats)?;
+        // Normals where the gradient vanishes come from the faces, which travel beside the mesh.
+        if mesh.normals.contains(&DVec3::ZERO) {
+            mesh.triangles = triangles.iter().map(|t| t.map(I::to_u32)).collect();
+            fill_vanishing_normals(&mut mesh);
+            mesh.triangles = Vec::new();
+        }
+    }
+    Ok((mesh, triangles, stats))
 }
 
 /// What a polygonization over the blocks of a lattice starts from ([`start_blocks`]).

@@ -109,6 +109,7 @@ pub fn stats_to_py<'py>(
     let d = PyDict::new(py);
     d.set_item("evaluations", s.evaluations)?;
     d.set_item("normal_evaluations", s.normal_evaluations)?;
+    d.set_item("projection_evaluations", s.projection_evaluations)?;
     d.set_item("lattice_points", s.lattice_points)?;
     d.set_item("evaluation_percent", s.evaluation_percent())?;
     d.set_item("cells_visited", s.cells_visited)?;
@@ -171,6 +172,7 @@ fn parse_window(obj: &Bound<'_, PyAny>) -> PyResult<[[u32; 3]; 2]> {
 fn shared_settings(
     ambiguity: &str,
     normals: bool,
+    project: bool,
     batch_size: usize,
     memory_limit: Option<u64>,
 ) -> PyResult<Settings> {
@@ -181,6 +183,7 @@ fn shared_settings(
     Ok(Settings {
         ambiguity: parse_ambiguity(ambiguity)?,
         normals,
+        project,
         batch: batch_size,
         memory_limit: memory_limit.unwrap_or(defaults.memory_limit),
     })
@@ -281,7 +284,7 @@ fn unknown_method(method: &str) -> PyErr {
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
 /// stats dict)``.
 #[pyfunction]
-#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None))]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, project=false, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn polygonize<'py>(
     py: Python<'py>,
@@ -291,6 +294,7 @@ pub fn polygonize<'py>(
     method: &str,
     ambiguity: &str,
     normals: bool,
+    project: bool,
     batch_size: usize,
     memory_limit: Option<u64>,
     start_level: Option<u32>,
@@ -306,7 +310,7 @@ pub fn polygonize<'py>(
         let [lo, hi] = parse_window(w)?;
         lattice = lattice.window(lo, hi)?;
     }
-    let settings = shared_settings(ambiguity, normals, batch_size, memory_limit)?;
+    let settings = shared_settings(ambiguity, normals, project, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
     if !METHODS.contains(&method.as_str()) {
         return Err(unknown_method(&method));
@@ -416,7 +420,7 @@ impl PyTessellator {
     ) -> PyResult<Bound<'py, PyTuple>> {
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
-        let settings = shared_settings(ambiguity, normals, batch_size, memory_limit)?;
+        let settings = shared_settings(ambiguity, normals, false, batch_size, memory_limit)?;
         let ts = tracking_settings(&field, seeds, &lattice, settings)?;
         let tess = &mut self.inner;
         let on_caller = field.is_callable();

@@ -52,7 +52,7 @@ mod state;
 mod store;
 mod triangulate;
 
-use super::{compute_normals, Settings, Stats};
+use super::{finish_mesh, Settings, Stats};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
@@ -141,7 +141,7 @@ pub fn polygonize<F: Field + ?Sized>(
     run.repair(&mut leaves)?;
     run.stats.add_time("sample", sampling);
     let (mut mesh, mut stats) = run.triangulate(leaves);
-    compute_normals(field, &mut mesh, &settings.common, &mut stats)?;
+    finish_mesh(field, &mut mesh, lattice, &settings.common, &mut stats)?;
     Ok((mesh, stats))
 }
 

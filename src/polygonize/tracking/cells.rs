@@ -29,7 +29,7 @@ use crate::polygonize::cell::{case_index, edge_origin, emit_triangles};
 use crate::polygonize::sparse::{self, BlockSigns};
 use crate::polygonize::table::EDGES;
 use crate::polygonize::{
-    check_memory, compute_normals, estimate_triangles, evaluate, CaseTable, Settings, Stats,
+    check_memory, estimate_triangles, evaluate, finish_mesh, CaseTable, Settings, Stats,
     BYTES_PER_TRIANGLE,
 };
 use glam::DVec3;
@@ -93,7 +93,7 @@ impl CellTracking {
             ));
         }
         let mut stats = self.walk_from(field, lattice, settings)?;
-        self.finish(field, &settings.common, &mut stats)?;
+        self.finish(field, lattice, &settings.common, &mut stats)?;
         Ok((&self.mesh, stats))
     }
 
@@ -108,7 +108,7 @@ impl CellTracking {
         if settings.components == Components::All {
             self.walk_the_rest(field, lattice, &settings.common, &mut stats)?;
         }
-        self.finish(field, &settings.common, &mut stats)?;
+        self.finish(field, lattice, &settings.common, &mut stats)?;
         Ok((&self.mesh, stats))
     }
 
@@ -296,15 +296,16 @@ impl CellTracking {
         Ok(())
     }
 
-    /// Computes the normals of the mesh.
+    /// Projects the vertices and computes the normals of the mesh.
     fn finish<F: Field + ?Sized>(
         &mut self,
         field: &F,
+        lattice: &Lattice,
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<()> {
         let mut mesh = std::mem::take(&mut self.mesh);
-        let r = compute_normals(field, &mut mesh, settings, stats);
+        let r = finish_mesh(field, &mut mesh, lattice, settings, stats);
         self.mesh = mesh;
         r
     }
