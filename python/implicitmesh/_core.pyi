@@ -33,6 +33,7 @@ class VariationalSurface:
         *,
         d: float | None = None,
         w: float | None = None,
+        tolerance: float | None = None,
         **options: Unpack[_FitOptions],
     ) -> VariationalSurface: ...
     @staticmethod
@@ -48,6 +49,8 @@ class VariationalSurface:
     def interpolate(
         points: ArrayLike,
         values: ArrayLike,
+        *,
+        tolerance: float | None = None,
         **options: Unpack[_FitOptions],
     ) -> VariationalSurface: ...
     def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
@@ -77,6 +80,8 @@ class VariationalSurface:
     def residual(self) -> float: ...
     @property
     def merged_points(self) -> int: ...
+    @property
+    def reduction(self) -> dict[str, int | float] | None: ...
     @property
     def bounds(self) -> npt.NDArray[np.float64]: ...
 

@@ -16,6 +16,7 @@ pub mod kernel;
 pub mod particles;
 pub mod partition;
 pub mod rbf;
+pub mod reduction;
 pub mod saddle;
 pub mod thin;
 pub mod voxels;

@@ -9,6 +9,7 @@ use crate::field::constraints::{self, Constraints};
 use crate::field::kernel::Kernel;
 use crate::field::partition::{self, PartitionSurface};
 use crate::field::rbf::{self, VariationalSurface};
+use crate::field::reduction::{self, Reduction, ReductionSettings};
 use crate::field::Field;
 use glam::DVec3;
 use numpy::PyArray1;
@@ -173,7 +174,67 @@ impl<'a, 'py> FitOptions<'a, 'py> {
             Fitted::Global(Arc::new(fitted?))
         };
         warn_merged(py, inner.merged())?;
-        Ok(PyVariationalSurface { inner })
+        Ok(PyVariationalSurface {
+            inner,
+            reduction: None,
+        })
+    }
+
+    /// Greedy fits to growing subsets of `points` until every point is within `tolerance`
+    /// ([`reduction::fit_within`]), each fit global or partition as the method and the subset's
+    /// constraints (`per_point` per point) decide; warns when the rounds did not suffice.
+    #[allow(clippy::too_many_arguments)]
+    fn run_within(
+        self,
+        py: Python<'py>,
+        tolerance: f64,
+        points: &[DVec3],
+        targets: Option<&[f64]>,
+        per_point: usize,
+        global: impl Fn(&[u32], &rbf::FitSettings) -> Result<VariationalSurface> + Send,
+        partition: impl Fn(&[u32], &partition::PartitionSettings) -> Result<PartitionSurface> + Send,
+    ) -> PyResult<PyVariationalSurface> {
+        let settings = ReductionSettings {
+            tolerance,
+            ..Default::default()
+        };
+        settings.check()?;
+        let (method, ps, gs) = (self.method, self.partition, self.global);
+        let (report, end) = reporter(py, self.progress, "fit (within tolerance)")?;
+        let fitted = super::interrupt::run(py, report.as_ref(), false, move || {
+            let fit = |used: &[u32]| -> Result<Fitted> {
+                let use_partition = match method {
+                    Method::Global => false,
+                    Method::Partition => true,
+                    Method::Auto => per_point * used.len() >= AUTO_PARTITION_CONSTRAINTS,
+                };
+                Ok(if use_partition {
+                    Fitted::Partition(Arc::new(partition(used, &ps)?))
+                } else {
+                    Fitted::Global(Arc::new(global(used, &gs)?))
+                })
+            };
+            reduction::fit_within(points, targets, &settings, fit, Fitted::as_field)
+        });
+        end.call0()?;
+        let (inner, r) = fitted?;
+        warn_merged(py, inner.merged())?;
+        if r.outside > 0 {
+            let message = std::ffi::CString::new(format!(
+                "{} of {} data points are farther than tolerance={tolerance:e} from the surface \
+                 after {} fits (largest {:.3e}); see VariationalSurface.reduction",
+                r.outside,
+                points.len(),
+                r.rounds,
+                r.largest_residual
+            ))
+            .expect("no NUL in the message");
+            PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)?;
+        }
+        Ok(PyVariationalSurface {
+            inner,
+            reduction: Some(r),
+        })
     }
 }
 
@@ -237,6 +298,8 @@ fn partition_settings(
 #[pyclass(name = "VariationalSurface", module = "implicitmesh", frozen)]
 pub struct PyVariationalSurface {
     pub inner: Fitted,
+    /// What a fit with `tolerance` did; `None` for exact fits and surfaces loaded from a state.
+    pub reduction: Option<Reduction>,
 }
 
 fn fit_settings(
@@ -340,6 +403,17 @@ impl PyVariationalSurface {
     ///     median distance from a point to its nearest neighbour): repeated samples, as where
     ///     scans overlap, are merged and the rest kept. Raise it when a fit is refused as
     ///     ill-conditioned.
+    /// tolerance : float, optional
+    ///     Fit only as many data points as needed to pass within ``tolerance`` of every point
+    ///     (in the points' units; near the data f is about the distance to the surface), by
+    ///     greedy reduction (Carr et al. 2001): fit one point per cube of 8 typical spacings,
+    ///     add the points farther than the tolerance, fit again, at most 4 fits. The points
+    ///     used are interpolated exactly, the others approximated; :attr:`reduction` says how
+    ///     many were used and how far the farthest is, and a ``UserWarning`` is raised when
+    ///     points stay outside the tolerance after the last fit. For scans with many more
+    ///     points than the surface needs (10⁶ points meshed at 256 cells): each fit is of a
+    ///     fraction of the points, plus one evaluation per point. Default ``None``: every point
+    ///     is interpolated.
     ///
     /// Returns
     /// -------
@@ -355,7 +429,7 @@ impl PyVariationalSurface {
     ///     ``merge_distance``, zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None))]
+    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
@@ -370,6 +444,7 @@ impl PyVariationalSurface {
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
         merge_distance: Option<f64>,
+        tolerance: Option<f64>,
     ) -> PyResult<Self> {
         let fit = fit_options(
             method,
@@ -393,6 +468,27 @@ impl PyVariationalSurface {
             ));
         }
         let pl = placement(d, w, fit.merge_distance);
+        if let Some(tolerance) = tolerance {
+            let subset = |used: &[u32]| -> (Vec<DVec3>, Vec<DVec3>) {
+                let pick = |a: &[DVec3]| used.iter().map(|&i| a[i as usize]).collect();
+                (pick(&p), pick(&n))
+            };
+            return fit.run_within(
+                py,
+                tolerance,
+                &p,
+                None,
+                2,
+                |used, s| {
+                    let (q, m) = subset(used);
+                    VariationalSurface::fit(&q, &m, &pl, s)
+                },
+                |used, s| {
+                    let (q, m) = subset(used);
+                    PartitionSurface::fit(&q, &m, &pl, s)
+                },
+            );
+        }
         fit.run(
             py,
             2 * p.len(),
@@ -465,15 +561,16 @@ impl PyVariationalSurface {
     /// ----------
     /// points : (N, 3) float64
     /// values : (N,) float64
-    /// kernel, smoothing, memory_limit, method, progress, partition_options, merge_distance
+    /// kernel, smoothing, memory_limit, method, progress, partition_options, merge_distance, tolerance
     ///     As for :meth:`fit` (``"auto"``: global below 2000 points); merged points get the
-    ///     mean of their values.
+    ///     mean of their values; with ``tolerance``, every ``|f(points[i]) - values[i]|`` is
+    ///     within it (when the fits sufficed).
     ///
     /// Returns
     /// -------
     /// VariationalSurface
     #[staticmethod]
-    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None))]
+    #[pyo3(signature = (points, values, *, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
     #[allow(clippy::too_many_arguments)]
     fn interpolate(
         py: Python<'_>,
@@ -486,6 +583,7 @@ impl PyVariationalSurface {
         progress: Option<&Bound<'_, PyAny>>,
         partition_options: Option<&Bound<'_, PyDict>>,
         merge_distance: Option<f64>,
+        tolerance: Option<f64>,
     ) -> PyResult<Self> {
         let fit = fit_options(
             method,
@@ -499,6 +597,39 @@ impl PyVariationalSurface {
         let p = self::points(points, "points")?;
         let v = self::values(values, "values")?;
         let merge = fit.merge_distance;
+        if let Some(tolerance) = tolerance {
+            if v.len() != p.len() {
+                return Err(value_error(
+                    "values",
+                    format!(
+                        "need one value per point: {} values for {} points",
+                        v.len(),
+                        p.len()
+                    ),
+                ));
+            }
+            let subset = |used: &[u32]| -> (Vec<DVec3>, Vec<f64>) {
+                (
+                    used.iter().map(|&i| p[i as usize]).collect(),
+                    used.iter().map(|&i| v[i as usize]).collect(),
+                )
+            };
+            return fit.run_within(
+                py,
+                tolerance,
+                &p,
+                Some(&v),
+                1,
+                |used, s| {
+                    let (q, w) = subset(used);
+                    VariationalSurface::interpolate(&q, &w, merge, s)
+                },
+                |used, s| {
+                    let (q, w) = subset(used);
+                    PartitionSurface::interpolate(&q, &w, merge, s)
+                },
+            );
+        }
         fit.run(
             py,
             p.len(),
@@ -575,6 +706,24 @@ impl PyVariationalSurface {
             Fitted::Global(s) => Ok(values_to_py(py, s.polynomial().to_vec())),
             Fitted::Partition(_) => Err(global_only("polynomial")),
         }
+    }
+
+    /// dict or None: for a fit with ``tolerance``, ``rounds`` (fits made), ``used`` (data
+    /// points in the last fit, interpolated exactly), ``largest_residual`` (largest
+    /// ``|f(p) - target|`` over all data points) and ``outside`` (data points farther than the
+    /// tolerance, 0 when the rounds sufficed); None for exact fits and after loading or
+    /// unpickling (the state keeps the field, not how it was fitted).
+    #[getter]
+    fn reduction<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(r) = &self.reduction else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("rounds", r.rounds)?;
+        d.set_item("used", r.used)?;
+        d.set_item("largest_residual", r.largest_residual)?;
+        d.set_item("outside", r.outside)?;
+        Ok(Some(d))
     }
 
     /// str: ``"global"`` or ``"partition"``, the fit in use (what ``method="auto"`` chose).
@@ -694,6 +843,7 @@ impl PyVariationalSurface {
     fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
         Ok(PyVariationalSurface {
             inner: super::state::from_state(state)?,
+            reduction: None,
         })
     }
 
@@ -712,7 +862,10 @@ impl PyVariationalSurface {
             Fitted::Global(_) => self.inner.clone(),
             Fitted::Partition(s) => Fitted::Partition(std::sync::Arc::new(s.cut(b[0], b[1]))),
         };
-        Ok(PyVariationalSurface { inner })
+        Ok(PyVariationalSurface {
+            inner,
+            reduction: self.reduction.clone(),
+        })
     }
 
     /// Pickling: :meth:`from_state` of :meth:`to_state`.
