@@ -27,9 +27,13 @@ MESH = ROOT / "tests" / "data" / "meshes"
 MODEL = "knot"
 #: Points per case (full, quick) and the methods run at each size, ours beside its peer.
 SIZES = {False: (10_000, 100_000, 1_000_000), True: (10_000,)}
-OURS = {"ours-128": 128, "ours-256": 256, "ours-1024": 1024}
+OURS = {"ours-128": 128, "ours-256": 256, "ours-256-tol": 256, "ours-1024": 1024}
 POISSON = {"poisson-8": 8, "poisson-10": 10}
-PEER = {"ours-128": "ferreus-128", "ours-256": "poisson-8", "ours-1024": "poisson-10"}
+PEER = {"ours-128": "ferreus-128", "ours-256": "poisson-8", "ours-256-tol": "poisson-8", "ours-1024": "poisson-10"}
+#: ``tolerance=`` of the "-tol" fit: about an eighth of a cell at 256 cells over the default
+#: bounds of the model (largest side 1.8); run from TOLERANCE_MIN_POINTS points on.
+TOLERANCE = 1e-3
+TOLERANCE_MIN_POINTS = 100_000
 #: ferreus-rbf runs only at the smallest size (about a minute there; hours above).
 FERREUS_MAX_POINTS = 10_000
 QUICK_METHODS = ("ours-256", "poisson-8")
@@ -66,8 +70,11 @@ def reconstruct(method: str, p, n) -> tuple[object, dict]:
         import implicitmesh as im
 
         t = time.perf_counter()
-        s = im.VariationalSurface.fit(p, n)
+        tolerance = TOLERANCE if method.endswith("-tol") else None
+        s = im.VariationalSurface.fit(p, n, tolerance=tolerance)
         out["fit_s"] = time.perf_counter() - t
+        if s.reduction is not None:
+            out["points_used"] = s.reduction["used"]
         out["fit_method"] = s.method
         t = time.perf_counter()
         mesh = im.polygonize(s, resolution=OURS[method], method="octree", normals=False, project=True)
@@ -165,7 +172,8 @@ def measure(a: argparse.Namespace) -> dict:
     cases = []
     for n in SIZES[a.quick]:
         methods = [m for ours in OURS for m in (ours, PEER[ours])
-                   if not (m == "ferreus-128" and n > FERREUS_MAX_POINTS) and not (m == "ours-128" and n > FERREUS_MAX_POINTS)]
+                   if not (m == "ferreus-128" and n > FERREUS_MAX_POINTS) and not (m == "ours-128" and n > FERREUS_MAX_POINTS)
+                   and not (m == "ours-256-tol" and n < TOLERANCE_MIN_POINTS)]
         for method in QUICK_METHODS if a.quick else methods:
             repeats = 1 if n >= ONCE else RUNS[a.quick]
             log(f"{method}, {n:,} points, {repeats} run(s)")
@@ -202,6 +210,8 @@ def render(raw: dict) -> str:
             peer = by.get((PEER.get(method), n))
             ratio = fmt_ratio(median(peer, "total_s"), total) if peer and "error" not in peer[0] else ""
             label = method + (f" ({r0['fit_method']})" if "fit_method" in r0 else "")
+            if "points_used" in r0:
+                label += f", {r0['points_used']:,} points used"
             rows.append([
                 f"{n:,}", label, phases, fmt_s(total), ratio, f"{median(runs, 'peak_mib'):,.0f}",
                 f"{r0['triangles']:,}", f"{median(runs, 'chamfer_over_diagonal'):.2e}",
@@ -215,7 +225,8 @@ def render(raw: dict) -> str:
         f"Run {run['date']} with `{run['command']}`. Points sampled uniformly on `{raw['model']}_hires` "
         "(`trimesh.sample.sample_surface`, seed 7) with their face normals; the same points for every method. "
         "Ours: `VariationalSurface.fit(points, normals)` (method \"auto\") then `polygonize(method=\"octree\", "
-        "normals=False, project=True)` at 128³, 256³ or 1024³ over the default bounds. ferreus-rbf: r³ with linear drift, its "
+        "normals=False, project=True)` at 128³, 256³ or 1024³ over the default bounds; `ours-256-tol` fits with "
+        f"`tolerance={TOLERANCE}` (greedy reduction: only the points needed to pass within it of every point). ferreus-rbf: r³ with linear drift, its "
         "default solver, on the constraints our fit places, meshed by its `build_isosurface` at 128³. Open3D: "
         "`TriangleMesh.create_from_point_cloud_poisson(pcd, depth)` on a point cloud with the normals, its mesh "
         "untrimmed. Each case in a fresh process (peak resident size VmHWM its own); times are medians over the "
