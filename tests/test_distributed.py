@@ -5,6 +5,7 @@ that do not divide the lattice, tiles of one cell, a worker memory limit, and ba
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sys
@@ -202,9 +203,30 @@ def test_output_directory_and_weld(client, blobs, tmp_path):
     files = sorted(p.name for p in out.iterdir())
     assert "manifest.json" in files and any(f.endswith(".npz") for f in files)
     assert not any(f.endswith(".part") for f in files)
-    assert_same_mesh(imd.weld(out), whole)
+    done = []
+    assert_same_mesh(imd.weld(out, progress=done.append), whole)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert done[-1] == sum(e["vertices"] for e in manifest["tiles"]) > len(whole.vertices)
     with pytest.raises(ValueError, match="directory"):
         imd.weld(tmp_path)
+
+
+def test_the_weld_checks_its_tiles():
+    from implicitmesh import _core
+
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    tile = lambda faces, normals=np.zeros((0, 3)), window=((0, 0, 0), (4, 4, 4)): (window, v, faces, normals)  # noqa: E731
+    lattice = ([4, 4, 4], [0.0, 0.0, 0.0], [0.25, 0.25, 0.25])
+    for bad, name in (
+        (tile([[0, 1, 3]]), "faces"), (tile([[0, 1, 2]], v[:1]), "normals"),
+        (tile([[0, 1, 2]], window=((0, 0, 0), (5, 4, 4))), "window"), (tile([0, 1, 2]), "faces"),
+    ):
+        with pytest.raises(ValueError, match=name):
+            _core.weld_tiles([bad], *lattice)
+    # Any layout of the arrays is read: strided, Fortran-ordered, int32 and float32.
+    grid = np.asfortranarray(np.repeat(v, 2, axis=0)[::2])
+    out = _core.weld_tiles([(tile([[0, 1, 2]])[0], grid, np.array([[0, 1, 2]], dtype=np.int32), np.zeros((0, 3), np.float32))], *lattice)
+    assert np.array_equal(out[0], v) and np.array_equal(out[1], [[0, 1, 2]]) and out[2].shape == (0, 3)
 
 
 def test_empty_result_and_progress(client, blobs):

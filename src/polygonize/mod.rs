@@ -12,6 +12,7 @@ pub mod octree;
 pub mod sparse;
 pub(crate) mod table;
 pub mod tracking;
+pub mod weld;
 
 pub use table::{Ambiguity, CaseTable};
 
