@@ -124,6 +124,35 @@ def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
     assert imd.cut_field(blobs, lo + 5, hi + 5) is None
 
 
+def test_a_partition_cut_ships_only_its_part(knot):
+    """A tile's cut of a partition fit pickles to a part of the whole that shrinks with the
+    tile (patches, octree and constraints), and evaluates, once unpickled, to the whole's bits
+    at the tile's lattice points."""
+    import pickle
+
+    surface = knot[1]
+    bounds = np.asarray(surface.bounds)
+    cells, origin, cell = im._core.lattice(bounds, 40)
+    whole = len(pickle.dumps(surface))
+    sizes = {}
+    for tile in (40, 20, 10):
+        sizes[tile] = []
+        for lo, hi in imd.tiles(cells, (tile,) * 3):
+            part = pickle.loads(pickle.dumps(imd.cut_field(surface, *imd.tile_box(np.asarray(origin), np.asarray(cell), lo, hi))))
+            sizes[tile].append(len(pickle.dumps(part)))
+            grid = np.stack(np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(lo, hi)], indexing="ij"), -1).reshape(-1, 3)
+            points = np.asarray(origin) + grid.astype(np.float64) * np.asarray(cell)
+            assert np.array_equal(part(points).view(np.uint64), surface(points).view(np.uint64))
+            assert np.array_equal(part.gradient(points).view(np.uint64), surface.gradient(points).view(np.uint64))
+            assert 0 < len(part) <= len(surface)
+            # A cut of a cut is the same part.
+            again = imd.cut_field(part, *imd.tile_box(np.asarray(origin), np.asarray(cell), lo, hi))
+            assert np.array_equal(again(points).view(np.uint64), surface(points).view(np.uint64))
+    # The whole lattice's cut is the whole plus its octree.
+    assert max(sizes[40]) < 1.05 * whole
+    assert np.mean(sizes[10]) < 0.7 * whole and np.mean(sizes[10]) < np.mean(sizes[20]) < whole
+
+
 def test_tiles_get_the_primitives_cut_blobs_gives_them():
     """The primitives of every tile, found for all tiles at once, are those cut_blobs finds for
     the tile alone (uneven tiles, radii from a tenth of a tile to several tiles, centres outside

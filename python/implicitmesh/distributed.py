@@ -154,7 +154,8 @@ def _cut_per_tile(field: Any) -> bool:
 def cut_field(field: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
     """What a tile ``[lo, hi]`` (its box) needs of ``field``: for a :class:`BlobField` the
     primitives reaching the box (None when none does), for a partition
-    :class:`VariationalSurface` the patches its points use; other fields whole. Values and
+    :class:`VariationalSurface` the patches its points use, its octree split only where it
+    meets the box and the constraints inside those patches; other fields whole. Values and
     gradients in the box are the same bits as the whole field's."""
     if isinstance(field, _core.BlobField):
         return cut_blobs(field, lo, hi)
@@ -238,8 +239,9 @@ def polygonize(
         As for :func:`implicitmesh.polygonize`; it must pickle (a callable is sent with
         cloudpickle). Each task receives what its tile needs (:func:`cut_field`): for a
         :class:`BlobField` the primitives reaching the tile (tiles no primitive reaches are not
-        run), for a partition :class:`VariationalSurface` the patches covering it (and the
-        constraints, whole); other fields are sent to the workers once, whole.
+        run), for a partition :class:`VariationalSurface` the patches covering it, its octree
+        pruned to it and the constraints inside those patches; other fields are sent to the
+        workers once, whole.
     bounds : (2, 3) array_like, optional
         As for :func:`implicitmesh.polygonize` (defaults to ``field.bounds``).
     resolution : int or (3,) ints
