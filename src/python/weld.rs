@@ -1,6 +1,6 @@
 //! `_core.weld_tiles`: the tiles' numpy arrays read in place, the GIL released around the weld.
 
-use super::convert::{flat_faces, flatten_points, python_shape, MeshBuffers};
+use super::convert::{check_rows_of_three, flat_faces, flatten_points, MeshBuffers};
 use super::errors::value_error;
 use super::interrupt::run;
 use crate::lattice::{Lattice, MAX_CELLS_PER_AXIS};
@@ -21,16 +21,7 @@ fn rows<'py, T: numpy::Element>(
     let a = np
         .call_method1("require", (obj, dtype, "CA"))
         .map_err(|e| value_error(name, format!("not convertible to a {dtype} array ({e})")))?;
-    let shape: Vec<usize> = a.getattr("shape")?.extract()?;
-    if shape.len() != 2 || shape[1] != 3 {
-        return Err(value_error(
-            name,
-            format!(
-                "expected an array of shape (N, 3), got shape {}",
-                python_shape(&shape)
-            ),
-        ));
-    }
+    check_rows_of_three(&a, name)?;
     a.extract()
 }
 
