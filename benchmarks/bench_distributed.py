@@ -83,7 +83,7 @@ def make_field(name: str, size: int):
 
 
 class Phases:
-    """Wraps ``_tile_fields`` and ``weld_tiles`` of :mod:`implicitmesh.distributed` to count the
+    """Wraps ``_tile_fields`` and ``weld_tiles`` (the core's weld) of :mod:`implicitmesh.distributed` to count the
     client's seconds cutting the field for the tiles and welding, and the vertices the weld
     joins (the tiles' fields are cut before the first is submitted)."""
 
@@ -105,9 +105,9 @@ class Phases:
         self.cut_s += time.perf_counter() - t
         return parts
 
-    def _weld(self, tiles, *a):
+    def _weld(self, tiles, *a, **kw):
         t = time.perf_counter()
-        out = self.weld(tiles, *a)
+        out = self.weld(tiles, *a, **kw)
         self.weld_s += time.perf_counter() - t
         self.tile_vertices = sum(len(x[1]) for x in tiles)
         self.welded_vertices = self.tile_vertices - len(out[0])

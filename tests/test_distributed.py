@@ -5,6 +5,7 @@ that do not divide the lattice, tiles of one cell, a worker memory limit, and ba
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sys
@@ -123,6 +124,35 @@ def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
     assert imd.cut_field(blobs, lo + 5, hi + 5) is None
 
 
+def test_a_partition_cut_ships_only_its_part(knot):
+    """A tile's cut of a partition fit pickles to a part of the whole that shrinks with the
+    tile (patches, octree and constraints), and evaluates, once unpickled, to the whole's bits
+    at the tile's lattice points."""
+    import pickle
+
+    surface = knot[1]
+    bounds = np.asarray(surface.bounds)
+    cells, origin, cell = im._core.lattice(bounds, 40)
+    whole = len(pickle.dumps(surface))
+    sizes = {}
+    for tile in (40, 20, 10):
+        sizes[tile] = []
+        for lo, hi in imd.tiles(cells, (tile,) * 3):
+            part = pickle.loads(pickle.dumps(imd.cut_field(surface, *imd.tile_box(np.asarray(origin), np.asarray(cell), lo, hi))))
+            sizes[tile].append(len(pickle.dumps(part)))
+            grid = np.stack(np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(lo, hi)], indexing="ij"), -1).reshape(-1, 3)
+            points = np.asarray(origin) + grid.astype(np.float64) * np.asarray(cell)
+            assert np.array_equal(part(points).view(np.uint64), surface(points).view(np.uint64))
+            assert np.array_equal(part.gradient(points).view(np.uint64), surface.gradient(points).view(np.uint64))
+            assert 0 < len(part) <= len(surface)
+            # A cut of a cut is the same part.
+            again = imd.cut_field(part, *imd.tile_box(np.asarray(origin), np.asarray(cell), lo, hi))
+            assert np.array_equal(again(points).view(np.uint64), surface(points).view(np.uint64))
+    # The whole lattice's cut is the whole plus its octree.
+    assert max(sizes[40]) < 1.05 * whole
+    assert np.mean(sizes[10]) < 0.7 * whole and np.mean(sizes[10]) < np.mean(sizes[20]) < whole
+
+
 def test_tiles_get_the_primitives_cut_blobs_gives_them():
     """The primitives of every tile, found for all tiles at once, are those cut_blobs finds for
     the tile alone (uneven tiles, radii from a tenth of a tile to several tiles, centres outside
@@ -202,9 +232,30 @@ def test_output_directory_and_weld(client, blobs, tmp_path):
     files = sorted(p.name for p in out.iterdir())
     assert "manifest.json" in files and any(f.endswith(".npz") for f in files)
     assert not any(f.endswith(".part") for f in files)
-    assert_same_mesh(imd.weld(out), whole)
+    done = []
+    assert_same_mesh(imd.weld(out, progress=done.append), whole)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert done[-1] == sum(e["vertices"] for e in manifest["tiles"]) > len(whole.vertices)
     with pytest.raises(ValueError, match="directory"):
         imd.weld(tmp_path)
+
+
+def test_the_weld_checks_its_tiles():
+    from implicitmesh import _core
+
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    tile = lambda faces, normals=np.zeros((0, 3)), window=((0, 0, 0), (4, 4, 4)): (window, v, faces, normals)  # noqa: E731
+    lattice = ([4, 4, 4], [0.0, 0.0, 0.0], [0.25, 0.25, 0.25])
+    for bad, name in (
+        (tile([[0, 1, 3]]), "faces"), (tile([[0, 1, 2]], v[:1]), "normals"),
+        (tile([[0, 1, 2]], window=((0, 0, 0), (5, 4, 4))), "window"), (tile([0, 1, 2]), "faces"),
+    ):
+        with pytest.raises(ValueError, match=name):
+            _core.weld_tiles([bad], *lattice)
+    # Any layout of the arrays is read: strided, Fortran-ordered, int32 and float32.
+    grid = np.asfortranarray(np.repeat(v, 2, axis=0)[::2])
+    out = _core.weld_tiles([(tile([[0, 1, 2]])[0], grid, np.array([[0, 1, 2]], dtype=np.int32), np.zeros((0, 3), np.float32))], *lattice)
+    assert np.array_equal(out[0], v) and np.array_equal(out[1], [[0, 1, 2]]) and out[2].shape == (0, 3)
 
 
 def test_empty_result_and_progress(client, blobs):

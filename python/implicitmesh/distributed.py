@@ -19,10 +19,10 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 
 from . import _core
+from ._core import weld_tiles
 from ._progress import reporter
 from .mesh import Mesh
 from .polygonize import _check_common
-from ._weld import tile_box, weld_tiles
 
 __all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
 
@@ -52,6 +52,12 @@ def _import_distributed():
             "(dask[distributed])"
         ) from e
     return distributed
+
+
+def tile_box(origin: np.ndarray, cell: np.ndarray, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Corners of the tile of cells ``[lo, hi)`` as the core computes lattice points (per
+    coordinate one product and one sum)."""
+    return origin + np.asarray(lo, dtype=np.float64) * cell, origin + np.asarray(hi, dtype=np.float64) * cell
 
 
 def _check_tile(tile: Any) -> tuple[int, int, int]:
@@ -148,7 +154,8 @@ def _cut_per_tile(field: Any) -> bool:
 def cut_field(field: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
     """What a tile ``[lo, hi]`` (its box) needs of ``field``: for a :class:`BlobField` the
     primitives reaching the box (None when none does), for a partition
-    :class:`VariationalSurface` the patches its points use; other fields whole. Values and
+    :class:`VariationalSurface` the patches its points use, its octree split only where it
+    meets the box and the constraints inside those patches; other fields whole. Values and
     gradients in the box are the same bits as the whole field's."""
     if isinstance(field, _core.BlobField):
         return cut_blobs(field, lo, hi)
@@ -232,8 +239,9 @@ def polygonize(
         As for :func:`implicitmesh.polygonize`; it must pickle (a callable is sent with
         cloudpickle). Each task receives what its tile needs (:func:`cut_field`): for a
         :class:`BlobField` the primitives reaching the tile (tiles no primitive reaches are not
-        run), for a partition :class:`VariationalSurface` the patches covering it (and the
-        constraints, whole); other fields are sent to the workers once, whole.
+        run), for a partition :class:`VariationalSurface` the patches covering it, its octree
+        pruned to it and the constraints inside those patches; other fields are sent to the
+        workers once, whole.
     bounds : (2, 3) array_like, optional
         As for :func:`implicitmesh.polygonize` (defaults to ``field.bounds``).
     resolution : int or (3,) ints
@@ -343,7 +351,7 @@ def polygonize(
     return _weld([(e, e["v"], e["f"], e["n"]) for e in entries], info)
 
 
-def weld(directory: str | os.PathLike[str]) -> Mesh:
+def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], object] = False) -> Mesh:
     """Joins the tiles that :func:`polygonize` wrote with ``output=directory`` into one mesh
     (the mesh :func:`polygonize` returns without ``output``).
 
@@ -351,6 +359,9 @@ def weld(directory: str | os.PathLike[str]) -> Mesh:
     ----------
     directory : path
         The directory holding ``manifest.json`` and the tiles' ``.npz`` files.
+    progress : bool or callable
+        ``True``: show the tile vertices welded (a tqdm bar or a line on standard error); a
+        callable is called with their number.
 
     Returns
     -------
@@ -374,15 +385,22 @@ def weld(directory: str | os.PathLike[str]) -> Mesh:
             raise ValueError(f"directory: tile {e['file']} listed in the manifest is missing")
         with np.load(file) as z:
             parts.append((e, z["vertices"], z["faces"], z["normals"]))
-    return _weld(parts, manifest)
+    return _weld(parts, manifest, progress)
 
 
-def _weld(parts: list, info: dict) -> Mesh:
+def _weld(parts: list, info: dict, progress: Any = False) -> Mesh:
     """The mesh of the tiles ``parts`` (``(manifest entry, vertices, faces, normals)`` each),
-    welded, with the tiles' statistics summed."""
-    v, f, n = weld_tiles(
-        [(p[0]["window"], p[1], p[2], p[3]) for p in parts], np.asarray(info["origin"]), np.asarray(info["cell"])
-    )
+    welded by the core (``_core.weld_tiles``: exact, see :mod:`implicitmesh.distributed`),
+    with the tiles' statistics summed."""
+    total = sum(len(p[1]) for p in parts)
+    report, end = reporter(progress, "weld", total, "vertices")
+    try:
+        v, f, n = weld_tiles(
+            [(p[0]["window"], p[1], p[2], p[3]) for p in parts],
+            info["cells"], info["origin"], info["cell"], progress=report,
+        )
+    finally:
+        end()
     stats: dict[str, Any] = {k: sum(int(p[0]["stats"][k]) for p in parts) for k in _SUMMED}
     stats["lattice_points"] = int(np.prod(np.asarray(info["cells"], dtype=np.int64) + 1))
     stats.update(

@@ -13,6 +13,7 @@ pub mod project;
 pub mod sparse;
 pub(crate) mod table;
 pub mod tracking;
+pub mod weld;
 
 pub use table::{Ambiguity, CaseTable};
 

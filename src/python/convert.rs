@@ -49,6 +49,18 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>
     }
     let arr = asarray(obj, "float64")
         .map_err(|e| value_error(name, format!("not convertible to a float64 array ({e})")))?;
+    check_rows_of_three(&arr, name)?;
+    let a: PyReadonlyArray2<f64> = arr.extract()?;
+    let view = a.as_array();
+    Ok(view
+        .rows()
+        .into_iter()
+        .map(|r| DVec3::new(r[0], r[1], r[2]))
+        .collect())
+}
+
+/// A ValueError naming `name` unless the array `arr` has shape (N, 3).
+pub fn check_rows_of_three(arr: &Bound<'_, PyAny>, name: &str) -> PyResult<()> {
     let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
     if shape.len() != 2 || shape[1] != 3 {
         return Err(value_error(
@@ -59,13 +71,7 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>
             ),
         ));
     }
-    let a: PyReadonlyArray2<f64> = arr.extract()?;
-    let view = a.as_array();
-    Ok(view
-        .rows()
-        .into_iter()
-        .map(|r| DVec3::new(r[0], r[1], r[2]))
-        .collect())
+    Ok(())
 }
 
 /// The rows of `obj` when it is an (N, 3) numpy array of `T` (None otherwise, or when it is

@@ -7,6 +7,7 @@ use super::errors::value_error;
 use super::variational::Fitted;
 use crate::field::constraints::Constraints;
 use crate::field::kernel::Kernel;
+use crate::field::partition::octree::Node;
 use crate::field::partition::{PartitionParts, PartitionSettings, PartitionSurface, PatchParts};
 use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use glam::DVec3;
@@ -118,9 +119,57 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
             d.set_item("min_points", st.min_points)?;
             d.set_item("residual", p.residual)?;
             put_patches(py, &d, &p.patches)?;
+            if let Some(nodes) = &p.tree {
+                put_tree(py, &d, nodes)?;
+            }
         }
     }
     Ok(d)
+}
+
+/// A cut's octree: per node its cube's centre and half side, and its first child (0 for a
+/// leaf).
+fn put_tree(py: Python<'_>, d: &Bound<'_, PyDict>, nodes: &[Node]) -> PyResult<()> {
+    d.set_item(
+        "tree_centre",
+        points_to_py(py, nodes.iter().map(|n| n.centre).collect())?,
+    )?;
+    d.set_item(
+        "tree_half",
+        values_to_py(py, nodes.iter().map(|n| n.half).collect()),
+    )?;
+    d.set_item(
+        "tree_children",
+        counts_to_py(py, nodes.iter().map(|n| n.children as usize)),
+    )
+}
+
+/// The octree [`put_tree`] stored, if any.
+fn tree_of(d: &Bound<'_, PyDict>) -> PyResult<Option<Vec<Node>>> {
+    if d.get_item("tree_centre")?.is_none() {
+        return Ok(None);
+    }
+    let (centre, half) = (points_of(d, "tree_centre")?, values_of(d, "tree_half")?);
+    let children = counts_of(d, "tree_children")?;
+    if half.len() != centre.len() || children.len() != centre.len() {
+        return Err(bad("the octree's arrays differ in length"));
+    }
+    centre
+        .into_iter()
+        .zip(half)
+        .zip(children)
+        .map(|((centre, half), children)| {
+            Ok(Node {
+                centre,
+                half,
+                children: u32::try_from(children)
+                    .map_err(|_| bad("\"tree_children\" holds a number over 2³²"))?,
+                start: 0,
+                end: 0,
+            })
+        })
+        .collect::<PyResult<_>>()
+        .map(Some)
 }
 
 /// The patches, flattened: per patch its ball, counts and fit's numbers; their normalised
@@ -288,6 +337,7 @@ pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
                 constraints,
                 patches: patches_of(d, kernel)?,
                 residual,
+                tree: tree_of(d)?,
             };
             let s = PartitionSurface::from_parts(parts)?;
             Ok(Fitted::Partition(Arc::new(s)))

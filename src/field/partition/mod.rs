@@ -112,6 +112,9 @@ pub struct PartitionSurface {
     settings: PartitionSettings,
     constraints: Constraints,
     tree: Octree,
+    /// Whether this is a [`PartitionSurface::cut`], whose octree is not built from its
+    /// constraints (and so is part of its [`PartitionSurface::parts`]).
+    cut: bool,
     patches: Vec<Patch>,
     /// Patches covering each leaf: `cover[cover_start[l]..cover_start[l + 1]]`, increasing.
     cover_start: Vec<u32>,
@@ -214,6 +217,7 @@ impl PartitionSurface {
             settings: *settings,
             constraints: c,
             tree,
+            cut: false,
             patches: fitted,
             cover_start,
             cover,

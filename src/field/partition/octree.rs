@@ -9,7 +9,7 @@ use rayon::prelude::*;
 const MAX_DEPTH: u32 = 24;
 
 /// One node: a cube, its children and the run of points it holds.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
     pub centre: DVec3,
     /// Half the side of the cube.
@@ -139,6 +139,15 @@ impl Octree {
             }
             level = next..nodes.len();
         }
+        Octree {
+            order,
+            ..Octree::from_nodes(nodes)
+        }
+    }
+
+    /// The octree of `nodes` (as [`Octree::nodes`] lists them, children after their parent),
+    /// without points: `order` is empty.
+    pub fn from_nodes(nodes: Vec<Node>) -> Octree {
         let mut leaves = Vec::new();
         let mut leaf_slot = vec![u32::MAX; nodes.len()];
         for (i, n) in nodes.iter().enumerate() {
@@ -149,10 +158,46 @@ impl Octree {
         }
         Octree {
             nodes,
-            order,
+            order: Vec::new(),
             leaves,
             leaf_slot,
         }
+    }
+
+    /// The octree split only where its nodes meet the box `[lo, hi]` (with the margin of
+    /// [`Octree::for_each_leaf_meeting_box`]): a node that does not meet it is a leaf. Every
+    /// point of the box clamped into the root cube descends to a leaf of the same cube as in
+    /// `self`. Without points (`order` empty, runs zero).
+    pub fn pruned_to_box(&self, lo: DVec3, hi: DVec3) -> Octree {
+        let bare = |n: &Node| Node {
+            children: 0,
+            start: 0,
+            end: 0,
+            ..*n
+        };
+        let mut nodes = vec![bare(&self.nodes[0])];
+        // The node of `self` each node of the pruned tree stands for.
+        let mut from = vec![0u32];
+        let mut k = 0;
+        while k < nodes.len() {
+            let n = &self.nodes[from[k] as usize];
+            if !n.is_leaf() && self.meets_box(n, lo, hi) {
+                nodes[k].children = nodes.len() as u32;
+                for c in n.children..n.children + 8 {
+                    nodes.push(bare(&self.nodes[c as usize]));
+                    from.push(c);
+                }
+            }
+            k += 1;
+        }
+        Octree::from_nodes(nodes)
+    }
+
+    /// Whether node `n`'s cube, widened by a millionth of the root's half side, meets the
+    /// closed box `[lo, hi]`.
+    fn meets_box(&self, n: &Node, lo: DVec3, hi: DVec3) -> bool {
+        let reach = DVec3::splat(n.half + 1e-6 * self.nodes[0].half);
+        !((n.centre - reach).cmpgt(hi).any() || (n.centre + reach).cmplt(lo).any())
     }
 
     /// The root cube's corners.
@@ -197,12 +242,10 @@ impl Octree {
     /// widened by a millionth of the root's half side, so that a leaf a point of the box
     /// descends into is never left out by rounding of its corners).
     pub fn for_each_leaf_meeting_box(&self, lo: DVec3, hi: DVec3, mut visit: impl FnMut(u32)) {
-        let margin = 1e-6 * self.nodes[0].half;
         let mut stack = vec![0u32];
         while let Some(k) = stack.pop() {
             let n = &self.nodes[k as usize];
-            let reach = DVec3::splat(n.half + margin);
-            if (n.centre - reach).cmpgt(hi).any() || (n.centre + reach).cmplt(lo).any() {
+            if !self.meets_box(n, lo, hi) {
                 continue;
             }
             if n.is_leaf() {

@@ -1,7 +1,9 @@
 //! A partition-of-unity surface as plain numbers and back, bit for bit: the constraints, the
-//! settings and every patch's fit; the octree and the patches covering each leaf are built
-//! again from them (both depend only on the constraints, the settings and the patches' balls).
+//! settings and every patch's fit, and for a cut its octree; the octree of a whole surface and
+//! the patches covering each leaf are built again from them (they depend only on the
+//! constraints, the settings and the patches' balls).
 
+use super::octree::Node;
 use super::{patches, Octree, PartitionSettings, PartitionSurface, Patch};
 use crate::error::Result;
 use crate::field::constraints::Constraints;
@@ -25,6 +27,9 @@ pub struct PartitionParts {
     pub constraints: Constraints,
     pub patches: Vec<PatchParts>,
     pub residual: f64,
+    /// The octree's nodes, for a [`PartitionSurface::cut`] (whose octree is not the one its
+    /// constraints give); `None` for a whole surface.
+    pub tree: Option<Vec<Node>>,
 }
 
 impl PartitionSurface {
@@ -45,6 +50,7 @@ impl PartitionSurface {
                 })
                 .collect(),
             residual: self.residual,
+            tree: self.cut.then(|| self.tree.nodes.clone()),
         }
     }
 
@@ -78,16 +84,40 @@ impl PartitionSurface {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
-        let tree: Octree = Self::tree(c, &p.settings);
+        let cut = p.tree.is_some();
+        let tree: Octree = match p.tree {
+            Some(nodes) => Octree::from_nodes(checked_nodes(nodes)?),
+            None => Self::tree(c, &p.settings),
+        };
         let (cover_start, cover) = patches::cover(&tree, &patches);
         Ok(PartitionSurface {
             settings: p.settings,
             constraints: p.constraints,
             tree,
+            cut,
             patches,
             cover_start,
             cover,
             residual: p.residual,
         })
+    }
+}
+
+/// `nodes` when they form an octree: a root, finite cubes, and each inner node's eight
+/// children after it.
+fn checked_nodes(nodes: Vec<Node>) -> Result<Vec<Node>> {
+    let n = nodes.len();
+    let ok = n > 0
+        && nodes.iter().enumerate().all(|(k, node)| {
+            node.centre.is_finite()
+                && node.half.is_finite()
+                && node.half > 0.0
+                && (node.is_leaf()
+                    || (node.children as usize > k && node.children as usize + 8 <= n))
+        });
+    if ok {
+        Ok(nodes)
+    } else {
+        Err(bad_state("the octree's nodes do not form an octree"))
     }
 }

@@ -1,0 +1,105 @@
+//! `_core.weld_tiles`: the tiles' numpy arrays read in place, the GIL released around the weld.
+
+use super::convert::{check_rows_of_three, flat_faces, flatten_points, MeshBuffers};
+use super::errors::value_error;
+use super::interrupt::run;
+use crate::lattice::{Lattice, MAX_CELLS_PER_AXIS};
+use crate::polygonize::weld::{weld, Tile};
+use glam::DVec3;
+use numpy::PyReadonlyArray2;
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+
+/// `numpy.require(obj, dtype, "CA")` (C-contiguous and aligned, copied only when it is not) as
+/// an `(N, 3)` array borrowed read-only.
+fn rows<'py, T: numpy::Element>(
+    obj: &Bound<'py, PyAny>,
+    dtype: &str,
+    name: &'static str,
+) -> PyResult<PyReadonlyArray2<'py, T>> {
+    let np = obj.py().import("numpy")?;
+    let a = np
+        .call_method1("require", (obj, dtype, "CA"))
+        .map_err(|e| value_error(name, format!("not convertible to a {dtype} array ({e})")))?;
+    check_rows_of_three(&a, name)?;
+    a.extract()
+}
+
+/// The whole lattice from ``cells``, ``origin`` and ``cell`` (as :func:`lattice` gives them).
+fn whole_lattice(cells: [u32; 3], origin: [f64; 3], cell: [f64; 3]) -> PyResult<Lattice> {
+    if cells.iter().any(|&c| c == 0 || c > MAX_CELLS_PER_AXIS) {
+        return Err(value_error(
+            "cells",
+            format!("cells per axis must be in 1..={MAX_CELLS_PER_AXIS}, got {cells:?}"),
+        ));
+    }
+    let (origin, cell) = (DVec3::from(origin), DVec3::from(cell));
+    if !origin.is_finite() {
+        return Err(value_error("origin", "must be finite"));
+    }
+    if !(cell.is_finite() && cell.cmpgt(DVec3::ZERO).all()) {
+        return Err(value_error("cell", "must be positive and finite"));
+    }
+    Ok(Lattice {
+        origin,
+        cell,
+        cells,
+        base: origin,
+        offset: [0; 3],
+    })
+}
+
+/// Joins tile meshes made on windows of one lattice; see ``implicitmesh.distributed``.
+///
+/// ``tiles`` is a sequence of ``(window, vertices (V, 3) float64, faces (F, 3) int64, normals
+/// (V, 3) or (0, 3) float64)``, ``window = [[i0, j0, k0], [i1, j1, k1]]`` the tile's cells;
+/// ``cells``, ``origin``, ``cell`` the whole lattice (as :func:`lattice` returns them).
+/// ``progress`` is called with the tile vertices done.
+///
+/// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3))``.
+#[pyfunction]
+#[pyo3(signature = (tiles, cells, origin, cell, *, progress=None))]
+pub fn weld_tiles<'py>(
+    py: Python<'py>,
+    tiles: Vec<Bound<'py, PyAny>>,
+    cells: [u32; 3],
+    origin: [f64; 3],
+    cell: [f64; 3],
+    progress: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let lattice = whole_lattice(cells, origin, cell)?;
+    let mut arrays = Vec::with_capacity(tiles.len());
+    for t in &tiles {
+        let (window, v, f, n): ([[u32; 3]; 2], _, _, _) = t.extract().map_err(|_| {
+            value_error(
+                "tiles",
+                "expected (window [[i0, j0, k0], [i1, j1, k1]], vertices, faces, normals) per tile",
+            )
+        })?;
+        arrays.push((
+            window,
+            rows::<f64>(&v, "float64", "vertices")?,
+            rows::<i64>(&f, "int64", "faces")?,
+            rows::<f64>(&n, "float64", "normals")?,
+        ));
+    }
+    let parts: Vec<Tile> = arrays
+        .iter()
+        .map(|(window, v, f, n)| -> PyResult<Tile> {
+            Ok(Tile {
+                window: *window,
+                vertices: bytemuck::cast_slice(v.as_slice()?),
+                faces: bytemuck::cast_slice(f.as_slice()?),
+                normals: bytemuck::cast_slice(n.as_slice()?),
+            })
+        })
+        .collect::<PyResult<_>>()?;
+    let welded = run(py, progress, false, || weld(&parts, &lattice))?;
+    let [v, f, n] = MeshBuffers {
+        vertices: flatten_points(welded.vertices),
+        faces: flat_faces(welded.faces),
+        normals: flatten_points(welded.normals),
+    }
+    .to_py(py)?;
+    PyTuple::new(py, [v, f, n])
+}
