@@ -111,6 +111,25 @@ def test_variational_surface_equals_one_machine(client, knot, kind):
         assert genus_of(tiled.euler_number) == 1
 
 
+def test_projected_vertices_equal_one_machine(client, knot, blobs):
+    """project=True moves each vertex on its own position and the field's values there, which
+    cut fields give bit for bit: tiles weld to the single machine's projected mesh."""
+    for field, method, kw in ((knot[1], "octree", {}), (blobs, "sparse", {"bounds": BOX})):
+        whole = im.polygonize(field, resolution=40, method=method, project=True, **kw)
+        tiled = imd.polygonize(field, resolution=40, method=method, client=client, tile=13, project=True, **kw)
+        assert_same_mesh(tiled, whole)
+        assert tiled.to_trimesh().is_watertight
+
+
+def test_projection_is_refused_with_output_and_checks_its_faces(client, blobs, tmp_path):
+    with pytest.raises(ValueError, match="project"):
+        imd.polygonize(blobs, bounds=BOX, resolution=16, client=client, tile=8, project=True, output=tmp_path)
+    with pytest.raises(ValueError, match="project"):
+        imd.polygonize(blobs, bounds=BOX, resolution=16, client=client, tile=8, project="yes")
+    with pytest.raises(ValueError, match="faces"):
+        im._core.project_mesh(blobs, BOX, 16, np.zeros((3, 3)), [[0, 1, 3]])
+
+
 def test_cut_fields_evaluate_alike_in_their_box(blobs, knot):
     lo, hi = np.array([-0.5, -0.2, 0.0]), np.array([0.1, 0.3, 0.4])
     points = lo + (hi - lo) * np.random.default_rng(2).random((500, 3))

@@ -30,7 +30,7 @@ __all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
 TILE_METHODS = ("dense", "sparse", "octree", "tracking")
 
 #: Keywords passed to each tile's polygonizer.
-_TILE_OPTIONS = ("ambiguity", "normals", "batch_size", "memory_limit", "start_level", "safety", "corner_test")
+_TILE_OPTIONS = ("ambiguity", "normals", "project", "batch_size", "memory_limit", "start_level", "safety", "corner_test")
 
 #: Name of the manifest ``output=DIR`` writes.
 MANIFEST = "manifest.json"
@@ -266,7 +266,9 @@ def polygonize(
     **options
         Passed to :func:`implicitmesh.polygonize` per tile: ``ambiguity``, ``normals``,
         ``batch_size``, ``memory_limit`` (checked per tile), and the octree's ``start_level``,
-        ``safety``, ``corner_test``.
+        ``safety``, ``corner_test``. ``project=True`` moves the welded mesh's vertices onto the
+        surface as :func:`implicitmesh.polygonize` does, on the client with the whole field
+        (the tiles are welded by their lattice-edge vertices first); not with ``output``.
 
     Returns
     -------
@@ -301,6 +303,14 @@ def polygonize(
         field, bounds, options.get("ambiguity", "separate"), options.get("batch_size", 262144), options.get("memory_limit")
     )
     options["ambiguity"] = ambiguity
+    project = options.pop("project", False)
+    if not isinstance(project, (bool, np.bool_)):
+        raise ValueError(f"project: must be True or False, got {project!r}")
+    if project and output is not None:
+        raise ValueError("project: not with output (the tiles are written as marching cubes makes them)")
+    normals = options.get("normals", True)
+    if project:
+        options["normals"] = False  # taken at the projected vertices, after the weld
     bounds = np.asarray(bounds, dtype=np.float64)
     cells, origin, cell = _core.lattice(bounds, resolution)
     origin, cell = np.asarray(origin), np.asarray(cell)
@@ -348,7 +358,16 @@ def polygonize(
         tmp.write_text(json.dumps(manifest, indent=1))
         os.replace(tmp, output / MANIFEST)
         return output
-    return _weld([(e, e["v"], e["f"], e["n"]) for e in entries], info)
+    mesh = _weld([(e, e["v"], e["f"], e["n"]) for e in entries], info)
+    if not project:
+        return mesh
+    v, f, n, st = _core.project_mesh(
+        field, bounds, resolution, mesh.vertices, mesh.faces, normals=normals,
+        batch_size=options.get("batch_size", 262144),
+    )
+    mesh.stats["projection_evaluations"] = st["projection_evaluations"]
+    mesh.stats["normal_evaluations"] = mesh.stats.get("normal_evaluations", 0) + st["normal_evaluations"]
+    return Mesh(v, f, n, mesh.stats)
 
 
 def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], object] = False) -> Mesh:

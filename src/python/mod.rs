@@ -31,6 +31,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<polygonize::PyTessellator>()?;
     m.add_function(wrap_pyfunction!(polygonize::polygonize, m)?)?;
     m.add_function(wrap_pyfunction!(polygonize::lattice, m)?)?;
+    m.add_function(wrap_pyfunction!(polygonize::project_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(weld::weld_tiles, m)?)?;
     subdivision::register(m)?;
     Ok(())

@@ -385,6 +385,58 @@ pub fn polygonize<'py>(
     mesh_to_py(py, mesh, &stats, &lattice, &method)
 }
 
+/// Projects the vertices of a mesh made over the lattice of ``bounds`` and ``resolution``
+/// onto the field's zero set as ``polygonize(..., project=True)`` does (one Newton step of at
+/// most half a cell), with normals at the moved vertices when ``normals``. What
+/// :func:`implicitmesh.distributed.polygonize` runs on the welded mesh.
+///
+/// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
+/// stats dict)``.
+#[pyfunction]
+#[pyo3(signature = (field, bounds, resolution, vertices, faces, *, normals=true, batch_size=262144, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn project_mesh<'py>(
+    py: Python<'py>,
+    field: &Bound<'py, PyAny>,
+    bounds: &Bound<'py, PyAny>,
+    resolution: &Bound<'py, PyAny>,
+    vertices: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+    normals: bool,
+    batch_size: usize,
+    progress: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let field = FieldArg::extract(field)?;
+    let lattice = parse_lattice(bounds, resolution)?;
+    let mut settings = shared_settings("separate", normals, true, batch_size, None)?;
+    settings.project = true;
+    let mut mesh = crate::mesh::Mesh {
+        vertices: points(vertices, "vertices")?,
+        triangles: super::convert::triangles(faces, "faces")?,
+        normals: Vec::new(),
+    };
+    crate::error::check_finite_points("vertices", &mesh.vertices)?;
+    let nv = mesh.vertices.len();
+    if mesh.triangles.iter().flatten().any(|&i| i as usize >= nv) {
+        return Err(value_error(
+            "faces",
+            format!("indices must be below the {nv} vertices"),
+        ));
+    }
+    let f = &*polygonizer_field(&field, &lattice)?;
+    let on_caller = field.is_callable();
+    let result = run(py, progress, on_caller, || {
+        let mut stats = Stats::default();
+        crate::polygonize::finish_mesh(f, &mut mesh, &lattice, &settings, &mut stats)?;
+        Ok((MeshBuffers::new(mesh), stats))
+    });
+    if let Some(e) = field.take_error() {
+        return Err(e);
+    }
+    let (mesh, stats) = result?;
+    mesh_to_py(py, mesh, &stats, &lattice, "project")
+}
+
 /// Surface tracking with caches kept between calls (Triquet et al.): for animation, move the
 /// field and call :meth:`polygonize` again; in steady state nothing is reallocated.
 #[pyclass(name = "Tessellator", module = "implicitmesh")]
