@@ -178,6 +178,7 @@ def measure(a: argparse.Namespace) -> dict:
         methods = [m for ours in OURS for m in (ours, PEER[ours])
                    if not (m == "ferreus-128" and n > FERREUS_MAX_POINTS) and not (m == "ours-128" and n > FERREUS_MAX_POINTS)
                    and not (m == "ours-256-tol" and n < TOLERANCE_MIN_POINTS)]
+        methods = list(dict.fromkeys(methods))  # a peer shared by two of ours runs once
         for method in QUICK_METHODS if a.quick else methods:
             repeats = 1 if n >= ONCE else RUNS[a.quick]
             log(f"{method}, {n:,} points, {repeats} run(s)")
