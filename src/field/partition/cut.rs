@@ -7,8 +7,8 @@ use glam::DVec3;
 
 impl PartitionSurface {
     /// The surface with only the patches covering the octree leaves that points of the box
-    /// `[lo, hi]` fall in (a point is blended from its leaf's patches, or outside every support
-    /// evaluated by the nearest of them), in their order: at every point of the box it
+    /// `[lo, hi]` fall in (a point is blended from the patches of the leaf holding it clamped
+    /// into the root cube), in their order: at every point of the box it
     /// evaluates to the same bits, values and gradients, as `self`. The octree and the
     /// constraints are kept whole (the octree is built from the constraints).
     pub fn cut(&self, lo: DVec3, hi: DVec3) -> PartitionSurface {
