@@ -393,8 +393,9 @@ impl PyVariationalSurface {
     ///     The partition fit's patches: ``"max_per_leaf"`` (int, default 96: the octree splits
     ///     leaves holding more constraints), ``"max_patch"`` (int, default 400: and leaves whose
     ///     patch would hold more), ``"min_points"`` (int, default 256: smaller patches complete
-    ///     their system with constraints from further away; patches with no data in reach, with
-    ///     half as many) and ``"overlap"`` (float, default
+    ///     their system with constraints from further away; patches with no data in reach are
+    ///     planes that carry the sign of space, or for :meth:`interpolate` complete with half as
+    ///     many) and ``"overlap"`` (float, default
     ///     1.25: a patch's radius over its leaf's half-diagonal). Smaller patches fit faster and
     ///     risk spurious surface away from sparse data.
     /// merge_distance : float, optional

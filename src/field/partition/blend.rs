@@ -7,9 +7,15 @@
 //! covering patches, in increasing order, with the vectorised kernel sums of
 //! [`VariationalSurface`](crate::field::rbf::VariationalSurface). Every sum is per point and the
 //! patches are added in a fixed order, so a point's value has the same bits whatever the batch,
-//! its grouping or the number of threads. Where no support reaches (outside the octree's cube),
-//! the field is that of the patch, among those covering the point's nearest point of the cube,
-//! with the smallest |x − c_i| − R_i (the first such patch on ties).
+//! its grouping or the number of threads.
+//!
+//! Outside the octree's cube the field is its value at the nearest point of the cube,
+//! f(x) = f(π(x)) (π clamps each coordinate), and its gradient that of f ∘ π (the components
+//! along the clamped axes are zero). Every point of the cube lies inside the support of its
+//! leaf's patch (a patch's radius exceeds its leaf's half-diagonal), so the blend is defined
+//! there, and f keeps outside the cube the sign it has on the cube's faces: no surface appears
+//! away from the data, and |f(x)| ≤ |f(π(x))| stays below the distance to a surface inside the
+//! cube wherever it does at π(x), since π does not lengthen distances to points of the cube.
 
 use super::PartitionSurface;
 use glam::DVec3;
@@ -86,9 +92,11 @@ impl PartitionSurface {
         &self.cover[self.cover_start[l] as usize..self.cover_start[l + 1] as usize]
     }
 
-    /// Blend at points all in leaf `l`.
+    /// Blend at points all in leaf `l` (as clamped into the cube).
     fn blend_group(&self, l: u32, pts: &[DVec3], with_gradients: bool) -> (Vec<f64>, Vec<DVec3>) {
         let m = pts.len();
+        let (lo, hi) = self.tree.cube();
+        let clamped: Vec<DVec3> = pts.iter().map(|p| p.clamp(lo, hi)).collect();
         let mut sum = vec![0.0; m];
         let mut wsum = vec![0.0; m];
         let mut gsum = vec![DVec3::ZERO; if with_gradients { m } else { 0 }];
@@ -98,13 +106,12 @@ impl PartitionSurface {
         let mut sub_w = Vec::with_capacity(m);
         let mut fv = vec![0.0; m];
         let mut fg = vec![DVec3::ZERO; m];
-        let cover = self.covering(l);
-        for &i in cover {
+        for &i in self.covering(l) {
             let patch = &self.patches[i as usize];
             sub_idx.clear();
             sub_pts.clear();
             sub_w.clear();
-            for (k, p) in pts.iter().enumerate() {
+            for (k, p) in clamped.iter().enumerate() {
                 let (w, dw) = weight(*p, patch.centre, patch.radius);
                 if w > 0.0 {
                     sub_idx.push(k);
@@ -133,38 +140,15 @@ impl PartitionSurface {
                 }
             }
         }
-        let mut values = vec![0.0; m];
+        // Every clamped point lies inside its leaf's own support: wsum > 0.
+        let values: Vec<f64> = (0..m).map(|k| sum[k] / wsum[k]).collect();
         let mut grads = vec![DVec3::ZERO; if with_gradients { m } else { 0 }];
-        for k in 0..m {
-            if wsum[k] > 0.0 {
-                let f = sum[k] / wsum[k];
-                values[k] = f;
-                if with_gradients {
-                    grads[k] = (gsum[k] - gw[k] * f) / wsum[k];
-                }
-            } else {
-                // Outside every support: the nearest patch alone.
-                let p = pts[k];
-                let near = cover
-                    .iter()
-                    .copied()
-                    .min_by(|&a, &b| {
-                        let g = |i: u32| {
-                            let q = &self.patches[i as usize];
-                            (p - q.centre).length() - q.radius
-                        };
-                        g(a).total_cmp(&g(b)).then(a.cmp(&b))
-                    })
-                    .expect("every leaf is covered by its own patch");
-                let fit = &self.patches[near as usize].fit;
-                let (mut v, mut g) = ([0.0], [DVec3::ZERO]);
-                if with_gradients {
-                    fit.eval_on_this_thread(&[p], &mut v, Some(&mut g));
-                    grads[k] = g[0];
-                } else {
-                    fit.eval_on_this_thread(&[p], &mut v, None);
-                }
-                values[k] = v[0];
+        if with_gradients {
+            for k in 0..m {
+                let g = (gsum[k] - gw[k] * values[k]) / wsum[k];
+                // f ∘ π does not change along the axes where π moved the point.
+                let moved = pts[k].cmpne(clamped[k]);
+                grads[k] = DVec3::select(moved, DVec3::ZERO, g);
             }
         }
         (values, grads)

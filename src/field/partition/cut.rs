@@ -9,8 +9,8 @@ use glam::DVec3;
 
 impl PartitionSurface {
     /// The surface with only the patches covering the octree leaves that points of the box
-    /// `[lo, hi]` fall in (a point is blended from its leaf's patches, or outside every support
-    /// evaluated by the nearest of them), in their order, the octree pruned to the box
+    /// `[lo, hi]` fall in (a point is blended from the patches of the leaf holding it clamped
+    /// into the root cube), in their order, the octree pruned to the box
     /// ([`super::octree::Octree::pruned_to_box`]), and the constraints inside the kept
     /// patches' supports, in their order (at least one data point, for its bounds): at every
     /// point of the box it evaluates to the same bits, values and gradients, as `self`.

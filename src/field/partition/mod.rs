@@ -9,7 +9,9 @@
 //!   half-diagonal around its centre, fitted with r³ + linear (as
 //!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball
 //!   (completed, when they are fewer than [`PartitionSettings::min_points`], by constraints spread over a
-//!   larger ball, from the subsampled levels of [`coarse`]); patches are solved in parallel.
+//!   larger ball, from the subsampled levels of [`coarse`]; a ball with no constraint, in a
+//!   fit with normal constraints, gets a plane that carries the sign of space, [`empty`]);
+//!   patches are solved in parallel.
 //! - [`blend`]: f = Σ w_i f_i / Σ w_i with compactly supported C² weights. Each patch whose
 //!   weight is non-zero at a constraint interpolates it, so the blend interpolates every
 //!   constraint to the patches' residual.
@@ -17,6 +19,7 @@
 pub mod blend;
 pub mod coarse;
 mod cut;
+pub mod empty;
 pub mod octree;
 mod parts;
 pub mod patches;
@@ -204,7 +207,8 @@ impl PartitionSurface {
             half,
             settings.max_per_leaf,
         );
-        let supports = patches::supports(&tree, &c.points, &levels, settings);
+        let planes = empty::oriented(&c);
+        let supports = patches::supports(&tree, &c.points, &levels, settings, planes);
         let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
             + (c.points.len() * 48) as u64

@@ -3,10 +3,12 @@
 //! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
 //! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], the
 //! system is completed with up to max(`max_patch` − inside, `max_patch` / 2) constraints outside
-//! it, spread over a larger ball (see [`super::coarse`]); a patch with no constraint in its ball,
-//! which only carries the field's sign away from the data, with up to `min_points` / 2.
+//! it, spread over a larger ball (see [`super::coarse`]). A patch with no constraint in its ball
+//! only carries the field's sign away from the data: in fits with normal constraints it is a
+//! plane ([`super::empty`]), otherwise completed with up to `min_points` / 2.
 
 use super::coarse::Level;
+use super::empty;
 use super::octree::Octree;
 use super::PartitionSettings;
 use crate::error::Result;
@@ -42,7 +44,15 @@ pub struct Support {
 }
 
 impl Support {
+    /// Whether the patch is the plane of [`empty`]: no constraint inside, no completion.
+    pub fn is_plane(&self) -> bool {
+        self.inside == 0 && self.extra.is_none()
+    }
+
     pub fn size(&self) -> usize {
+        if self.is_plane() {
+            return empty::PLANE_POINTS;
+        }
         self.inside + self.extra.map_or(0, |e| e.2)
     }
 }
@@ -56,12 +66,14 @@ pub const SPARSE_LEAF: usize = 16;
 /// from any coarse level, the others from one in 8^k (see [`super::coarse`]).
 pub const FAR_DATA: f64 = 0.95;
 
-/// The support of each leaf's patch.
+/// The support of each leaf's patch; with `planes`, supports holding no constraint get no
+/// completion (their patch is a plane, see [`empty`]).
 pub fn supports(
     tree: &Octree,
     points: &[DVec3],
     levels: &[Level],
     settings: &PartitionSettings,
+    planes: bool,
 ) -> Vec<Support> {
     let want = settings.min_points.min(points.len());
     tree.leaves
@@ -79,7 +91,7 @@ pub fn supports(
             // Leaves with (almost) no constraints of their own see the data only at the edge
             // of their support: those are completed too, however many constraints it holds.
             let own = (n.end - n.start) as usize;
-            if inside >= want && own >= SPARSE_LEAF {
+            if (inside >= want && own >= SPARSE_LEAF) || (inside == 0 && planes) {
                 return s;
             }
             // A ball reaching one support radius past the `want`-th nearest constraint.
@@ -177,6 +189,17 @@ pub fn fit(
                 t.check()?;
             }
             let (centre, radius) = (s.centre, s.radius);
+            if s.is_plane() {
+                let (pts, vals) = empty::plane(c, tree, centre, radius);
+                let fit = VariationalSurface::fit_patch(pts, vals, &rbf_settings, Par::Seq)?;
+                return Ok(Patch {
+                    centre,
+                    radius,
+                    inside: 0,
+                    size: empty::PLANE_POINTS,
+                    fit,
+                });
+            }
             let mut idx = Vec::with_capacity(s.size());
             tree.for_each_within(&c.points, centre, radius, |i| idx.push(i));
             let mut outside = Vec::new();

@@ -69,7 +69,11 @@ fn patches_hold_every_constraint_of_their_support() {
             .filter(|q| (**q - p.centre).length_squared() <= p.radius * p.radius)
             .count();
         assert_eq!(p.inside, inside, "patch {i}");
-        assert!(p.size >= p.inside.max(16), "patch {i}");
+        if p.inside == 0 {
+            assert_eq!(p.size, empty::PLANE_POINTS, "patch {i}");
+        } else {
+            assert!(p.size >= p.inside.max(16), "patch {i}");
+        }
         assert!(
             p.size <= s.settings().max_patch * 3 / 2,
             "patch {i}: {}",
@@ -118,8 +122,8 @@ fn gradient_matches_central_differences() {
     let s = torus_surface();
     let mut pts = random_points(300, -0.95, 0.95, 12);
     let inner = gradient_error(&s, &pts, 1e-6);
-    // And points outside every support (the nearest patch alone), where the kernel sums cancel
-    // more: a longer step.
+    // And points outside the cube, where f is its value at the nearest point of the cube: a
+    // longer step.
     let far = random_points(20, 3.0, 4.0, 13);
     let outer = gradient_error(&s, &far, 1e-4);
     assert!(inner < 1e-5 && outer < 1e-5, "{inner} {outer}");
@@ -211,4 +215,55 @@ fn parts_give_back_the_same_surface() {
     let mut bad = s.parts();
     bad.constraints.values.pop();
     assert!(PartitionSurface::from_parts(bad).is_err());
+}
+
+/// Outside the octree's cube f is its value at the nearest point of the cube (same bits), its
+/// gradient has no component along the clamped axes, and it is positive outside the torus.
+#[test]
+fn outside_the_cube_the_field_is_its_value_at_the_nearest_point_of_the_cube() {
+    let s = torus_surface();
+    let (lo, hi) = s.octree().cube();
+    let mut outside = 0;
+    for x in random_points(400, -3.0, 3.0, 15) {
+        let p = x.clamp(lo, hi);
+        assert_eq!(s.value(x).to_bits(), s.value(p).to_bits(), "{x}");
+        let (gx, gp) = (s.gradient(x), s.gradient(p));
+        for a in 0..3 {
+            let expected = if x[a] == p[a] { gp[a] } else { 0.0 };
+            assert_eq!(gx[a].to_bits(), expected.to_bits(), "{x} axis {a}");
+        }
+        if x != p {
+            assert!(s.value(x) > 0.0, "{x}");
+            outside += 1;
+        }
+    }
+    assert!(outside > 300, "{outside}");
+}
+
+/// The patches whose support holds no constraint are planes with the torus's sign on their
+/// whole support (checked at its centre and 6 points on its rim), growing away from the data.
+#[test]
+fn empty_patches_carry_the_sign_of_space() {
+    let s = torus_surface();
+    let torus = |x: DVec3| DVec3::new(x.truncate().length() - 0.6, x.z, 0.0).length() - 0.25;
+    let mut planes = 0;
+    for p in s.patches().iter().filter(|p| p.inside == 0) {
+        planes += 1;
+        let side = torus(p.centre).signum();
+        let rim = [
+            DVec3::X,
+            DVec3::NEG_X,
+            DVec3::Y,
+            DVec3::NEG_Y,
+            DVec3::Z,
+            DVec3::NEG_Z,
+        ];
+        for x in std::iter::once(p.centre).chain(rim.iter().map(|e| p.centre + *e * p.radius)) {
+            let v = p.fit.value(x);
+            assert_eq!(v.signum(), side, "{} at {x}", p.centre);
+            // The slope w/d = 3/4 along the direction away from the nearest data point.
+            assert!((p.fit.gradient(x).length() - 0.75).abs() < 1e-9);
+        }
+    }
+    assert!(planes > 10, "{planes}");
 }

@@ -1,0 +1,86 @@
+//! The patches of leaves whose support holds no constraint, for fits with normal constraints:
+//! a plane that carries the sign of space there, instead of an interpolant of far constraints.
+//!
+//! Such a patch has zero weight at every constraint, so it cannot change the interpolation; it
+//! only decides the sign of f away from the data. An interpolant of constraints gathered from
+//! further away extrapolates over the whole support, and where the data on one side is a thin
+//! part (a leg under a table) it turns negative far outside the body: spurious components. The
+//! plane is f_e(x) = σ ρ (x − q)·u, with q the data point nearest to the patch's centre c,
+//! u = (c − q)/|c − q|, ρ = |w_q/d_q| (the slope of q's normal constraint) and σ the side of the
+//! surface c is on: the sign of Σ_j sign(w_j) (c − q_j)·n_j / |c − q_j| over the [`NEAREST`] data
+//! points nearest to c. Every point of the support is further than its radius from q along u, so
+//! f_e has the sign σ throughout, and grows with the distance from the data as the fitted field
+//! does. (On the support, (x − q)·u ≥ |c − q| − R > 0, since q lies outside it.)
+
+use super::octree::Octree;
+use crate::field::constraints::Constraints;
+use glam::DVec3;
+
+/// Data points that vote on the side of the surface a patch is on.
+pub const NEAREST: usize = 8;
+
+/// Points a plane patch interpolates.
+pub const PLANE_POINTS: usize = 5;
+
+/// Whether `c` holds normal constraints: data points `0..boundary`, the normal constraint of
+/// point `j` at `boundary + j`, with its offset.
+pub fn oriented(c: &Constraints) -> bool {
+    c.boundary > 0 && c.offsets.len() == c.boundary && c.points.len() >= 2 * c.boundary
+}
+
+/// The points and values, a linear function of position, whose interpolant (with a linear
+/// polynomial) is the plane of the empty patch around `centre` with support `radius`. `c` must
+/// be [`oriented`], `tree` its octree.
+pub fn plane(c: &Constraints, tree: &Octree, centre: DVec3, radius: f64) -> (Vec<DVec3>, Vec<f64>) {
+    let b = c.boundary;
+    // The 2 NEAREST nearest constraints hold about NEAREST data points (a normal constraint
+    // lies near its data point); more where inner constraints crowd them out.
+    let mut k = 2 * NEAREST;
+    let mut data: Vec<usize> = Vec::with_capacity(k);
+    while data.is_empty() {
+        k = k.min(c.points.len());
+        let reach = tree.kth_nearest_distance(&c.points, centre, k);
+        tree.for_each_within(&c.points, centre, reach, |i| {
+            let i = i as usize;
+            if i < 2 * b {
+                data.push(i % b);
+            }
+        });
+        k *= 2;
+    }
+    let distance = |j: usize| (c.points[j] - centre).length();
+    data.sort_unstable_by(|&a, &e| distance(a).total_cmp(&distance(e)).then(a.cmp(&e)));
+    data.dedup();
+    data.truncate(NEAREST);
+    let nearest = data[0];
+    let slope = |j: usize| c.values[b + j] / c.offsets[j];
+    let vote: f64 = data
+        .iter()
+        .map(|&j| {
+            let (q, n) = (
+                c.points[j],
+                (c.points[b + j] - c.points[j]).normalize_or_zero(),
+            );
+            slope(j).signum() * (centre - q).normalize_or_zero().dot(n)
+        })
+        .sum();
+    let side = if vote < 0.0 { -1.0 } else { 1.0 };
+    let q = c.points[nearest];
+    let u = (centre - q).normalize_or_zero();
+    let gradient = u * (side * slope(nearest).abs());
+    // A tetrahedron around the centre and the centre: the interpolant of linear values at
+    // five points in general position is that linear function.
+    let h = 0.5 * radius / 3f64.sqrt();
+    let points: Vec<DVec3> = [
+        DVec3::ZERO,
+        DVec3::new(1.0, 1.0, 1.0),
+        DVec3::new(1.0, -1.0, -1.0),
+        DVec3::new(-1.0, 1.0, -1.0),
+        DVec3::new(-1.0, -1.0, 1.0),
+    ]
+    .iter()
+    .map(|t| centre + *t * h)
+    .collect();
+    let values = points.iter().map(|x| gradient.dot(*x - q)).collect();
+    (points, values)
+}
