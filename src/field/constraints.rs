@@ -280,8 +280,8 @@ fn place_distinct(
 
     let inner = if settings.thin_reach_over_d > 0.0 {
         let depths =
-            thin::depths_behind(points, &normals, settings.thin_reach_over_d * d, FACING_COS);
-        let keep = thin::inner_points(points, &normals, &depths);
+            thin::depths_behind(points, normals, settings.thin_reach_over_d * d, FACING_COS);
+        let keep = thin::inner_points(points, normals, &depths);
         keep.into_iter().map(|i| (i, 0.5 * depths[i])).collect()
     } else {
         Vec::new()
