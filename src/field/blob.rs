@@ -9,6 +9,8 @@
 //! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
+mod interior;
+
 use super::blob_kernel::{with_profile, BlobKernel, Profile, Triquet};
 use super::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
@@ -1279,6 +1281,11 @@ impl BlockField for BlobField {
             if let Some(s) = first {
                 return s;
             }
+        }
+        // Inside the surface, the bounds over boxes of many points are loose (each term's
+        // smallest value is at the box's farthest corner): bound pairs of points instead.
+        if self.block_inside(Isa::detect(), list, &BlockCoords::new(lattice, lo, n)) {
+            return BlockSign::Inside;
         }
         BlockSign::Mixed
     }
