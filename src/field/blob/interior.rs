@@ -21,8 +21,12 @@
 //! is a bound too, and the loop stops once every pair is above the threshold.
 
 use super::{BlobField, BlockCoords};
+#[cfg(target_arch = "x86_64")]
+use crate::field::blob_kernel::LaneProfile;
 use crate::field::blob_kernel::{with_profile, Profile};
 use crate::field::BLOCK_POINTS;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::lanes::F64s;
 use crate::simd::Isa;
 
 /// Pairs of neighbouring points per block row along x.
@@ -31,8 +35,8 @@ const PAIRS: usize = BLOCK_POINTS / 2;
 /// Primitives summed between two checks of whether every pair is already inside.
 const CHECK_EVERY: usize = 16;
 
-/// Lower bounds on the potential at a block's pairs of points: `[z][x + 4y]`.
-type Pairs = [[f64; PAIRS * BLOCK_POINTS]; BLOCK_POINTS];
+/// Lower bounds on the potential at a block's pairs of points: `[z][y][pair along x]`.
+type Pairs = [[[f64; PAIRS]; BLOCK_POINTS]; BLOCK_POINTS];
 
 /// The larger value of each pair of neighbouring lanes.
 #[inline(always)]
@@ -50,20 +54,39 @@ impl BlobField {
             // SAFETY: the caller passes an instruction set the CPU has (AVX-512 implies AVX2).
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2 | Isa::Avx512 => unsafe { self.block_inside_avx2::<K>(list, block) },
-            _ => self.block_inside_with::<K>(list, block),
+            _ => self.block_inside_with(list, block, |row, qx, k, a| {
+                for (v, q) in row.iter_mut().zip(qx) {
+                    *v += a * K::value(k - q);
+                }
+            }),
         })
     }
 
-    /// [`BlobField::block_inside_with`] compiled for AVX2 (the compiler's vectors).
+    /// [`BlobField::block_inside_with`] with a row of pairs per AVX2 vector
+    /// ([`LaneProfile::value_lanes`], the same bits).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn block_inside_avx2<K: Profile>(&self, list: &[u32], block: &BlockCoords) -> bool {
-        self.block_inside_with::<K>(list, block)
+    unsafe fn block_inside_avx2<K: LaneProfile>(&self, list: &[u32], block: &BlockCoords) -> bool {
+        use std::arch::x86_64::__m256d;
+        self.block_inside_with(list, block, |row, qx, k, a| {
+            // SAFETY: AVX2 is enabled here; a row holds four values, one vector.
+            unsafe {
+                let t = __m256d::splat(k).sub(__m256d::load(qx));
+                let v = __m256d::load(row).add(__m256d::splat(a).mul(K::value_lanes(t)));
+                v.store(row);
+            }
+        })
     }
 
-    /// [`BlobField::block_inside`] with the profile `K`.
+    /// [`BlobField::block_inside`] with `row_fn` adding one primitive's terms A·w(k − dx²/R²)
+    /// to a row of pairs (from the farthest dx²/R² per pair, the row's k and A).
     #[inline(always)]
-    fn block_inside_with<K: Profile>(&self, list: &[u32], block: &BlockCoords) -> bool {
+    fn block_inside_with(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        row_fn: impl Fn(&mut [f64; PAIRS], &[f64; PAIRS], f64, f64),
+    ) -> bool {
         let mut scale = self.threshold.abs();
         for &i in list {
             let a = self.strengths[i as usize];
@@ -74,23 +97,20 @@ impl BlobField {
             scale += a;
         }
         let goal = self.threshold + 1e-9 * scale;
-        let above = |low: &Pairs| low.iter().flatten().all(|&v| v > goal);
+        let above = |low: &Pairs| low.iter().flatten().flatten().all(|&v| v > goal);
         let BlockCoords { xs, ys, zs, .. } = block;
-        let mut low: Pairs = [[0.0; PAIRS * BLOCK_POINTS]; BLOCK_POINTS];
+        let mut low: Pairs = [[[0.0; PAIRS]; BLOCK_POINTS]; BLOCK_POINTS];
         for (m, &i) in list.iter().enumerate() {
             let (c, inv, a, _) = self.primitive(i);
             let qx = farthest(std::array::from_fn(|l| {
                 ((xs[l] - c.x) * (xs[l] - c.x)) * inv
             }));
-            let dy2: [f64; 8] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
+            let dy2: [f64; BLOCK_POINTS] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
             for (plane, z) in low.iter_mut().zip(zs) {
                 let dz = z - c.z;
                 let dz2 = dz * dz;
-                for (row, dy2) in plane.chunks_exact_mut(PAIRS).zip(dy2) {
-                    let k = 1.0 - (dy2 + dz2) * inv;
-                    for (v, q) in row.iter_mut().zip(qx) {
-                        *v += a * K::value(k - q);
-                    }
+                for (row, dy2) in plane.iter_mut().zip(dy2) {
+                    row_fn(row, &qx, 1.0 - (dy2 + dz2) * inv, a);
                 }
             }
             if m % CHECK_EVERY == CHECK_EVERY - 1 && above(&low) {
