@@ -129,16 +129,22 @@ impl BlobField {
         let first = list.iter().filter(|&&i| near(i));
         let then = list.iter().filter(|&&i| !near(i));
         for (m, &i) in first.chain(then).enumerate() {
-            let (c, inv, a, _) = self.primitive(i);
+            let (c, inv, a, r) = self.primitive(i);
             let qx = farthest(std::array::from_fn(|l| {
                 ((xs[l] - c.x) * (xs[l] - c.x)) * inv
             }));
             let dy2: [f64; BLOCK_POINTS] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
-            for (plane, z) in low.iter_mut().zip(zs) {
-                let dz = z - c.z;
+            // Terms left out are bounded below by 0: only the planes and rows the primitive
+            // reaches are summed (as in the splat).
+            let nearest = qx.iter().fold(f64::INFINITY, |m, &q| m.min(q));
+            for k in block.planes(c.z, r) {
+                let dz = zs[k] - c.z;
                 let dz2 = dz * dz;
-                for (row, dy2) in plane.iter_mut().zip(dy2) {
-                    row_fn(row, &qx, 1.0 - (dy2 + dz2) * inv, a);
+                for (row, dy2) in low[k].iter_mut().zip(dy2) {
+                    let k = 1.0 - (dy2 + dz2) * inv;
+                    if k > nearest {
+                        row_fn(row, &qx, k, a);
+                    }
                 }
             }
             if m % CHECK_EVERY == CHECK_EVERY - 1 && above(&low) {
