@@ -11,9 +11,12 @@ s/4: ``BlobField.from_particles(P, s/2)`` (splashsurf's colour field, the cubic 
 lies on a flat face of the fluid (see :func:`triquet_threshold`), each with normals off and on.
 
 Every case runs in a fresh process (its peak resident size VmHWM is its own, particles included);
-times are wall-clock seconds from particles to mesh, medians over the runs.
+times are wall-clock seconds from particles to mesh, medians over the runs. The results (JSON and
+markdown) are written again as each case finishes, so a run stopped early keeps what it measured.
+``--sizes`` and ``--cases`` run some cases only and keep the other cases already in the results
+(run the 10⁶ and the 4·10⁶ particles separately, say).
 
-    python -m benchmarks.bench_particles [--quick] [--results DIR]
+    python -m benchmarks.bench_particles [--quick] [--results DIR] [--sizes N,...] [--cases NAME,...]
     python -m benchmarks.bench_particles one LAYOUT METHOD PARTICLES   # one JSON line
 """
 
@@ -26,7 +29,8 @@ import time
 from functools import lru_cache
 
 from benchmarks.bench_scale import median, vmhwm_mib
-from benchmarks.timing import RunRecord, run_case_process, fmt_ratio, fmt_s, md_table, run_markdown, run_section
+from benchmarks.timing import (RunRecord, fmt_ratio, fmt_s, load_raw, md_table, results_dir, run_case_process,
+                               run_markdown, save_raw, section_parser)
 
 #: Particle spacing.
 S = 0.01
@@ -39,6 +43,8 @@ PEERS = ("splashsurf-f32", "splashsurf-f64")
 RUNS = {False: 3, True: 1}
 #: The colour field's threshold (splashsurf's default).
 ISO = 0.6
+#: The results' name: NAME.json and NAME.md in the results directory.
+NAME = "particles"
 
 
 def lattice_ball(radius: float, center, rng):
@@ -186,17 +192,47 @@ def log(msg: str) -> None:
     print(f"[bench_particles] {msg}", file=sys.stderr, flush=True)
 
 
-def measure(a: argparse.Namespace) -> dict:
+def selected(a: argparse.Namespace) -> list[tuple[str, str, int]]:
+    """The (layout, method, particles) cases ``a`` asks for, in the order they run."""
+    sizes = a.sizes or SIZES[a.quick]
+    names = a.cases or []
+    unknown = [c for c in names if c not in LAYOUTS + PEERS + OURS
+               and not (c.count("/") == 1 and c.split("/")[0] in LAYOUTS and c.split("/")[1] in PEERS + OURS)]
+    if unknown:
+        raise ValueError(f"unknown case {unknown[0]!r}: give layouts ({', '.join(LAYOUTS)}), methods "
+                         f"({', '.join(PEERS + OURS)}) or LAYOUT/METHOD")
+    wanted = lambda layout, method: not names or bool({layout, method, f"{layout}/{method}"} & set(names))
+    return [(layout, method, n) for layout in LAYOUTS for n in sizes for method in PEERS + OURS
+            if wanted(layout, method)]
+
+
+def case_order(case: dict) -> tuple:
+    """Sort key of a result: layout, particles asked for, method, in the order they run."""
+    return (LAYOUTS.index(case["layout"]), case["n"], (PEERS + OURS).index(case["method"]))
+
+
+def measure(a: argparse.Namespace, save) -> dict:
+    """Runs the cases ``a`` selects; after each, calls ``save`` with the results so far. With
+    ``--sizes`` or ``--cases``, the cases of ``a.previous`` that this run does not repeat are
+    kept."""
     run = RunRecord("benchmarks.bench_particles", a.quick)
-    cases = []
-    for layout in LAYOUTS:
-        for n in SIZES[a.quick]:
-            for method in PEERS + OURS:
-                log(f"{layout}, {method}, {n:,} particles, {RUNS[a.quick]} run(s)")
-                cases.append({"layout": layout, "method": method, "n": n,
-                              "runs": [run_one(layout, method, n) for _ in range(RUNS[a.quick])]})
-    return {"spacing": S, "iso_surface_threshold": ISO, "cases": cases,
-            "run": run.finish(("numpy", "pysplashsurf", "implicitmesh"))}
+    todo = selected(a)
+    kept = [c for c in (a.previous or {}).get("cases", [])
+            if (c["layout"], c["method"], c["n"]) not in set(todo)]
+    earlier = [r for r in (a.previous or {}).get("earlier_runs", []) + [(a.previous or {}).get("run")] if r]
+    cases: list = []
+
+    def raw() -> dict:
+        return {"spacing": S, "iso_surface_threshold": ISO, "cases": sorted(kept + cases, key=case_order),
+                "run": run.finish(("numpy", "pysplashsurf", "implicitmesh")),
+                "earlier_runs": earlier if kept else []}
+
+    for layout, method, n in todo:
+        log(f"{layout}, {method}, {n:,} particles, {RUNS[a.quick]} run(s)")
+        cases.append({"layout": layout, "method": method, "n": n,
+                      "runs": [run_one(layout, method, n) for _ in range(RUNS[a.quick])]})
+        save(raw())
+    return raw()
 
 
 def render(raw: dict) -> str:
@@ -232,11 +268,23 @@ def render(raw: dict) -> str:
         "ours: above 1, ours is faster.",
         "",
         run_markdown(run),
+        *[f"- cases kept from the run of {r['date']} (`{r['command']}`)" for r in raw.get("earlier_runs", [])],
         "",
         md_table(["layout", "particles", "method", "seconds", "splashsurf f32 / ours", "peak MiB", "triangles",
                   "area", "volume"], rows, "llrrrrrrr"),
         "",
     ])
+
+
+def count_list(text: str) -> list[int]:
+    """Particle counts from ``N,N,...`` (``1e6`` and ``1_000_000`` both read)."""
+    try:
+        counts = [int(float(t)) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected particle counts like 1000000,4e6, got {text!r}") from None
+    if not counts or min(counts) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive particle counts, got {text!r}")
+    return counts
 
 
 def main() -> int:
@@ -248,8 +296,28 @@ def main() -> int:
             return 2
         print(json.dumps(one(sys.argv[2], sys.argv[3], int(sys.argv[4]))))
         return 0
-    return run_section("particles", measure, render, __doc__.split("\n")[0],
-                       "2·10⁴ particles, one run per case")
+    p = section_parser(__doc__.split("\n")[0], "2·10⁴ particles, one run per case")
+    p.add_argument("--sizes", type=count_list, metavar="N,...",
+                   help="particle counts to run (default 10⁵, 10⁶ and 4·10⁶; with --quick 2·10⁴)")
+    p.add_argument("--cases", type=lambda t: [c.strip() for c in t.split(",") if c.strip()], metavar="NAME,...",
+                   help=f"only these layouts ({', '.join(LAYOUTS)}), methods ({', '.join(PEERS + OURS)}) or "
+                        "LAYOUT/METHOD pairs")
+    a = p.parse_args()
+    try:
+        selected(a)
+    except ValueError as e:
+        p.error(str(e))
+    results = results_dir(a.results, a.quick)
+    a.previous = load_raw(results, NAME) if (a.sizes or a.cases) else None
+
+    def save(raw: dict) -> None:
+        save_raw(results, NAME, raw)
+        (results / f"{NAME}.md").write_text(render(load_raw(results, NAME)))
+
+    save(measure(a, save))
+    sys.stdout.write((results / f"{NAME}.md").read_text())
+    log(f"wrote {results / NAME}.json and .md")
+    return 0
 
 
 if __name__ == "__main__":

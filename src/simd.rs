@@ -83,6 +83,8 @@ pub(crate) mod lanes {
         unsafe fn lt(self, o: Self) -> u32;
         /// Bit per lane: `self > o` (false for NaN).
         unsafe fn gt(self, o: Self) -> u32;
+        /// Lane by lane `self <= o ? yes : no` (so `no` where `self` or `o` is NaN).
+        unsafe fn select_le(self, o: Self, yes: Self, no: Self) -> Self;
     }
 
     macro_rules! binary {
@@ -141,6 +143,11 @@ pub(crate) mod lanes {
         unsafe fn gt(self, o: Self) -> u32 {
             _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(self, o)) as u32
         }
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        unsafe fn select_le(self, o: Self, yes: Self, no: Self) -> Self {
+            _mm256_blendv_pd(no, yes, _mm256_cmp_pd::<_CMP_LE_OQ>(self, o))
+        }
     }
 
     impl F64s for __m512d {
@@ -186,6 +193,11 @@ pub(crate) mod lanes {
         #[target_feature(enable = "avx512f")]
         unsafe fn gt(self, o: Self) -> u32 {
             _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self, o) as u32
+        }
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn select_le(self, o: Self, yes: Self, no: Self) -> Self {
+            _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_LE_OQ>(self, o), no, yes)
         }
     }
 }

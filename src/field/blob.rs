@@ -9,6 +9,10 @@
 //! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
+mod interior;
+
+#[cfg(target_arch = "x86_64")]
+use super::blob_kernel::LaneProfile;
 use super::blob_kernel::{with_profile, BlobKernel, Profile, Triquet};
 use super::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
@@ -556,11 +560,64 @@ impl BlobField {
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2 if is_triquet::<K>() => unsafe { self.splat_block_avx2(list, block, out) },
-            // SAFETY: as above (AVX-512 implies AVX2).
+            // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 | Isa::Avx512 => unsafe { self.splat_block_generic_avx2::<K>(list, block, out) },
+            Isa::Avx512 => unsafe { self.splat_block_lanes_avx512::<K>(list, block, out) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { self.splat_block_lanes_avx2::<K>(list, block, out) },
             Isa::Generic => self.splat_block_generic::<K>(list, block, out),
         })
+    }
+
+    /// [`BlobField::splat_block_generic`] with each row's terms `V::LANES` at a time
+    /// ([`LaneProfile::value_lanes`]): the same operations in the same order, so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn splat_block_lanes<K: LaneProfile, V: F64s>(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        out: &mut [f64; 512],
+    ) {
+        self.splat_block_with(list, block, out, |row, qx, k, a| {
+            // SAFETY: the caller runs where V's feature is; a row holds 8 values, a multiple of
+            // V::LANES.
+            unsafe {
+                let (k, a) = (V::splat(k), V::splat(a));
+                for h in (0..BLOCK_POINTS).step_by(V::LANES) {
+                    let t = k.sub(V::load(&qx[h..]));
+                    let v = V::load(&row[h..]).add(a.mul(K::value_lanes(t)));
+                    v.store(&mut row[h..]);
+                }
+            }
+        })
+    }
+
+    /// [`BlobField::splat_block_lanes`] with AVX-512, a row per vector.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn splat_block_lanes_avx512<K: LaneProfile>(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        out: &mut [f64; 512],
+    ) {
+        // SAFETY: AVX-512F is enabled here.
+        unsafe { self.splat_block_lanes::<K, std::arch::x86_64::__m512d>(list, block, out) }
+    }
+
+    /// [`BlobField::splat_block_lanes`] with AVX2, a row per two vectors.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn splat_block_lanes_avx2<K: LaneProfile>(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+        out: &mut [f64; 512],
+    ) {
+        // SAFETY: AVX2 is enabled here.
+        unsafe { self.splat_block_lanes::<K, std::arch::x86_64::__m256d>(list, block, out) }
     }
 
     /// [`BlobField::splat_block_with`] with the profile's scalar row loop.
@@ -576,19 +633,6 @@ impl BlobField {
                 *v += a * K::value(k - q);
             }
         })
-    }
-
-    /// [`BlobField::splat_block_generic`] compiled for AVX2 (the compiler's vectors; no fused
-    /// multiply-adds, so the same bits).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn splat_block_generic_avx2<K: Profile>(
-        &self,
-        list: &[u32],
-        block: &BlockCoords,
-        out: &mut [f64; 512],
-    ) {
-        self.splat_block_generic::<K>(list, block, out)
     }
 
     /// [`BlobField::gradient_over`] at each point, with the vector path of `isa` (which the CPU
@@ -1279,6 +1323,11 @@ impl BlockField for BlobField {
             if let Some(s) = first {
                 return s;
             }
+        }
+        // Inside the surface, the bounds over boxes of many points are loose (each term's
+        // smallest value is at the box's farthest corner): bound pairs of points instead.
+        if self.block_inside(Isa::detect(), list, &BlockCoords::new(lattice, lo, n)) {
+            return BlockSign::Inside;
         }
         BlockSign::Mixed
     }

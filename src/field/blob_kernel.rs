@@ -12,6 +12,8 @@
 //! 21/(2π) for Wendland C2.
 
 use crate::error::{Error, Result};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::lanes::F64s;
 
 /// The kernel a blob field sums (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -88,6 +90,7 @@ impl BlobKernel {
 pub trait Profile: 'static {
     /// w at t = 1 − q² as rounded by the caller; +0.0 for t ≤ 0.
     fn value(t: f64) -> f64;
+
     /// g(s) = −w′(q)/(q·GRADIENT_SCALE) at s = 1 − q² (unclamped): the gradient of A·w(|p − c|/R)
     /// is −GRADIENT_SCALE·(A/R²)·g(s)·(p − c). +0.0 for s ≤ 0.
     fn slope(s: f64) -> f64;
@@ -120,6 +123,18 @@ impl Profile for Triquet {
 fn q_of(t: f64) -> (f64, f64) {
     let q2 = 1.0 - t.max(0.0);
     (q2, q2.max(0.0).sqrt())
+}
+
+/// [`q_of`] of each lane (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn q_of_lanes<V: F64s>(t: V) -> (V, V) {
+    // SAFETY: the caller runs where V's feature is.
+    unsafe {
+        let zero = V::splat(0.0);
+        let q2 = V::splat(1.0).sub(t.max(zero));
+        (q2, q2.max(zero).sqrt())
+    }
 }
 
 /// 1 − 6q² + 6q³ for q ≤ 1/2, 2(1 − q)³ beyond.
@@ -173,6 +188,58 @@ impl Profile for Wendland {
     const GRADIENT_SCALE: f64 = 1.0;
     /// 20q(1 − q)³ peaks at q = 1/4: 135/64.
     const MAX_SLOPE: f64 = 2.109_375;
+}
+
+/// A [`Profile`] evaluated a vector of lanes at a time.
+#[cfg(target_arch = "x86_64")]
+pub(crate) trait LaneProfile: Profile {
+    /// [`Profile::value`] of each lane: the same operations in the same order, so the same
+    /// bits. The caller runs where `V`'s feature is.
+    unsafe fn value_lanes<V: F64s>(t: V) -> V;
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneProfile for Triquet {
+    #[inline(always)]
+    unsafe fn value_lanes<V: F64s>(t: V) -> V {
+        // SAFETY: the caller runs where V's feature is.
+        unsafe {
+            let t = t.max(V::splat(0.0));
+            t.mul(t)
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneProfile for CubicSpline {
+    /// Both branches, then each lane's.
+    #[inline(always)]
+    unsafe fn value_lanes<V: F64s>(t: V) -> V {
+        // SAFETY: the caller runs where V's feature is.
+        unsafe {
+            let (q2, q) = q_of_lanes(t);
+            let one = V::splat(1.0);
+            let near = one.add(V::splat(6.0).mul(q2).mul(q.sub(one)));
+            let u = one.sub(q);
+            let far = V::splat(2.0).mul(u.mul(u).mul(u));
+            q.select_le(V::splat(0.5), near, far)
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneProfile for Wendland {
+    #[inline(always)]
+    unsafe fn value_lanes<V: F64s>(t: V) -> V {
+        // SAFETY: the caller runs where V's feature is.
+        unsafe {
+            let (_, q) = q_of_lanes(t);
+            let one = V::splat(1.0);
+            let u = one.sub(q);
+            let u2 = u.mul(u);
+            u2.mul(u2).mul(one.add(V::splat(4.0).mul(q)))
+        }
+    }
 }
 
 /// Runs `$body` with the type alias `$K` naming the profile of `$kernel` (one match per call, the
@@ -229,6 +296,61 @@ mod tests {
             assert_eq!(k.value(3.0, 1.0).to_bits(), 0.0f64.to_bits());
         }
         assert!(BlobKernel::parse("gauss").is_err());
+    }
+
+    /// Every vector path's values are the scalar values' bits, on both sides of the cubic
+    /// spline's q = 1/2 and where the profiles vanish.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn lane_values_are_the_scalar_bits() {
+        use crate::simd::Isa;
+        use std::arch::x86_64::{__m256d, __m512d};
+        fn check<K: LaneProfile>() {
+            let mut ts: Vec<f64> = (0..4000).map(|i| i as f64 / 3000.0 - 0.25).collect();
+            let quarter = 0.75f64; // t at q = 1/2
+            ts.extend([
+                -1.0,
+                -0.0,
+                0.0,
+                1.0,
+                quarter,
+                f64::from_bits(quarter.to_bits() + 1),
+            ]);
+            ts.extend([f64::from_bits(quarter.to_bits() - 1), 1e-300, -1e-300]);
+            ts.resize(ts.len().next_multiple_of(8), 0.5);
+            let want: Vec<u64> = ts.iter().map(|&t| K::value(t).to_bits()).collect();
+            for isa in Isa::available() {
+                let mut got = vec![0.0; ts.len()];
+                for (t, g) in ts.chunks_exact(8).zip(got.chunks_exact_mut(8)) {
+                    // SAFETY: each path runs only where the CPU has its feature.
+                    unsafe {
+                        match isa {
+                            Isa::Avx512 => avx512::<K>(t, g),
+                            Isa::Avx2 => avx2::<K>(t, g),
+                            Isa::Generic => g.copy_from_slice(
+                                &t.iter().map(|&t| K::value(t)).collect::<Vec<_>>(),
+                            ),
+                        }
+                    }
+                }
+                let got: Vec<u64> = got.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(got, want, "{isa:?}");
+            }
+        }
+        #[target_feature(enable = "avx512f")]
+        unsafe fn avx512<K: LaneProfile>(t: &[f64], out: &mut [f64]) {
+            unsafe { K::value_lanes(__m512d::load(t)).store(out) }
+        }
+        #[target_feature(enable = "avx2")]
+        unsafe fn avx2<K: LaneProfile>(t: &[f64], out: &mut [f64]) {
+            unsafe {
+                K::value_lanes(__m256d::load(t)).store(out);
+                K::value_lanes(__m256d::load(&t[4..])).store(&mut out[4..]);
+            }
+        }
+        check::<Triquet>();
+        check::<CubicSpline>();
+        check::<Wendland>();
     }
 
     /// σ/R³ · w integrates to 1 (midpoint rule on a grid of R/40).

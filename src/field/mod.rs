@@ -531,6 +531,19 @@ pub(crate) mod testing {
         }
     }
 
+    /// A cube of `side`³ particles on a lattice of spacing 1 from the origin, each moved by up
+    /// to ±0.1 per axis ([`random_points`] of `seed`).
+    pub fn jittered_cube(side: u32, seed: u64) -> Vec<DVec3> {
+        let jitter = random_points(side.pow(3) as usize, -0.1, 0.1, seed);
+        let s = side as usize;
+        let grid = |i: usize| DVec3::new((i % s) as f64, (i / s % s) as f64, (i / s / s) as f64);
+        jitter
+            .iter()
+            .enumerate()
+            .map(|(i, d)| grid(i) + *d)
+            .collect()
+    }
+
     /// Deterministic pseudo-random points in a box (xorshift), for tests.
     pub fn random_points(n: usize, lo: f64, hi: f64, seed: u64) -> Vec<DVec3> {
         let mut s = seed.max(1);

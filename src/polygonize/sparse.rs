@@ -996,6 +996,43 @@ mod tests {
         }
     }
 
+    /// A jittered cube of particles with each kernel and as a colour field: the blocks deep in
+    /// it are ruled out, and the mesh is still the dense one, bit for bit.
+    #[test]
+    fn equals_dense_on_particles_with_inside_blocks() {
+        use crate::field::blob::{BlobSettings, PerPrimitive};
+        use crate::field::blob_kernel::BlobKernel;
+        use crate::field::particles::{colour_field, ParticleSettings};
+        let p = crate::field::testing::jittered_cube(14, 7);
+        // Cells of 1/4 over the particles and their support (2) on every side, partial blocks.
+        let l = Lattice::new(DVec3::splat(-2.3), DVec3::splat(15.2), [70, 69, 71]).unwrap();
+        let mut fields = vec![colour_field(&p, 0.5, &ParticleSettings::default()).unwrap()];
+        for (kernel, threshold) in [
+            (BlobKernel::Triquet, 3.9),
+            (BlobKernel::CubicSpline, 1.4),
+            (BlobKernel::Wendland, 1.0),
+        ] {
+            let settings = BlobSettings {
+                kernel,
+                ..Default::default()
+            };
+            let one = PerPrimitive::All(1.0);
+            let f = BlobField::new(&p, PerPrimitive::All(2.0), one, threshold, settings);
+            fields.push(f.unwrap());
+        }
+        let grid = block_grid(&l);
+        for f in &fields {
+            let st = check_equal(f, &l, Ambiguity::Separate);
+            assert!(st.cells_crossed > 0);
+            // The blocks 3..=6 per axis lie in [2.95, 9.95]³, 2.95 or more into the particles.
+            let blocks = f.blocks(&l, grid.dims);
+            for b in (0..64).map(|i| [3 + i % 4, 3 + i / 4 % 4, 3 + i / 16]) {
+                let sign = f.block_sign(&blocks, &l, &block_at(&l, b));
+                assert_eq!(sign, BlockSign::Inside, "{:?} {b:?}", f.settings().kernel);
+            }
+        }
+    }
+
     #[test]
     fn anisotropic_and_cut_lattices() {
         let f = blobs(40, 0.3, 9);
