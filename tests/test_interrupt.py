@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import _thread
+import signal
 import threading
 import time
 
@@ -19,6 +20,16 @@ def interrupt_after(seconds: float) -> threading.Timer:
     t = threading.Timer(seconds, _thread.interrupt_main)
     t.start()
     return t
+
+
+@pytest.fixture(autouse=True)
+def python_handles_ctrl_c():
+    """Python's own SIGINT handler, which raises KeyboardInterrupt: a process started in the
+    background by a non-interactive shell inherits SIGINT ignored, and then a simulated Ctrl-C
+    would do nothing."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
 
 
 @pytest.fixture(scope="module")
