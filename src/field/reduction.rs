@@ -69,7 +69,7 @@ pub struct Reduction {
 const BATCH: usize = 1 << 16;
 
 /// Fits `fit(indices)` to growing subsets of `points` until every point `i` has
-/// |f(points[i]) − targets[i]| ≤ tolerance (targets 0 when `None`), as the module says. `fit`
+/// `|f(points[i]) − targets[i]| ≤ tolerance` (targets 0 when `None`), as the module says. `fit`
 /// receives the indices of the subset, increasing; `field` gives the fitted surface as a field.
 pub fn fit_within<S>(
     points: &[DVec3],
@@ -146,7 +146,7 @@ fn first_in_each_cell(points: &[DVec3], cell: f64) -> Vec<u32> {
     first
 }
 
-/// |f(points[i]) − targets[i]| for every point, in batches; infinity where f is not finite.
+/// `|f(points[i]) − targets[i]|` for every point, in batches; infinity where f is not finite.
 fn residuals(field: &dyn Field, points: &[DVec3], targets: Option<&[f64]>) -> Result<Vec<f64>> {
     let mut r = vec![0.0; points.len()];
     for (k, (p, out)) in points.chunks(BATCH).zip(r.chunks_mut(BATCH)).enumerate() {
