@@ -408,8 +408,7 @@ pub fn project_mesh<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let lattice = parse_lattice(bounds, resolution)?;
-    let mut settings = shared_settings("separate", normals, true, batch_size, None)?;
-    settings.project = true;
+    let settings = shared_settings("separate", normals, true, batch_size, None)?;
     let mut mesh = crate::mesh::Mesh {
         vertices: points(vertices, "vertices")?,
         triangles: super::convert::triangles(faces, "faces")?,
