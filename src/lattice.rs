@@ -177,6 +177,32 @@ impl Lattice {
         (Self::key(i) << 2) | axis as u64
     }
 
+    /// Key of the lattice edge that starts at this lattice's point `i` and runs along `axis`
+    /// (0, 1, 2), in the whole lattice's numbering (for a window, from the point `offset + i`):
+    /// 20 bits per coordinate (no index exceeds [`MAX_CELLS_PER_AXIS`]) above the axis in the
+    /// lowest two bits. Windows of one lattice give one edge the same key.
+    #[inline]
+    pub fn whole_edge_key(&self, i: [u32; 3], axis: u8) -> u64 {
+        let [x, y, z] = std::array::from_fn(|a| (self.offset[a] + i[a]) as u64);
+        (x | (y << 20) | (z << 40)) << 2 | axis as u64
+    }
+
+    /// Inverse of [`Lattice::whole_edge_key`]: the edge's lower end in the whole lattice, and
+    /// its axis.
+    #[inline]
+    pub fn unkey_whole_edge(key: u64) -> ([u32; 3], u8) {
+        let m = (1u64 << 20) - 1;
+        let p = key >> 2;
+        (
+            [
+                (p & m) as u32,
+                ((p >> 20) & m) as u32,
+                ((p >> 40) & m) as u32,
+            ],
+            (key & 3) as u8,
+        )
+    }
+
     /// Half the diagonal of a block of `n × n × n` cells: the circumradius of such a cube.
     pub fn block_radius(&self, n: u32) -> f64 {
         0.5 * (self.cell * n as f64).length()
@@ -223,6 +249,24 @@ pub fn edge_crossing(a: DVec3, b: DVec3, fa: f64, fb: f64) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn whole_edge_keys_round_trip_and_agree_across_windows() {
+        let l = Lattice::new(DVec3::ZERO, DVec3::ONE, [MAX_CELLS_PER_AXIS, 9, 9]).unwrap();
+        let w = l.window([5, 2, 3], [MAX_CELLS_PER_AXIS, 9, 9]).unwrap();
+        for (i, axis) in [
+            ([0, 0, 0], 0),
+            ([7, 1, 2], 2),
+            ([MAX_CELLS_PER_AXIS - 5, 6, 5], 1),
+        ] {
+            let key = w.whole_edge_key(i, axis);
+            assert_eq!(key, l.whole_edge_key([5 + i[0], 2 + i[1], 3 + i[2]], axis));
+            assert_eq!(
+                Lattice::unkey_whole_edge(key),
+                ([5 + i[0], 2 + i[1], 3 + i[2]], axis)
+            );
+        }
+    }
 
     #[test]
     fn keys_round_trip() {

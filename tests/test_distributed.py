@@ -219,21 +219,66 @@ def test_options_reach_every_tile(client, blobs):
 
 
 def test_zeros_on_tile_faces(client):
-    """The field is exactly zero at lattice points on tile faces, where several edges give one
-    position and so several vertices: the weld still joins each to its own."""
+    """The field is exactly zero at lattice points on tile faces, along tile edges and at tile
+    corners, where several edges give one position and so several vertices (up to six for the
+    octahedron's corners): one machine keeps one vertex per edge, and so does the weld, which
+    joins vertices by their lattice edge."""
     diagonal = lambda p: p[:, 0] + p[:, 1] - 0.5  # noqa: E731
     octahedron = lambda p: np.abs(p).sum(axis=1) - 0.75  # noqa: E731
-    for field, tiles in ((diagonal, [(16, 16, 3), (4, 2, 5), 3]), (octahedron, [(16, 16, 3), (2, 16, 16)])):
-        whole = im.polygonize(field, bounds=BOX, resolution=16)
-        assert len(np.unique(whole.vertices, axis=0)) < len(whole.vertices)
-        for tile in tiles:
-            tiled = imd.polygonize(field, bounds=BOX, resolution=16, method="dense", client=client, tile=tile)
-            assert_same_mesh(tiled, whole)
-    # Where tile edges meet at the octahedron's zeros (up to six vertices at one point) the
-    # triangles are the same; which of those vertices are one is not known to the weld.
-    whole = im.polygonize(octahedron, bounds=BOX, resolution=16)
+    for field, tiles in (
+        (diagonal, [(16, 16, 3), (4, 2, 5), 3]),
+        (octahedron, [(16, 16, 3), (2, 16, 16), 3, 2, (5, 3, 4)]),
+    ):
+        for method in ("dense", "octree"):
+            whole = im.polygonize(field, bounds=BOX, resolution=16, method=method)
+            assert len(np.unique(whole.vertices, axis=0)) < len(whole.vertices)
+            for tile in tiles:
+                tiled = imd.polygonize(field, bounds=BOX, resolution=16, method=method, client=client, tile=tile)
+                assert_same_mesh(tiled, whole)
+    # 80 positions of the octahedron hold three vertices each (366 vertices at 146 positions),
+    # on one machine and welded.
+    whole = im.polygonize(octahedron, bounds=BOX, resolution=16, method="dense")
     tiled = imd.polygonize(octahedron, bounds=BOX, resolution=16, method="dense", client=client, tile=3)
-    assert np.array_equal(triangles(tiled), triangles(whole))
+    for mesh in (whole, tiled):
+        counts = np.unique(mesh.vertices, axis=0, return_counts=True)[1]
+        assert np.bincount(counts).tolist() == [0, 6, 60, 80]
+
+
+def _edge_ends(keys: np.ndarray, origin, cell) -> tuple[np.ndarray, np.ndarray]:
+    """The two lattice points (positions as the core computes them) of each edge key."""
+    p = keys >> np.uint64(2)
+    lo = np.stack([(p >> np.uint64(20 * a)) & np.uint64(2**20 - 1) for a in range(3)], axis=1).astype(np.int64)
+    hi = lo.copy()
+    hi[np.arange(len(keys)), (keys & np.uint64(3)).astype(np.int64)] += 1
+    return np.asarray(origin) + lo * np.asarray(cell), np.asarray(origin) + hi * np.asarray(cell)
+
+
+@pytest.mark.parametrize("method", ["dense", "sparse", "octree", "tracking"])
+def test_boundary_keys_name_each_vertex_edge(blobs, method):
+    """With boundary=True a window's run lists its vertices on edges in its boundary faces, each
+    once, with the key of an edge of the window in that boundary that holds the vertex."""
+    cells, origin, cell = im._core.lattice(BOX, 32)
+    window = [[8, 5, 0], [20, 32, 13]]
+    v, f, n, stats, b, k = im._core.polygonize(blobs, BOX, 32, method=method, window=window, boundary=True)
+    assert b.dtype == np.uint32 and k.dtype == np.uint64 and len(b) == len(k) > 0
+    assert len(np.unique(b)) == len(b) and len(np.unique(k)) == len(k)
+    a, c = _edge_ends(k, origin, cell)
+    p = v[b]
+    assert np.all((np.minimum(a, c) <= p) & (p <= np.maximum(a, c)))
+    axis = (k & np.uint64(3)).astype(np.int64)
+    lo = np.asarray(origin) + np.asarray(window[0]) * np.asarray(cell)
+    hi = np.asarray(origin) + np.asarray(window[1]) * np.asarray(cell)
+    on_face = (a == lo) | (a == hi)
+    on_face[np.arange(len(k)), axis] = False
+    assert on_face.any(axis=1).all()
+    # The listed vertices lie on the boundary, and those on it not listed at lattice points
+    # (on edges that leave the boundary into the window).
+    face = ((v == lo) | (v == hi)).any(axis=1)
+    assert face[b].all()
+    rest = v[np.setdiff1d(np.flatnonzero(face), b)]
+    assert np.array_equal(np.asarray(origin) + np.round((rest - origin) / cell) * np.asarray(cell), rest)
+    same = im._core.polygonize(blobs, BOX, 32, method=method, window=window)
+    assert np.array_equal(same[0], v) and np.array_equal(same[1], f)
 
 
 def test_tiles_of_one_cell(client, blobs):
@@ -265,15 +310,24 @@ def test_the_weld_checks_its_tiles():
     v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     tile = lambda faces, normals=np.zeros((0, 3)), window=((0, 0, 0), (4, 4, 4)): (window, v, faces, normals)  # noqa: E731
     lattice = ([4, 4, 4], [0.0, 0.0, 0.0], [0.25, 0.25, 0.25])
+    none = (np.zeros(0, np.uint32), np.zeros(0, np.uint64))
     for bad, name in (
         (tile([[0, 1, 3]]), "faces"), (tile([[0, 1, 2]], v[:1]), "normals"),
         (tile([[0, 1, 2]], window=((0, 0, 0), (5, 4, 4))), "window"), (tile([0, 1, 2]), "faces"),
+        (tile([[0, 1, 2]])[:4] + ([0, 1], [0]), "keys"), (tile([[0, 1, 2]])[:4] + ([7], [0]), "boundary"),
+        (tile([[0, 1, 2]])[:4] + ([[0]], [0]), "boundary"), (tile([[0, 1, 2]])[:4] + ([0], [20]), "keys"),
+        (tile([[0, 1, 2]])[:4] + ([0, 1], [0, 0]), "keys"), (tile([[0, 1, 2]])[:4], "tiles"),
     ):
+        bad = bad + none if len(bad) == 4 and name != "tiles" else bad
         with pytest.raises(ValueError, match=name):
             _core.weld_tiles([bad], *lattice)
+    # One edge at two positions in two tiles: not the tiles of one field and lattice.
+    moved = (tile([[0, 1, 2]])[0], v + 0.5, [[0, 1, 2]], np.zeros((0, 3)), [0], [0])
+    with pytest.raises(ValueError, match="tiles"):
+        _core.weld_tiles([tile([[0, 1, 2]]) + ([0], [0]), moved], *lattice)
     # Any layout of the arrays is read: strided, Fortran-ordered, int32 and float32.
     grid = np.asfortranarray(np.repeat(v, 2, axis=0)[::2])
-    out = _core.weld_tiles([(tile([[0, 1, 2]])[0], grid, np.array([[0, 1, 2]], dtype=np.int32), np.zeros((0, 3), np.float32))], *lattice)
+    out = _core.weld_tiles([(tile([[0, 1, 2]])[0], grid, np.array([[0, 1, 2]], dtype=np.int32), np.zeros((0, 3), np.float32), *none)], *lattice)
     assert np.array_equal(out[0], v) and np.array_equal(out[1], [[0, 1, 2]]) and out[2].shape == (0, 3)
 
 

@@ -176,13 +176,17 @@ def polygonize(
     corner_test: bool | None = None,
     seeds: ArrayLike | None = None,
     window: ArrayLike | None = None,
+    boundary: bool = False,
     **options: Unpack[_PolygonizeOptions],
-) -> _MeshTuple: ...
+) -> _MeshTuple | tuple[
+    npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any],
+    npt.NDArray[np.uint32], npt.NDArray[np.uint64],
+]: ...
 
 def lattice(bounds: ArrayLike, resolution: int | Sequence[int]) -> tuple[list[int], list[float], list[float]]: ...
 def project_mesh(field: _Field, bounds: ArrayLike, resolution: int | Sequence[int], vertices: ArrayLike, faces: ArrayLike, *, normals: bool = True, batch_size: int = 262144, progress: Callable[[int], object] | None = None) -> _MeshTuple: ...
 def weld_tiles(
-    tiles: Sequence[tuple[ArrayLike, ArrayLike, ArrayLike, ArrayLike]],
+    tiles: Sequence[tuple[ArrayLike, ArrayLike, ArrayLike, ArrayLike, ArrayLike, ArrayLike]],
     cells: Sequence[int],
     origin: Sequence[float],
     cell: Sequence[float],

@@ -3,8 +3,9 @@ tiles' meshes welded into the mesh :func:`implicitmesh.polygonize` makes on one 
 
 Every tile is a window of the one lattice (``_core.polygonize(..., window=)``): its lattice
 points and edge vertices are computed from the whole lattice's origin and indices, so a vertex on
-a face two tiles share is the same number in both, and the weld joins them by their exact
-coordinates, without tolerance.
+a face two tiles share is the same number in both. Each tile reports the lattice edges of its
+vertices on its boundary faces in the whole lattice's numbering (``boundary=True``), and the
+weld joins the vertices of one edge: exact, one vertex per crossed edge as on one machine.
 """
 
 from __future__ import annotations
@@ -177,16 +178,18 @@ def _tile_fields(field: Any, shared: Any, cells, origin: np.ndarray, cell: np.nd
 def _run_tile(field, bounds, resolution, window, method, options, output):
     """One task: polygonizes the cells ``window`` of the lattice; returns the tile's mesh, or
     with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the manifest."""
-    v, f, n, stats = _core.polygonize(field, bounds, resolution, method=method, window=window, **options)
+    v, f, n, stats, b, k = _core.polygonize(
+        field, bounds, resolution, method=method, window=window, boundary=True, **options
+    )
     stats = {k: stats[k] for k in _SUMMED}
     entry = {"window": [list(window[0]), list(window[1])], "vertices": len(v), "faces": len(f), "stats": stats}
     if output is None:
-        entry.update(v=v, f=f, n=n)
+        entry.update(v=v, f=f, n=n, b=b, k=k)
         return entry
     name = "tile-{}-{}-{}.npz".format(*window[0])
     tmp = os.path.join(output, name + ".part")
     with open(tmp, "wb") as fh:
-        np.savez(fh, vertices=v, faces=f, normals=n)
+        np.savez(fh, vertices=v, faces=f, normals=n, boundary=b, keys=k)
     os.replace(tmp, os.path.join(output, name))
     entry["file"] = name
     return entry
@@ -257,7 +260,8 @@ def polygonize(
         Cells per tile edge (default 256); the last tile along an axis holds what is left.
     output : path, optional
         A directory: each task writes its tile as ``tile-i-j-k.npz`` (``vertices``, ``faces``,
-        ``normals``) when it finishes, and ``manifest.json`` is written last; nothing is
+        ``normals``, and ``boundary``, ``keys``: its vertices on lattice edges in its boundary
+        faces and their edges' keys, which the weld joins by) when it finishes, and ``manifest.json`` is written last; nothing is
         gathered and the directory's path is returned; :func:`weld` joins the tiles. The
         workers must see the directory (one machine, or a shared file system).
     progress : bool or callable
@@ -341,10 +345,12 @@ def polygonize(
         entries = []
         for done, fut in enumerate(distributed.as_completed(futures), 1):
             entries.append(fut.result())
+            # The worker need not keep a result the client holds (nor spill it to disk).
+            fut.release()
             if report is not None:
                 report(done)
     except BaseException:
-        client.cancel(futures)
+        client.cancel([f for f in futures if f.status != "finished"])
         raise
     finally:
         end()
@@ -358,7 +364,7 @@ def polygonize(
         tmp.write_text(json.dumps(manifest, indent=1))
         os.replace(tmp, output / MANIFEST)
         return output
-    mesh = _weld([(e, e["v"], e["f"], e["n"]) for e in entries], info)
+    mesh = _weld([(e, e["v"], e["f"], e["n"], e["b"], e["k"]) for e in entries], info)
     if not project:
         return mesh
     v, f, n, st = _core.project_mesh(
@@ -403,19 +409,19 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
         if not file.is_file():
             raise ValueError(f"directory: tile {e['file']} listed in the manifest is missing")
         with np.load(file) as z:
-            parts.append((e, z["vertices"], z["faces"], z["normals"]))
+            parts.append((e, z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"]))
     return _weld(parts, manifest, progress)
 
 
 def _weld(parts: list, info: dict, progress: Any = False) -> Mesh:
-    """The mesh of the tiles ``parts`` (``(manifest entry, vertices, faces, normals)`` each),
-    welded by the core (``_core.weld_tiles``: exact, see :mod:`implicitmesh.distributed`),
-    with the tiles' statistics summed."""
+    """The mesh of the tiles ``parts`` (``(manifest entry, vertices, faces, normals, boundary,
+    keys)`` each), welded by the core (``_core.weld_tiles``: by lattice edge, see
+    :mod:`implicitmesh.distributed`), with the tiles' statistics summed."""
     total = sum(len(p[1]) for p in parts)
     report, end = reporter(progress, "weld", total, "vertices")
     try:
         v, f, n = weld_tiles(
-            [(p[0]["window"], p[1], p[2], p[3]) for p in parts],
+            [(p[0]["window"], *p[1:]) for p in parts],
             info["cells"], info["origin"], info["cell"], progress=report,
         )
     finally:

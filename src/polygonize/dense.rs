@@ -150,14 +150,14 @@ impl Plane<'_> {
 }
 
 /// Makes the vertices of the crossed x- and y-edges of plane `k`, writing their indices (from
-/// `vertices.len()`) into `xe` and `ye`.
+/// `vertices.len()`) into `xe` and `ye`, and their edges' keys into `keys` when given.
 fn plane_edges(
     lattice: &Lattice,
     k: u32,
     p: Plane,
-    xe: &mut [u32],
-    ye: &mut [u32],
+    (xe, ye): (&mut [u32], &mut [u32]),
     vertices: &mut Vec<DVec3>,
+    mut keys: Option<&mut Vec<u64>>,
 ) {
     let [nx, ny, _] = lattice.cells;
     let (nxu, px) = (nx as usize, nx as usize + 1);
@@ -173,6 +173,9 @@ fn plane_edges(
             |w| (r[w] ^ Bits::next(r, w)) & Bits::below(w, nxu),
             |i| {
                 xe[j * nxu + i] = vertices.len() as u32;
+                if let Some(keys) = keys.as_mut() {
+                    keys.push(lattice.whole_edge_key([i as u32, j as u32, k], 0));
+                }
                 let pa = lattice.point([i as u32, j as u32, k]);
                 let pb = lattice.point([i as u32 + 1, j as u32, k]);
                 vertices.push(edge_crossing(pa, pb, v[i], v[i + 1]));
@@ -189,6 +192,9 @@ fn plane_edges(
             |w| r0[w] ^ r1[w],
             |i| {
                 ye[j * px + i] = vertices.len() as u32;
+                if let Some(keys) = keys.as_mut() {
+                    keys.push(lattice.whole_edge_key([i as u32, j as u32, k], 1));
+                }
                 let pa = lattice.point([i as u32, j as u32, k]);
                 let pb = lattice.point([i as u32, j as u32 + 1, k]);
                 let (a, c) = (p.values[j * px + i], p.values[(j + 1) * px + i]);
@@ -198,14 +204,16 @@ fn plane_edges(
     }
 }
 
-/// Makes the vertices layer `k` owns, into `vertices`: the crossed x- and y-edges of plane
-/// `k + 1` and the crossed z-edges between planes `k` and `k + 1`.
+/// Makes the vertices layer `k` owns, into `vertices` (and their edges' keys into `keys` when
+/// given): the crossed x- and y-edges of plane `k + 1` and the crossed z-edges between planes
+/// `k` and `k + 1`.
 fn layer_vertices(
     lattice: &Lattice,
     k: u32,
     (lo, hi): (Plane, Plane),
     layer: &mut Layer,
     vertices: &mut Vec<DVec3>,
+    mut keys: Option<&mut Vec<u64>>,
 ) {
     let [nx, ny, _] = lattice.cells;
     let (nxu, pxu, pyu) = (nx as usize, nx as usize + 1, ny as usize + 1);
@@ -219,7 +227,11 @@ fn layer_vertices(
         }
     }
     vertices.clear();
-    plane_edges(lattice, k + 1, hi, &mut layer.x, &mut layer.y, vertices);
+    if let Some(keys) = keys.as_mut() {
+        keys.clear();
+    }
+    let edges = (&mut layer.x[..], &mut layer.y[..]);
+    plane_edges(lattice, k + 1, hi, edges, vertices, keys.as_deref_mut());
     let b = Bits::new(pxu);
     for j in 0..pyu {
         if !may_cross(lo.rows[j], hi.rows[j]) {
@@ -232,6 +244,9 @@ fn layer_vertices(
             |i| {
                 let idx = j * pxu + i;
                 layer.z[idx] = vertices.len() as u32;
+                if let Some(keys) = keys.as_mut() {
+                    keys.push(lattice.whole_edge_key([i as u32, j as u32, k], 2));
+                }
                 let pa = lattice.point([i as u32, j as u32, k]);
                 let pb = lattice.point([i as u32, j as u32, k + 1]);
                 vertices.push(edge_crossing(pa, pb, lo.values[idx], hi.values[idx]));
@@ -367,6 +382,8 @@ struct Workspace {
     /// Per cell layer of the lattice (plus the bottom plane first): its vertices and triangles,
     /// gathered into the mesh at the end.
     vertices: Vec<Vec<DVec3>>,
+    /// Beside `vertices`, their edges' keys ([`polygonize_keyed`] only).
+    keys: Vec<Vec<u64>>,
     triangles: Vec<Vec<[u32; 3]>>,
     carry_x: Vec<u32>,
     carry_y: Vec<u32>,
@@ -395,6 +412,7 @@ impl Workspace {
                 .iter()
                 .map(|t| t.capacity() * 12)
                 .sum::<usize>()
+            + self.keys.iter().map(|k| k.capacity() * 8).sum::<usize>()
     }
 }
 
@@ -437,6 +455,27 @@ pub fn polygonize<F: Field + ?Sized>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Stats)> {
+    let (mesh, _, stats) = polygonize_with_keys(field, lattice, settings, false)?;
+    Ok((mesh, stats))
+}
+
+/// [`polygonize`], with the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]),
+/// one per vertex.
+pub fn polygonize_keyed<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+) -> Result<(Mesh, Vec<u64>, Stats)> {
+    polygonize_with_keys(field, lattice, settings, true)
+}
+
+/// [`polygonize`], and the vertices' edge keys when `keyed` (else none).
+fn polygonize_with_keys<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+    keyed: bool,
+) -> Result<(Mesh, Vec<u64>, Stats)> {
     let plane = lattice.points_per_axis()[..2]
         .iter()
         .map(|&p| p as u64)
@@ -461,29 +500,34 @@ pub fn polygonize<F: Field + ?Sized>(
     let mut mesh = Mesh::default();
     let mut ws = take_workspace();
     let r = sweep(
-        field, lattice, settings, table, &mut ws, &mut mesh, &mut stats,
+        field,
+        lattice,
+        (settings, table, keyed),
+        &mut ws,
+        &mut mesh,
+        &mut stats,
     );
     return_workspace(ws);
-    r?;
+    let keys = r?;
     debug_assert!(mesh
         .triangles
         .iter()
         .flatten()
         .all(|&v| (v as usize) < mesh.vertices.len()));
     finish_mesh(field, &mut mesh, lattice, settings, &mut stats)?;
-    Ok((mesh, stats))
+    Ok((mesh, keys, stats))
 }
 
-/// The sweep over the groups of planes (see the module documentation).
+/// The sweep over the groups of planes (see the module documentation); returns the vertices'
+/// edge keys when `keyed` (else none).
 fn sweep<F: Field + ?Sized>(
     field: &F,
     lattice: &Lattice,
-    settings: &Settings,
-    table: &CaseTable,
+    (settings, table, keyed): (&Settings, &CaseTable, bool),
     ws: &mut Workspace,
     mesh: &mut Mesh,
     stats: &mut Stats,
-) -> Result<()> {
+) -> Result<Vec<u64>> {
     let [nx, _, nz] = lattice.cells;
     let [px, py, _] = lattice.points_per_axis();
     let (nxu, pxu, pyu) = (nx as usize, px as usize, py as usize);
@@ -498,6 +542,7 @@ fn sweep<F: Field + ?Sized>(
         points,
         layers,
         vertices,
+        keys,
         triangles,
         carry_x,
         carry_y,
@@ -509,6 +554,9 @@ fn sweep<F: Field + ?Sized>(
     let nzu = nz as usize;
     if vertices.len() < nzu + 1 {
         vertices.resize_with(nzu + 1, Vec::new);
+    }
+    if keyed && keys.len() < nzu + 1 {
+        keys.resize_with(nzu + 1, Vec::new);
     }
     if triangles.len() < nzu {
         triangles.resize_with(nzu, Vec::new);
@@ -563,19 +611,31 @@ fn sweep<F: Field + ?Sized>(
             .collect();
         if g0 == 0 {
             vertices[0].clear();
-            plane_edges(lattice, 0, planes[0], carry_x, carry_y, &mut vertices[0]);
+            let mut first_keys = keys.first_mut().filter(|_| keyed);
+            if let Some(k) = first_keys.as_deref_mut() {
+                k.clear();
+            }
+            let edges = (&mut carry_x[..], &mut carry_y[..]);
+            plane_edges(lattice, 0, planes[0], edges, &mut vertices[0], first_keys);
             next_base = vertices[0].len() as u32;
         }
         if layers.len() < n_layers {
             layers.resize_with(n_layers, Layer::default);
         }
-        let group_vertices = &mut vertices[g0 as usize + 1..g1 as usize + 1];
+        let group = g0 as usize + 1..g1 as usize + 1;
+        let group_vertices = &mut vertices[group.clone()];
+        let mut group_keys: Vec<Option<&mut Vec<u64>>> = match keyed {
+            true => keys[group].iter_mut().map(Some).collect(),
+            false => (0..n_layers).map(|_| None).collect(),
+        };
         layers[..n_layers]
             .par_iter_mut()
             .zip(group_vertices.par_iter_mut())
+            .zip(group_keys.par_iter_mut())
             .enumerate()
-            .for_each(|(l, (layer, v))| {
-                layer_vertices(lattice, g0 + l as u32, (planes[l], planes[l + 1]), layer, v)
+            .for_each(|(l, ((layer, v), k))| {
+                let planes = (planes[l], planes[l + 1]);
+                layer_vertices(lattice, g0 + l as u32, planes, layer, v, k.take())
             });
         for (layer, v) in layers[..n_layers].iter_mut().zip(group_vertices.iter()) {
             layer.base = next_base;
@@ -616,8 +676,13 @@ fn sweep<F: Field + ?Sized>(
     let t = Instant::now();
     mesh.vertices = gather(&vertices[..nzu + 1]);
     mesh.triangles = gather(&triangles[..nzu]);
+    let keys = if keyed {
+        gather(&keys[..nzu + 1])
+    } else {
+        Vec::new()
+    };
     stats.add_time("triangulate", t);
-    Ok(())
+    Ok(keys)
 }
 
 #[cfg(test)]

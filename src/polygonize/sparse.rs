@@ -404,6 +404,29 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
     lattice: &Lattice,
     settings: &Settings,
 ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
+    let (mesh, triangles, _, stats) = polygonize_with_keys(field, lattice, settings, false)?;
+    Ok((mesh, triangles, stats))
+}
+
+/// [`polygonize_as`], with the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]),
+/// one per vertex.
+#[allow(clippy::type_complexity)]
+pub fn polygonize_as_keyed<F: BlockField + ?Sized, I: TriangleIndex>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+) -> Result<(Mesh, Vec<[I; 3]>, Vec<u64>, Stats)> {
+    polygonize_with_keys(field, lattice, settings, true)
+}
+
+/// [`polygonize_as`], and the vertices' edge keys when `keyed` (else none).
+#[allow(clippy::type_complexity)]
+fn polygonize_with_keys<F: BlockField + ?Sized, I: TriangleIndex>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &Settings,
+    keyed: bool,
+) -> Result<(Mesh, Vec<[I; 3]>, Vec<u64>, Stats)> {
     // With projection, the normals are the field's gradients at the moved vertices.
     let inner = Settings {
         normals: settings.normals && !settings.project,
@@ -415,7 +438,7 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
         .ok()
         .and_then(|mut w| w.pop())
         .unwrap_or_default();
-    let r = run(field, lattice, &inner, start, &mut ws);
+    let r = run(field, lattice, (&inner, keyed), start, &mut ws);
     if ws.bytes() <= KEEP_BYTES {
         if let Ok(mut pool) = WORKSPACES.lock() {
             if pool.len() < 2 {
@@ -423,7 +446,7 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
             }
         }
     }
-    let (mut mesh, triangles, mut stats) = r?;
+    let (mut mesh, triangles, keys, mut stats) = r?;
     if settings.project {
         finish_mesh(field, &mut mesh, lattice, settings, &mut stats)?;
         // Normals where the gradient vanishes come from the faces, which travel beside the mesh.
@@ -433,7 +456,7 @@ pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
             mesh.triangles = Vec::new();
         }
     }
-    Ok((mesh, triangles, stats))
+    Ok((mesh, triangles, keys, stats))
 }
 
 /// What a polygonization over the blocks of a lattice starts from ([`start_blocks`]).
@@ -475,13 +498,14 @@ pub(crate) fn start_blocks<F: BlockField + ?Sized>(
     })
 }
 
+#[allow(clippy::type_complexity)]
 fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
     lattice: &Lattice,
-    settings: &Settings,
+    (settings, keyed): (&Settings, bool),
     start: BlockStart<F::Blocks>,
     ws: &mut Workspace,
-) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
+) -> Result<(Mesh, Vec<[I; 3]>, Vec<u64>, Stats)> {
     let BlockStart {
         grid,
         cases,
@@ -537,6 +561,13 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
         .map(|a| a.n.iter().map(|&v| v as u64 - 1).product::<u64>())
         .sum();
     let mut mesh = gather_parts(&mut ws.parts, normals);
+    let keys = if keyed {
+        let keys = edge_keys(lattice, &ws.active);
+        debug_assert_eq!(keys.len(), mesh.vertices.len());
+        keys
+    } else {
+        Vec::new()
+    };
     let outputs: Vec<&BlockOutput> = ws.parts.iter().map(|p| &p.out).collect();
     stats.add_time("evaluate", t);
 
@@ -554,7 +585,26 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
         stats.normal_evaluations = mesh.vertices.len() as u64;
         stats.add_time("normals", t);
     }
-    Ok((mesh, triangles, stats))
+    Ok((mesh, triangles, keys, stats))
+}
+
+/// The keys of the lattice edges of the vertices of the evaluated blocks `active` (block after
+/// block, each in the order [`block_vertices`] made them).
+fn edge_keys(lattice: &Lattice, active: &[Active]) -> Vec<u64> {
+    let counts: Vec<u32> = active.iter().map(|a| a.vertices() as u32).collect();
+    crate::memory::collect_counted(&counts, |b| {
+        let a = &active[b];
+        let lo = a.block.map(|v| v * STEP);
+        let mut keys = Vec::with_capacity(counts[b] as usize);
+        for (w, &e) in a.edges.iter().enumerate() {
+            let (axis, k) = (w / 8, (w % 8) as u32);
+            for_each_set_bit(e, |bit| {
+                let p = [lo[0] + (bit & 7), lo[1] + (bit >> 3), lo[2] + k];
+                keys.push(lattice.whole_edge_key(p, axis as u8));
+            });
+        }
+        keys
+    })
 }
 
 /// The vertices (and normals) of the parts' outputs, in order, as one mesh without triangles.

@@ -1,19 +1,12 @@
 //! The exact weld of tile meshes into the mesh of the whole lattice.
 //!
 //! A tile is a [`Lattice::window`]: the vertex of a lattice edge on a face two tiles share is
-//! the same number in both, so joining the tiles' vertices on their faces gives the whole
-//! lattice's mesh, vertex for vertex, without tolerance.
-//!
-//! A vertex not at a lattice point lies on exactly one lattice edge, so its position names the
-//! edge and is its key; a tile has one vertex per crossed edge, so where `k` vertices of a tile
-//! share a position (only at lattice points, in fact) the `k`-th of each tile are joined. At a
-//! lattice point several edges can give the same position (where the field is zero there, or
-//! the crossing rounds to the point), and a tile then holds several vertices there: such a
-//! vertex is matched, per tile face it lies on, by its position and the positions of its
-//! neighbours along the tile's open mesh edges in that face. Those edges are the cut of the
-//! surface by the face (the segments marching cubes draws on the cell faces in it), which both
-//! tiles make alike from the same corner values; a vertex of a lattice edge that leaves the face
-//! into one tile has no such neighbours in that face and is not matched through it.
+//! the same number in both. The polygonizers give one vertex per crossed lattice edge, also
+//! where several edges give one position (the field is zero at a lattice point, or a crossing
+//! rounds onto it), and can report the edge of each vertex in the whole lattice's numbering
+//! ([`Lattice::whole_edge_key`]). Each tile hands the weld the keys of its vertices on edges in
+//! its boundary faces ([`boundary_edges`]); vertices with one key are one vertex. So the welded
+//! mesh is the whole lattice's mesh, vertex for vertex, without tolerance.
 //!
 //! The welded mesh lists the vertices tile after tile, each tile's in its order; a joined vertex
 //! takes the place of its first occurrence. Triangles follow tile after tile, in their order.
@@ -23,7 +16,6 @@ use crate::error::{Error, Result};
 use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// One tile's mesh, as a polygonizer run on a window of the lattice makes it.
 #[derive(Clone, Copy, Debug)]
@@ -36,6 +28,11 @@ pub struct Tile<'a> {
     pub faces: &'a [[i64; 3]],
     /// Unit normals, one per vertex, or none.
     pub normals: &'a [DVec3],
+    /// Indices of the vertices on lattice edges in the window's boundary faces.
+    pub boundary: &'a [u32],
+    /// The keys of those vertices' edges ([`Lattice::whole_edge_key`]), one per index of
+    /// `boundary`.
+    pub keys: &'a [u64],
 }
 
 /// The welded mesh; triangles index `vertices` as int64 (numpy's index type).
@@ -55,39 +52,36 @@ const CHUNK: usize = 1 << 14;
 /// Global vertex numbers (tiles' vertices one after another) as `u32`.
 type Id = u32;
 
-/// Bit patterns of a position: equal exactly for equal coordinates.
-type Bits = [u64; 3];
+/// Whether the lattice edge `key` lies in a boundary face of `window` (cells `lo ≤ i < hi`):
+/// a coordinate other than its axis's is at `lo` or `hi`.
+fn in_boundary(key: u64, window: &[[u32; 3]; 2]) -> bool {
+    let (p, axis) = Lattice::unkey_whole_edge(key);
+    (0..3).any(|a| a != axis as usize && (p[a] == window[0][a] || p[a] == window[1][a]))
+}
 
-fn bits(p: DVec3) -> Bits {
-    p.to_array().map(f64::to_bits)
+/// The vertices, among those whose edge keys are `keys` (one per vertex, as a polygonizer's
+/// `_keyed` variant gives them for a window of cells `lo ≤ i < hi`), that lie on lattice edges
+/// in the window's boundary faces, which neighbouring windows share: their indices and keys.
+pub fn boundary_edges(keys: &[u64], window: [[u32; 3]; 2]) -> (Vec<u32>, Vec<u64>) {
+    keys.iter()
+        .enumerate()
+        .filter(|(_, &k)| in_boundary(k, &window))
+        .map(|(i, &k)| (i as u32, k))
+        .unzip()
 }
 
 /// Joins the tiles of `lattice` (the whole lattice their windows cut) into one mesh.
 ///
 /// Errors (naming the argument of `_core.weld_tiles`) for a window outside the lattice, a
-/// triangle index outside its tile's vertices, normals not one per vertex, or more than 2³²
-/// vertices in all. Checks [`cancel::check`] between steps and reports the tiles' vertices
+/// triangle index outside its tile's vertices, normals not one per vertex, boundary indices
+/// and keys that do not match (an index outside the tile, a key outside its window, a key
+/// twice in a tile), vertices of one edge at different positions in two tiles, or more than
+/// 2³² vertices in all. Checks [`cancel::check`] between steps and reports the tiles' vertices
 /// done.
 pub fn weld(tiles: &[Tile], lattice: &Lattice) -> Result<Welded> {
     let starts = check(tiles, lattice)?;
     let total = starts[tiles.len()] as u64;
-    let faces: Vec<OnFaces> = tiles
-        .par_iter()
-        .enumerate()
-        .map(|(t, tile)| on_faces(tile, lattice, (t as u32, starts[t])))
-        .collect();
-    cancel::check()?;
-    let mut joined = joined_by_position(&faces);
-    cancel::check()?;
-    let at_points: Vec<_> = tiles
-        .par_iter()
-        .zip(&faces)
-        .enumerate()
-        .flat_map_iter(|(t, (tile, f))| {
-            point_groups(tile, lattice, &f.at_points, (t as u32, starts[t]))
-        })
-        .collect();
-    joined.extend(joined_at_points(at_points));
+    let joined = joined_by_edge(tiles, &starts)?;
     cancel::advance(total / 2)?;
     let (index, kept) = renumbered(tiles, &joined);
     cancel::check()?;
@@ -128,6 +122,7 @@ fn check(tiles: &[Tile], lattice: &Lattice) -> Result<Vec<usize>> {
                 format!("tile {t} has vertex index {bad}, outside its {n} vertices"),
             ));
         }
+        check_boundary(t, tile)?;
         starts.push(total);
         total += tile.vertices.len();
     }
@@ -141,196 +136,90 @@ fn check(tiles: &[Tile], lattice: &Lattice) -> Result<Vec<usize>> {
     Ok(starts)
 }
 
-/// A tile's vertices on its faces: those not at a lattice point as `(position, id, tile)`,
-/// those at one by their index in the tile.
-struct OnFaces {
-    keyed: Vec<(Bits, Id, u32)>,
-    at_points: Vec<u32>,
-}
-
-/// The corners of `window`'s box, as the lattice computes its points.
-fn corners(lattice: &Lattice, window: [[u32; 3]; 2]) -> [DVec3; 2] {
-    window.map(|w| lattice.point(w))
-}
-
-/// Whether `p` is a lattice point, bit for bit (the nearest point's index per axis, rounded
-/// half to even, gives `p` back).
-fn at_lattice_point(p: DVec3, lattice: &Lattice) -> bool {
-    (0..3).all(|a| {
-        let i = ((p[a] - lattice.base[a]) / lattice.cell[a]).round_ties_even();
-        lattice.base[a] + i * lattice.cell[a] == p[a]
-    })
-}
-
-/// The vertices of tile `t` (whose ids start at `start`) on its box's faces.
-fn on_faces(tile: &Tile, lattice: &Lattice, (t, start): (u32, usize)) -> OnFaces {
-    let [lo, hi] = corners(lattice, tile.window);
-    let mut out = OnFaces {
-        keyed: Vec::new(),
-        at_points: Vec::new(),
+/// Checks tile `t`'s boundary indices (below its vertex count, one per key) and keys (edges in
+/// its window: lower end inside, upper end too).
+fn check_boundary(t: usize, tile: &Tile) -> Result<()> {
+    if tile.boundary.len() != tile.keys.len() {
+        return Err(Error::invalid(
+            "keys",
+            format!(
+                "tile {t} has {} keys for {} boundary vertices",
+                tile.keys.len(),
+                tile.boundary.len()
+            ),
+        ));
+    }
+    let n = tile.vertices.len();
+    if let Some(&bad) = tile.boundary.par_iter().find_any(|&&i| i as usize >= n) {
+        return Err(Error::invalid(
+            "boundary",
+            format!("tile {t} has vertex index {bad}, outside its {n} vertices"),
+        ));
+    }
+    let [lo, hi] = tile.window;
+    let outside = |&&k: &&u64| {
+        let (p, axis) = Lattice::unkey_whole_edge(k);
+        k >> 62 != 0
+            || axis > 2
+            || (0..3).any(|a| p[a] < lo[a] || p[a] + (a == axis as usize) as u32 > hi[a])
     };
-    for (i, &p) in tile.vertices.iter().enumerate() {
-        if !(p.cmpeq(lo) | p.cmpeq(hi)).any() {
-            continue;
-        }
-        if at_lattice_point(p, lattice) {
-            out.at_points.push(i as u32);
-        } else {
-            out.keyed.push((bits(p), (start + i) as Id, t));
-        }
+    if let Some(&bad) = tile.keys.par_iter().find_any(outside) {
+        return Err(Error::invalid(
+            "keys",
+            format!("tile {t} has edge key {bad}, not an edge of its window"),
+        ));
     }
-    out
+    Ok(())
 }
 
-/// `(vertex, the vertex it joins)` for the vertices on tile faces not at lattice points: among
-/// the vertices with one position, the `r`-th of each tile joins the `r`-th of the first tile
-/// that has one.
-fn joined_by_position(faces: &[OnFaces]) -> Vec<(Id, Id)> {
-    let mut all: Vec<(Bits, Id, u32)> = faces.iter().flat_map(|f| &f.keyed).copied().collect();
-    // Ids grow tile after tile, so this sorts by position, then tile, then index in the tile.
-    all.par_sort_unstable();
-    let mut joined = Vec::new();
-    let mut firsts = Vec::new();
-    for run in all.chunk_by(|a, b| a.0 == b.0) {
-        join_by_rank(run.iter().map(|e| (e.2, e.1)), &mut firsts, |id, first| {
-            joined.push((id, first))
-        });
-    }
-    joined
-}
-
-/// Walks `ids` (`(tile, id)`, increasing) and calls `join(id, first)` for the `r`-th id of a
-/// tile when an earlier tile had an `r`-th id (`first`), else records `id` as the `r`-th.
-fn join_by_rank(
-    ids: impl Iterator<Item = (u32, Id)>,
-    firsts: &mut Vec<Id>,
-    mut join: impl FnMut(Id, Id),
-) {
-    firsts.clear();
-    let (mut tile, mut rank) = (None, 0);
-    for (t, id) in ids {
-        if tile == Some(t) {
-            rank += 1;
-        } else {
-            (tile, rank) = (Some(t), 0);
-        }
-        match firsts.get(rank) {
-            Some(&first) => join(id, first),
-            None => firsts.push(id),
-        }
-    }
-}
-
-/// A group of vertices at lattice points to match: the axis of the tile face, the position,
-/// and the positions of the vertex's neighbours in that face (sorted).
-type PointKey = (u8, Bits, Vec<Bits>);
-
-/// The keys of the vertices `at_points` of tile `t` (indices in the tile), with their global
-/// ids (the tile's start `start` plus the index) and `t`.
-fn point_groups(
-    tile: &Tile,
-    lattice: &Lattice,
-    at_points: &[u32],
-    (t, start): (u32, usize),
-) -> Vec<(PointKey, Id, u32)> {
-    if at_points.is_empty() {
-        return Vec::new();
-    }
-    let v = tile.vertices;
-    let mut is_point = vec![false; v.len()];
-    for &i in at_points {
-        is_point[i as usize] = true;
-    }
-    // Mesh edges with an end at such a vertex, used by one triangle of the tile.
-    let mut edges: Vec<(u32, u32)> = Vec::new();
-    for f in tile.faces {
-        let f = f.map(|i| i as u32);
-        for k in 0..3 {
-            let (a, b) = (f[k], f[(k + 1) % 3]);
-            if is_point[a as usize] || is_point[b as usize] {
-                edges.push((a.min(b), a.max(b)));
-            }
-        }
-    }
-    edges.sort_unstable();
-    let mut neighbours: HashMap<u32, Vec<u32>> = HashMap::new();
-    for run in edges.chunk_by(|a, b| a == b) {
-        if let [(a, b)] = run {
-            for (p, q) in [(a, b), (b, a)] {
-                if is_point[*p as usize] {
-                    neighbours.entry(*p).or_default().push(*q);
-                }
-            }
-        }
-    }
-    let [lo, hi] = corners(lattice, tile.window);
-    let mut out = Vec::new();
-    for &i in at_points {
-        let p = v[i as usize];
-        let nbrs = neighbours.get(&i).map_or(&[][..], |n| n.as_slice());
-        for axis in 0..3 {
-            for plane in [lo[axis], hi[axis]] {
-                if p[axis] != plane {
-                    continue;
-                }
-                let in_plane: Vec<DVec3> = nbrs
-                    .iter()
-                    .map(|&n| v[n as usize])
-                    .filter(|q| q[axis] == plane)
-                    .collect();
-                if in_plane.is_empty() {
-                    continue;
-                }
-                // Neighbours at the vertex's own position (segments of length zero, which may
-                // lie on another face through the point) only say that there are some.
-                let mut apart: Vec<Bits> =
-                    in_plane.into_iter().filter(|&q| q != p).map(bits).collect();
-                apart.sort_unstable();
-                out.push(((axis as u8, bits(p), apart), (start + i as usize) as Id, t));
-            }
-        }
-    }
-    out
-}
-
-/// `(vertex, the vertex it joins)` for the vertices at lattice points: within a group of equal
-/// keys the `r`-th of each tile and the `r`-th of the first tile having one are one vertex; a
-/// vertex in several groups joins all of theirs, and each set takes its smallest id.
-fn joined_at_points(mut keyed: Vec<(PointKey, Id, u32)>) -> Vec<(Id, Id)> {
-    keyed.sort_unstable();
-    // Union-find over the ids, each set's root its smallest id.
-    let mut parent: HashMap<Id, Id> = HashMap::new();
-    fn find(parent: &mut HashMap<Id, Id>, a: Id) -> Id {
-        let mut root = a;
-        while let Some(&p) = parent.get(&root) {
-            if p == root {
-                break;
-            }
-            root = p;
-        }
-        let mut x = a;
-        while x != root {
-            let p = parent[&x];
-            parent.insert(x, root);
-            x = p;
-        }
-        root
-    }
-    let mut firsts = Vec::new();
-    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
-        join_by_rank(run.iter().map(|e| (e.2, e.1)), &mut firsts, |id, first| {
-            let (a, b) = (find(&mut parent, id), find(&mut parent, first));
-            parent.insert(a.max(b), a.min(b));
-        });
-    }
-    let mut ids: Vec<Id> = parent.keys().copied().collect();
-    ids.sort_unstable();
-    ids.into_iter()
-        .filter_map(|id| {
-            let root = find(&mut parent, id);
-            (root != id).then_some((id, root))
+/// `(vertex, the vertex it joins)`: the vertices of one edge key are one, the first (the
+/// lowest id, of the first tile that has it) kept. Errors for a key twice in one tile or
+/// joined vertices at different positions.
+fn joined_by_edge(tiles: &[Tile], starts: &[usize]) -> Result<Vec<(Id, Id)>> {
+    let mut all: Vec<(u64, Id)> = tiles
+        .par_iter()
+        .zip(starts)
+        .flat_map_iter(|(tile, &start)| {
+            tile.keys
+                .iter()
+                .zip(tile.boundary)
+                .map(move |(&k, &i)| (k, (start + i as usize) as Id))
         })
-        .collect()
+        .collect();
+    cancel::check()?;
+    all.par_sort_unstable();
+    cancel::check()?;
+    let tile_of = |id: Id| starts.partition_point(|&s| s <= id as usize) - 1;
+    let position = |id: Id| {
+        let t = tile_of(id);
+        (t, tiles[t].vertices[id as usize - starts[t]])
+    };
+    let mut joined = Vec::new();
+    for run in all.chunk_by(|a, b| a.0 == b.0) {
+        let (key, first) = run[0];
+        let (mut last, p) = position(first);
+        for &(_, id) in &run[1..] {
+            let (t, q) = position(id);
+            if t == last {
+                return Err(Error::invalid(
+                    "keys",
+                    format!("tile {t} has edge key {key} for two vertices"),
+                ));
+            }
+            if q.to_array().map(f64::to_bits) != p.to_array().map(f64::to_bits) {
+                return Err(Error::invalid(
+                    "tiles",
+                    format!(
+                        "the vertex of edge key {key} is at {p} in tile {} and at {q} in tile {t} (tiles of different fields or lattices?)",
+                        tile_of(first)
+                    ),
+                ));
+            }
+            last = t;
+            joined.push((id, first));
+        }
+    }
+    Ok(joined)
 }
 
 /// Marker of a vertex joined to another in [`renumbered`]'s first pass.
@@ -467,7 +356,29 @@ fn renumbered_faces(tiles: &[Tile], index: &[u32]) -> Vec<[i64; 3]> {
 mod tests {
     use super::*;
     use crate::field::analytic::Sphere;
-    use crate::polygonize::{dense, Settings};
+    use crate::field::Field;
+    use crate::mesh::Mesh;
+    use crate::polygonize::{dense, octree, Settings};
+
+    /// Bit patterns of a position: equal exactly for equal coordinates.
+    type Bits = [u64; 3];
+
+    fn bits(p: DVec3) -> Bits {
+        p.to_array().map(f64::to_bits)
+    }
+
+    /// `|x| + |y| + |z| − 0.75`: zero at many lattice points of a lattice of cells of 1/8,
+    /// where up to six crossed edges give one position.
+    struct Octahedron;
+
+    impl Field for Octahedron {
+        fn value(&self, p: DVec3) -> f64 {
+            p.x.abs() + p.y.abs() + p.z.abs() - 0.75
+        }
+        fn gradient(&self, p: DVec3) -> DVec3 {
+            DVec3::new(p.x.signum(), p.y.signum(), p.z.signum())
+        }
+    }
 
     /// Positions of each triangle's corners, bit for bit, sorted: equal for equal meshes
     /// whatever their numbering.
@@ -500,36 +411,43 @@ mod tests {
         out
     }
 
-    /// Tiles of a sphere, welded, give the whole lattice's mesh: the same triangles and
-    /// normals bit for bit, the same number of vertices, tile after tile.
-    #[test]
-    fn welded_tiles_are_the_whole_mesh() {
-        let sphere = Sphere {
-            center: DVec3::new(0.03, -0.05, 0.02),
-            radius: 0.7,
-        };
-        let lattice =
-            Lattice::new(DVec3::splat(-1.0), DVec3::new(1.0, 0.9, 0.8), [23, 19, 17]).unwrap();
-        let settings = Settings::default();
-        let (whole, _) = dense::polygonize(&sphere, &lattice, &settings).unwrap();
-        let meshes: Vec<_> = tiles_of(&lattice, 5)
+    /// A tile's mesh, faces as int64 and its boundary vertices with their edge keys.
+    type TileMesh = (Mesh, Vec<[i64; 3]>, (Vec<u32>, Vec<u64>), [[u32; 3]; 2]);
+
+    /// Polygonizes every tile of `tile` cells with `polygonize` (a mesh and its edge keys).
+    fn tile_meshes(
+        lattice: &Lattice,
+        tile: u32,
+        polygonize: impl Fn(&Lattice) -> (Mesh, Vec<u64>),
+    ) -> Vec<TileMesh> {
+        tiles_of(lattice, tile)
             .into_iter()
             .map(|(l, w)| {
-                let (m, _) = dense::polygonize(&sphere, &l, &settings).unwrap();
+                let (m, keys) = polygonize(&l);
+                assert_eq!(keys.len(), m.vertices.len());
                 let f: Vec<[i64; 3]> = m.triangles.iter().map(|t| t.map(i64::from)).collect();
-                (m, f, w)
+                (m, f, boundary_edges(&keys, w), w)
             })
-            .collect();
-        let tiles: Vec<Tile> = meshes
+            .collect()
+    }
+
+    fn as_tiles(meshes: &[TileMesh]) -> Vec<Tile<'_>> {
+        meshes
             .iter()
-            .map(|(m, f, w)| Tile {
+            .map(|(m, f, (b, k), w)| Tile {
                 window: *w,
                 vertices: &m.vertices,
                 faces: f,
                 normals: &m.normals,
+                boundary: b,
+                keys: k,
             })
-            .collect();
-        let welded = weld(&tiles, &lattice).unwrap();
+            .collect()
+    }
+
+    /// The welded mesh is `whole`: the same number of vertices, the same triangles and normals
+    /// bit for bit, the same Euler characteristic.
+    fn assert_whole(welded: &Welded, whole: &Mesh) {
         assert_eq!(welded.vertices.len(), whole.vertices.len());
         assert_eq!(welded.faces.len(), whole.triangles.len());
         assert_eq!(
@@ -552,9 +470,71 @@ mod tests {
             normals(&welded.vertices, &welded.normals),
             normals(&whole.vertices, &whole.normals)
         );
+        let mesh = Mesh {
+            vertices: welded.vertices.clone(),
+            triangles: welded.faces.iter().map(|t| t.map(|i| i as u32)).collect(),
+            normals: Vec::new(),
+        };
+        assert_eq!(mesh.euler_characteristic(), whole.euler_characteristic());
+        assert_eq!(mesh.is_closed_oriented(), whole.is_closed_oriented());
+    }
+
+    /// Tiles of a sphere, welded, give the whole lattice's mesh: the same triangles and
+    /// normals bit for bit, the same number of vertices, tile after tile.
+    #[test]
+    fn welded_tiles_are_the_whole_mesh() {
+        let sphere = Sphere {
+            center: DVec3::new(0.03, -0.05, 0.02),
+            radius: 0.7,
+        };
+        let lattice =
+            Lattice::new(DVec3::splat(-1.0), DVec3::new(1.0, 0.9, 0.8), [23, 19, 17]).unwrap();
+        let settings = Settings::default();
+        let (whole, _) = dense::polygonize(&sphere, &lattice, &settings).unwrap();
+        let meshes = tile_meshes(&lattice, 5, |l| {
+            let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
+            (m, k)
+        });
+        let welded = weld(&as_tiles(&meshes), &lattice).unwrap();
+        assert_whole(&welded, &whole);
         // The first tile's vertices come first, in their order.
         let first = &meshes[0].0.vertices;
         assert_eq!(&welded.vertices[..first.len()], &first[..]);
+    }
+
+    /// Where the field is zero at lattice points on tile faces, edges and corners (several
+    /// vertices at one position in a tile and on one machine), the weld joins each vertex to
+    /// the one of its own edge: the whole mesh, vertex for vertex, for dense and octree tiles.
+    #[test]
+    fn zeros_at_lattice_points_weld_to_the_whole_mesh() {
+        let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 16).unwrap();
+        let settings = Settings::default();
+        let (whole, keys, _) = dense::polygonize_keyed(&Octahedron, &lattice, &settings).unwrap();
+        // One vertex per crossed edge: several at one position, distinct keys.
+        let mut at = whole.vertices.iter().map(|&p| bits(p)).collect::<Vec<_>>();
+        at.sort_unstable();
+        at.dedup();
+        assert!(at.len() < whole.vertices.len());
+        let mut distinct = keys.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(distinct.len(), whole.vertices.len());
+        assert!(whole.is_closed_oriented());
+        let octree_settings = octree::OctreeSettings::default();
+        let (whole_octree, _) =
+            octree::polygonize(&Octahedron, &lattice, &octree_settings).unwrap();
+        for tile in [2, 3, 5, 16] {
+            let meshes = tile_meshes(&lattice, tile, |l| {
+                let (m, k, _) = dense::polygonize_keyed(&Octahedron, l, &settings).unwrap();
+                (m, k)
+            });
+            assert_whole(&weld(&as_tiles(&meshes), &lattice).unwrap(), &whole);
+            let meshes = tile_meshes(&lattice, tile, |l| {
+                let (m, k, _) = octree::polygonize_keyed(&Octahedron, l, &octree_settings).unwrap();
+                (m, k)
+            });
+            assert_whole(&weld(&as_tiles(&meshes), &lattice).unwrap(), &whole_octree);
+        }
     }
 
     /// Bad tiles are refused naming the argument at fault.
@@ -567,6 +547,8 @@ mod tests {
             vertices: &v,
             faces,
             normals,
+            boundary: &[],
+            keys: &[],
         };
         let w = [[0, 0, 0], [4, 4, 4]];
         let name = |r: Result<Welded>| match r {
@@ -585,6 +567,37 @@ mod tests {
         assert_eq!(
             name(weld(&[tile(&[], &[], [[0, 0, 0], [5, 4, 4]])], &lattice)),
             "window"
+        );
+        fn keyed<'a>(
+            vertices: &'a [DVec3],
+            boundary: &'a [u32],
+            keys: &'a [u64],
+            window: [[u32; 3]; 2],
+        ) -> Tile<'a> {
+            Tile {
+                window,
+                vertices,
+                faces: &[],
+                normals: &[],
+                boundary,
+                keys,
+            }
+        }
+        let k = lattice.whole_edge_key([0, 0, 0], 0);
+        let beyond = lattice.whole_edge_key([1, 0, 0], 0);
+        let w1 = [[0, 0, 0], [1, 4, 4]];
+        let name_of = |tiles: &[Tile]| name(weld(tiles, &lattice));
+        let (one, two, three) = ([0u32], [0u32, 1], [3u32]);
+        let (kk, k2) = ([k], [k, k]);
+        assert_eq!(name_of(&[keyed(&v, &two, &kk, w)]), "keys");
+        assert_eq!(name_of(&[keyed(&v, &three, &kk, w)]), "boundary");
+        assert_eq!(name_of(&[keyed(&v, &one, &[beyond], w1)]), "keys");
+        assert_eq!(name_of(&[keyed(&v, &two, &k2, w)]), "keys");
+        // One edge at two positions in two tiles.
+        let moved = [DVec3::X];
+        assert_eq!(
+            name_of(&[keyed(&v, &one, &kk, w1), keyed(&moved, &one, &kk, w1)]),
+            "tiles"
         );
         assert_eq!(weld(&[], &lattice).unwrap(), Welded::default());
     }

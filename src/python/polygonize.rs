@@ -7,6 +7,7 @@ use super::interrupt::run;
 use crate::field::{Differences, Field};
 use crate::lattice::Lattice;
 use crate::polygonize::tracking::{Components, TrackingSettings};
+use crate::polygonize::weld::boundary_edges;
 use crate::polygonize::{
     dense, difference_step, octree, sparse, tracking, Ambiguity, Settings, Stats,
 };
@@ -249,6 +250,25 @@ fn buffers((mesh, stats): (crate::mesh::Mesh, Stats)) -> (MeshBuffers, Stats) {
     (MeshBuffers::new(mesh), stats)
 }
 
+/// A polygonizer's result, its vertices' edge keys, and nothing for the boundary (when it is
+/// not asked for).
+type Polygonized = (MeshBuffers, Stats, Option<(Vec<u32>, Vec<u64>)>);
+
+/// [`buffers`] without the boundary.
+fn unkeyed(r: (crate::mesh::Mesh, Stats)) -> Polygonized {
+    let (m, s) = buffers(r);
+    (m, s, None)
+}
+
+/// A keyed polygonizer's result, with the vertices on edges in the boundary faces of the
+/// window `window` ([`boundary_edges`]).
+fn keyed(window: [[u32; 3]; 2]) -> impl Fn((crate::mesh::Mesh, Vec<u64>, Stats)) -> Polygonized {
+    move |(mesh, keys, stats)| {
+        let b = boundary_edges(&keys, window);
+        (MeshBuffers::new(mesh), stats, Some(b))
+    }
+}
+
 fn mesh_to_py<'py>(
     py: Python<'py>,
     mesh: MeshBuffers,
@@ -281,10 +301,16 @@ fn unknown_method(method: &str) -> PyErr {
 /// on) of the lattice, with the vertices the whole lattice gives there, bit for bit (what
 /// :func:`implicitmesh.distributed.polygonize` runs per tile).
 ///
+/// ``boundary=True`` (any method; for ``"tracking"`` a :class:`BlobField`) also returns the
+/// vertices on lattice edges in the window's boundary faces (the whole lattice's faces without
+/// ``window``), which the neighbouring windows share: their indices ``(B,) uint32`` and their
+/// edges' keys ``(B,) uint64`` in the whole lattice's numbering, what
+/// :func:`weld_tiles` joins them by.
+///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
-/// stats dict)``.
+/// stats dict)``, then with ``boundary`` ``boundary (B,) uint32, keys (B,) uint64``.
 #[pyfunction]
-#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, project=false, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None))]
+#[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, project=false, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None, boundary=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn polygonize<'py>(
     py: Python<'py>,
@@ -303,12 +329,14 @@ pub fn polygonize<'py>(
     seeds: Option<&Bound<'py, PyAny>>,
     progress: Option<&Bound<'py, PyAny>>,
     window: Option<&Bound<'py, PyAny>>,
+    boundary: bool,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let mut lattice = parse_lattice(bounds, resolution)?;
+    let mut cells = [[0; 3], lattice.cells];
     if let Some(w) = window {
-        let [lo, hi] = parse_window(w)?;
-        lattice = lattice.window(lo, hi)?;
+        cells = parse_window(w)?;
+        lattice = lattice.window(cells[0], cells[1])?;
     }
     let settings = shared_settings(ambiguity, normals, project, batch_size, memory_limit)?;
     let method = method.to_ascii_lowercase();
@@ -335,7 +363,10 @@ pub fn polygonize<'py>(
     let f = &*polygonizer_field(&field, &lattice)?;
     let on_caller = field.is_callable();
     let result = match method.as_str() {
-        "dense" => run(py, progress, on_caller, || dense::polygonize(f, &lattice, &settings).map(buffers)),
+        "dense" if boundary => run(py, progress, on_caller, || {
+            dense::polygonize_keyed(f, &lattice, &settings).map(keyed(cells))
+        }),
+        "dense" => run(py, progress, on_caller, || dense::polygonize(f, &lattice, &settings).map(unkeyed)),
         "octree" => {
             let od = octree::OctreeSettings::default();
             let o = octree::OctreeSettings {
@@ -344,29 +375,52 @@ pub fn polygonize<'py>(
                 safety: safety.or(od.safety),
                 corner_test: corner_test.unwrap_or(od.corner_test),
             };
-            run(py, progress, on_caller, || octree::polygonize(f, &lattice, &o).map(buffers))
+            match boundary {
+                true => run(py, progress, on_caller, || {
+                    octree::polygonize_keyed(f, &lattice, &o).map(keyed(cells))
+                }),
+                false => run(py, progress, on_caller, || octree::polygonize(f, &lattice, &o).map(unkeyed)),
+            }
         }
         "tracking" => {
             let ts = tracking_settings(&field, seeds, &lattice, settings)?;
             match &field {
+                FieldArg::Blob(b) if boundary => {
+                    let blobs = &b.inner;
+                    run(py, progress, on_caller, || {
+                        tracking::polygonize_bounded_keyed(blobs, &lattice, &ts).map(keyed(cells))
+                    })
+                }
                 FieldArg::Blob(b) => {
                     let blobs = &b.inner;
                     run(py, progress, on_caller, || {
-                        tracking::polygonize_bounded(blobs, &lattice, &ts).map(buffers)
+                        tracking::polygonize_bounded(blobs, &lattice, &ts).map(unkeyed)
                     })
                 }
+                _ if boundary => {
+                    return Err(value_error(
+                        "boundary",
+                        "with method=\"tracking\" needs a BlobField (whose every component is found)",
+                    ))
+                }
                 _ => run(py, progress, on_caller, || {
-                    tracking::polygonize(f, &lattice, &ts).map(buffers)
+                    tracking::polygonize(f, &lattice, &ts).map(unkeyed)
                 }),
             }
         }
         "sparse" => match &field {
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
-                run(py, progress, on_caller, || {
-                    sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
-                        |(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats),
-                    )
+                run(py, progress, on_caller, || match boundary {
+                    true => sparse::polygonize_as_keyed::<_, i64>(blobs, &lattice, &settings).map(
+                        |(mesh, faces, keys, stats)| {
+                            let b = boundary_edges(&keys, cells);
+                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats, Some(b))
+                        },
+                    ),
+                    false => sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
+                        |(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats, None),
+                    ),
                 })
             }
             _ => {
@@ -381,8 +435,17 @@ pub fn polygonize<'py>(
     if let Some(e) = field.take_error() {
         return Err(e);
     }
-    let (mesh, stats) = result?;
-    mesh_to_py(py, mesh, &stats, &lattice, &method)
+    let (mesh, stats, edges) = result?;
+    let out = mesh_to_py(py, mesh, &stats, &lattice, &method)?;
+    match edges {
+        None => Ok(out),
+        Some((b, k)) => {
+            let mut items: Vec<Bound<'py, PyAny>> = out.iter().collect();
+            items.push(numpy::PyArray1::from_vec(py, b).into_any());
+            items.push(numpy::PyArray1::from_vec(py, k).into_any());
+            PyTuple::new(py, items)
+        }
+    }
 }
 
 /// Projects the vertices of a mesh made over the lattice of ``bounds`` and ``resolution``

@@ -6,23 +6,51 @@ use super::interrupt::run;
 use crate::lattice::{Lattice, MAX_CELLS_PER_AXIS};
 use crate::polygonize::weld::{weld, Tile};
 use glam::DVec3;
-use numpy::PyReadonlyArray2;
+use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
-/// `numpy.require(obj, dtype, "CA")` (C-contiguous and aligned, copied only when it is not) as
-/// an `(N, 3)` array borrowed read-only.
+/// `numpy.require(obj, dtype, "CA")`: C-contiguous and aligned, copied only when it is not.
+fn required<'py>(
+    obj: &Bound<'py, PyAny>,
+    dtype: &str,
+    name: &'static str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let np = obj.py().import("numpy")?;
+    np.call_method1("require", (obj, dtype, "CA"))
+        .map_err(|e| value_error(name, format!("not convertible to a {dtype} array ({e})")))
+}
+
+/// [`required`] as an `(N, 3)` array borrowed read-only.
 fn rows<'py, T: numpy::Element>(
     obj: &Bound<'py, PyAny>,
     dtype: &str,
     name: &'static str,
 ) -> PyResult<PyReadonlyArray2<'py, T>> {
-    let np = obj.py().import("numpy")?;
-    let a = np
-        .call_method1("require", (obj, dtype, "CA"))
-        .map_err(|e| value_error(name, format!("not convertible to a {dtype} array ({e})")))?;
+    let a = required(obj, dtype, name)?;
     check_rows_of_three(&a, name)?;
     a.extract()
+}
+
+/// [`required`] as a one-dimensional array borrowed read-only.
+fn column<'py, T: numpy::Element>(
+    obj: &Bound<'py, PyAny>,
+    dtype: &str,
+    name: &'static str,
+) -> PyResult<PyReadonlyArray1<'py, T>> {
+    let a = required(obj, dtype, name)?;
+    a.extract().map_err(|_| {
+        value_error(
+            name,
+            format!("expected a one-dimensional array, got shape {}", shape(&a)),
+        )
+    })
+}
+
+/// `obj.shape` as Python prints it.
+fn shape(obj: &Bound<'_, PyAny>) -> String {
+    obj.getattr("shape")
+        .map_or_else(|_| "?".into(), |s| s.to_string())
 }
 
 /// The whole lattice from ``cells``, ``origin`` and ``cell`` (as :func:`lattice` gives them).
@@ -52,8 +80,11 @@ fn whole_lattice(cells: [u32; 3], origin: [f64; 3], cell: [f64; 3]) -> PyResult<
 /// Joins tile meshes made on windows of one lattice; see ``implicitmesh.distributed``.
 ///
 /// ``tiles`` is a sequence of ``(window, vertices (V, 3) float64, faces (F, 3) int64, normals
-/// (V, 3) or (0, 3) float64)``, ``window = [[i0, j0, k0], [i1, j1, k1]]`` the tile's cells;
-/// ``cells``, ``origin``, ``cell`` the whole lattice (as :func:`lattice` returns them).
+/// (V, 3) or (0, 3) float64, boundary (B,) uint32, keys (B,) uint64)``, ``window = [[i0, j0,
+/// k0], [i1, j1, k1]]`` the tile's cells, ``boundary`` and ``keys`` as
+/// ``polygonize(..., window=window, boundary=True)`` returns them; ``cells``, ``origin``,
+/// ``cell`` the whole lattice (as :func:`lattice` returns them). Vertices with one edge key
+/// are joined.
 /// ``progress`` is called with the tile vertices done.
 ///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3))``.
@@ -70,27 +101,32 @@ pub fn weld_tiles<'py>(
     let lattice = whole_lattice(cells, origin, cell)?;
     let mut arrays = Vec::with_capacity(tiles.len());
     for t in &tiles {
-        let (window, v, f, n): ([[u32; 3]; 2], _, _, _) = t.extract().map_err(|_| {
-            value_error(
-                "tiles",
-                "expected (window [[i0, j0, k0], [i1, j1, k1]], vertices, faces, normals) per tile",
-            )
-        })?;
+        let (window, v, f, n, b, k): ([[u32; 3]; 2], _, _, _, _, _) =
+            t.extract().map_err(|_| {
+                value_error(
+                    "tiles",
+                    "expected (window [[i0, j0, k0], [i1, j1, k1]], vertices, faces, normals, boundary, keys) per tile",
+                )
+            })?;
         arrays.push((
             window,
             rows::<f64>(&v, "float64", "vertices")?,
             rows::<i64>(&f, "int64", "faces")?,
             rows::<f64>(&n, "float64", "normals")?,
+            column::<u32>(&b, "uint32", "boundary")?,
+            column::<u64>(&k, "uint64", "keys")?,
         ));
     }
     let parts: Vec<Tile> = arrays
         .iter()
-        .map(|(window, v, f, n)| -> PyResult<Tile> {
+        .map(|(window, v, f, n, b, k)| -> PyResult<Tile> {
             Ok(Tile {
                 window: *window,
                 vertices: bytemuck::cast_slice(v.as_slice()?),
                 faces: bytemuck::cast_slice(f.as_slice()?),
                 normals: bytemuck::cast_slice(n.as_slice()?),
+                boundary: b.as_slice()?,
+                keys: k.as_slice()?,
             })
         })
         .collect::<PyResult<_>>()?;

@@ -134,15 +134,36 @@ pub fn polygonize<F: Field + ?Sized>(
     lattice: &Lattice,
     settings: &OctreeSettings,
 ) -> Result<(Mesh, Stats)> {
+    let (mesh, _, stats) = polygonize_with_keys(field, lattice, settings, false)?;
+    Ok((mesh, stats))
+}
+
+/// [`polygonize`], with the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]),
+/// one per vertex.
+pub fn polygonize_keyed<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &OctreeSettings,
+) -> Result<(Mesh, Vec<u64>, Stats)> {
+    polygonize_with_keys(field, lattice, settings, true)
+}
+
+/// [`polygonize`], and the vertices' edge keys when `keyed` (else none).
+fn polygonize_with_keys<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &OctreeSettings,
+    keyed: bool,
+) -> Result<(Mesh, Vec<u64>, Stats)> {
     let mut run = Run::new(field, lattice, settings)?;
     run.test_levels()?;
     let sampling = Instant::now();
     let mut leaves = run.crossed_leaves()?;
     run.repair(&mut leaves)?;
     run.stats.add_time("sample", sampling);
-    let (mut mesh, mut stats) = run.triangulate(leaves);
+    let (mut mesh, keys, mut stats) = run.triangulate(leaves, keyed);
     finish_mesh(field, &mut mesh, lattice, &settings.common, &mut stats)?;
-    Ok((mesh, stats))
+    Ok((mesh, keys, stats))
 }
 
 #[cfg(test)]

@@ -16,19 +16,24 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::time::Instant;
 
 impl<F: Field + ?Sized> Run<'_, F> {
-    /// The mesh of the crossed `leaves` (without normals), and the run's stats; everything
-    /// else the run holds is dropped first.
-    pub(super) fn triangulate(mut self, leaves: Vec<CrossedLeaf>) -> (Mesh, Stats) {
+    /// The mesh of the crossed `leaves` (without normals), its vertices' edge keys when
+    /// `keyed` (else none), and the run's stats; everything else the run holds is dropped
+    /// first.
+    pub(super) fn triangulate(
+        mut self,
+        leaves: Vec<CrossedLeaf>,
+        keyed: bool,
+    ) -> (Mesh, Vec<u64>, Stats) {
         self.stats.cells_crossed = leaves.len() as u64;
         let t = Instant::now();
         let values = std::mem::take(&mut self.store.values);
         let (table, lattice) = (self.table, self.lattice);
         let mut stats = std::mem::take(&mut self.stats);
         drop(self);
-        let mesh = triangulate(table, lattice, &values, &leaves);
+        let (mesh, keys) = triangulate(table, lattice, &values, &leaves, keyed);
         drop((values, leaves));
         stats.add_time("triangulate", t);
-        (mesh, stats)
+        (mesh, keys, stats)
     }
 }
 
@@ -37,13 +42,14 @@ impl<F: Field + ?Sized> Run<'_, F> {
 /// order of its first use (by leaf, then triangle, then edge). The first leaf that uses an edge
 /// (found with `fetch_min` on the edge's entry, keyed by the value index of its lower end and
 /// its axis) makes its vertex; the leaves' counts of vertices made give where each leaf's
-/// vertices start.
+/// vertices start. With `keyed`, also each vertex's edge key, in the same order.
 fn triangulate(
     table: &CaseTable,
     lattice: &Lattice,
     values: &[f64],
     leaves: &[CrossedLeaf],
-) -> Mesh {
+    keyed: bool,
+) -> (Mesh, Vec<u64>) {
     // The cell edges each case's triangles use.
     let used: [u16; 256] = std::array::from_fn(|c| {
         table
@@ -96,9 +102,9 @@ fn triangulate(
         .iter()
         .map(|l| table.triangles(l.case).len() as u32)
         .collect();
-    let vertices: Vec<DVec3> = crate::memory::collect_counted(&made_count, |i| {
-        let (l, made, first) = (&leaves[i], makes[i], start[i]);
-        // The vertices in order of first use in the leaf's triangles.
+    // The edges of the vertices leaf `i` makes, in order of first use in its triangles.
+    let made_order = |i: usize| {
+        let (l, made) = (&leaves[i], makes[i]);
         let mut order = [0u8; 12];
         let (mut k, mut left) = (0, made);
         for t in table.triangles(l.case) {
@@ -106,10 +112,17 @@ fn triangulate(
                 if left & 1 << e != 0 {
                     left &= !(1 << e);
                     order[k] = e;
-                    entry[key(l, e as usize)].store(first + k as u32, Relaxed);
                     k += 1;
                 }
             }
+        }
+        (order, k)
+    };
+    let vertices: Vec<DVec3> = crate::memory::collect_counted(&made_count, |i| {
+        let (l, first) = (&leaves[i], start[i]);
+        let (order, k) = made_order(i);
+        for (j, &e) in order[..k].iter().enumerate() {
+            entry[key(l, e as usize)].store(first + j as u32, Relaxed);
         }
         (0..k).map(move |j| {
             let [ka, kb] = EDGES[order[j] as usize].map(|k| k as usize);
@@ -132,9 +145,22 @@ fn triangulate(
             .iter()
             .map(move |t| t.map(|e| entry[key(l, e as usize)].load(Relaxed)))
     });
-    Mesh {
+    let keys = if keyed {
+        crate::memory::collect_counted(&made_count, |i| {
+            let (order, k) = made_order(i);
+            let o = leaves[i].origin;
+            (0..k).map(move |j| {
+                let e = order[j] as usize;
+                lattice.whole_edge_key(corner(o, EDGES[e][0] as usize), EDGE_AXIS[e])
+            })
+        })
+    } else {
+        Vec::new()
+    };
+    let mesh = Mesh {
         vertices,
         triangles,
         ..Default::default()
-    }
+    };
+    (mesh, keys)
 }

@@ -49,6 +49,10 @@ pub(super) struct CellTracking {
     slots: Vec<Slot>,
     vals: Vec<f64>,
     mesh: Mesh,
+    /// When set, `edge_keys` holds the key of each vertex's lattice edge, beside
+    /// `mesh.vertices`.
+    pub(super) keyed: bool,
+    pub(super) edge_keys: Vec<u64>,
     /// The search for components without a seed ([`Components::All`]): the blocks the field's
     /// bounds cannot rule out, and per block its sign words and points per axis (None: one
     /// sign) with the points evaluated.
@@ -73,6 +77,7 @@ impl CellTracking {
             + self.mesh.vertices.capacity() * 24
             + self.mesh.normals.capacity() * 24
             + self.mesh.triangles.capacity() * 12
+            + self.edge_keys.capacity() * 8
             + self.marks.capacity()
             + self.candidates.capacity() * 4
             + self.signs.capacity() * std::mem::size_of::<(Option<BlockSigns>, u64)>()
@@ -145,6 +150,7 @@ impl CellTracking {
         self.mesh.vertices.clear();
         self.mesh.triangles.clear();
         self.mesh.normals.clear();
+        self.edge_keys.clear();
     }
 
     /// Evaluates, in one batch, the corners of `cells` not yet known in this call.
@@ -263,9 +269,13 @@ impl CellTracking {
                     }
                     let (d, axis) = edge_origin(e);
                     let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
+                    let (keyed, keys) = (self.keyed, &mut self.edge_keys);
                     idx[e] = self.cache.edge(a, axis, || {
                         let mut b = a;
                         b[axis as usize] += 1;
+                        if keyed {
+                            keys.push(lattice.whole_edge_key(a, axis));
+                        }
                         vertices.push(edge_crossing(lattice.point(a), lattice.point(b), fa, fb));
                         (vertices.len() - 1) as u32
                     });

@@ -73,5 +73,5 @@ mod walker;
 mod tests;
 
 pub use settings::{Components, TrackingSettings};
-pub use tessellator::{polygonize, polygonize_bounded, Tessellator};
+pub use tessellator::{polygonize, polygonize_bounded, polygonize_bounded_keyed, Tessellator};
 pub(in crate::polygonize) use walker::FACE_STEP;

@@ -91,6 +91,20 @@ pub fn polygonize<F: Field + ?Sized>(
     Ok((m.clone(), s))
 }
 
+/// [`polygonize_bounded`], with the key of each vertex's lattice edge
+/// ([`Lattice::whole_edge_key`]), one per vertex.
+pub fn polygonize_bounded_keyed<F: BlockField + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    settings: &TrackingSettings,
+) -> Result<(Mesh, Vec<u64>, Stats)> {
+    let mut t = Tessellator::new();
+    t.cells.keyed = true;
+    let (m, s) = t.polygonize_bounded(field, lattice, settings)?;
+    let m = m.clone();
+    Ok((m, std::mem::take(&mut t.cells.edge_keys), s))
+}
+
 /// One-shot tracking polygonization of a field with block bounds (see
 /// [`Tessellator::polygonize_bounded`]).
 pub fn polygonize_bounded<F: BlockField + ?Sized>(
