@@ -179,7 +179,7 @@ def polygonize(
     boundary: bool = False,
     **options: Unpack[_PolygonizeOptions],
 ) -> _MeshTuple | tuple[
-    npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any],
+    npt.NDArray[np.float64], npt.NDArray[np.uint32], npt.NDArray[np.float64], dict[str, Any],
     npt.NDArray[np.uint32], npt.NDArray[np.uint64],
 ]: ...
 

@@ -12,6 +12,7 @@ use crate::polygonize::{
     dense, difference_step, octree, sparse, tracking, Ambiguity, Settings, Stats,
 };
 use pyo3::prelude::*;
+use numpy::PyArrayMethods;
 use pyo3::types::{PyBool, PyDict, PyTuple};
 
 pub fn parse_ambiguity(s: &str) -> PyResult<Ambiguity> {
@@ -250,9 +251,20 @@ fn buffers((mesh, stats): (crate::mesh::Mesh, Stats)) -> (MeshBuffers, Stats) {
     (MeshBuffers::new(mesh), stats)
 }
 
-/// A polygonizer's result, its vertices' edge keys, and nothing for the boundary (when it is
-/// not asked for).
-type Polygonized = (MeshBuffers, Stats, Option<(Vec<u32>, Vec<u64>)>);
+/// What a tile run adds: its triangles as flat `u32` (the mesh buffers then hold none), and
+/// its vertices on edges in its boundary faces with their edge keys ([`boundary_edges`]).
+type TileParts = (Vec<u32>, (Vec<u32>, Vec<u64>));
+
+/// A polygonizer's result, with the tile's parts when asked for.
+type Polygonized = (MeshBuffers, Stats, Option<TileParts>);
+
+/// Triangles as a flat vector, without a copy when the allocation allows it.
+fn flat_u32(t: Vec<[u32; 3]>) -> Vec<u32> {
+    match bytemuck::allocation::try_cast_vec::<[u32; 3], u32>(t) {
+        Ok(v) => v,
+        Err((_, t)) => bytemuck::cast_slice::<[u32; 3], u32>(&t).to_vec(),
+    }
+}
 
 /// [`buffers`] without the boundary.
 fn unkeyed(r: (crate::mesh::Mesh, Stats)) -> Polygonized {
@@ -263,9 +275,10 @@ fn unkeyed(r: (crate::mesh::Mesh, Stats)) -> Polygonized {
 /// A keyed polygonizer's result, with the vertices on edges in the boundary faces of the
 /// window `window` ([`boundary_edges`]).
 fn keyed(window: [[u32; 3]; 2]) -> impl Fn((crate::mesh::Mesh, Vec<u64>, Stats)) -> Polygonized {
-    move |(mesh, keys, stats)| {
+    move |(mut mesh, keys, stats)| {
         let b = boundary_edges(&keys, window);
-        (MeshBuffers::new(mesh), stats, Some(b))
+        let faces = flat_u32(std::mem::take(&mut mesh.triangles));
+        (MeshBuffers::new(mesh), stats, Some((faces, b)))
     }
 }
 
@@ -301,14 +314,16 @@ fn unknown_method(method: &str) -> PyErr {
 /// on) of the lattice, with the vertices the whole lattice gives there, bit for bit (what
 /// :func:`implicitmesh.distributed.polygonize` runs per tile).
 ///
-/// ``boundary=True`` (any method; for ``"tracking"`` a :class:`BlobField`) also returns the
-/// vertices on lattice edges in the window's boundary faces (the whole lattice's faces without
-/// ``window``), which the neighbouring windows share: their indices ``(B,) uint32`` and their
-/// edges' keys ``(B,) uint64`` in the whole lattice's numbering, what
+/// ``boundary=True`` (any method; for ``"tracking"`` a :class:`BlobField`) returns a tile as
+/// :func:`weld_tiles` takes it: the faces as ``uint32`` (a tile has fewer than 2³² vertices),
+/// and also the vertices on lattice edges in the window's boundary faces (the whole lattice's
+/// faces without ``window``), which the neighbouring windows share: their indices ``(B,)
+/// uint32`` and their edges' keys ``(B,) uint64`` in the whole lattice's numbering, what
 /// :func:`weld_tiles` joins them by.
 ///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
-/// stats dict)``, then with ``boundary`` ``boundary (B,) uint32, keys (B,) uint64``.
+/// stats dict)``; with ``boundary``, faces ``(F, 3) uint32`` and then ``boundary (B,) uint32,
+/// keys (B,) uint64``.
 #[pyfunction]
 #[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, project=false, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None, boundary=false))]
 #[allow(clippy::too_many_arguments)]
@@ -412,10 +427,10 @@ pub fn polygonize<'py>(
             FieldArg::Blob(b) => {
                 let blobs = &b.inner;
                 run(py, progress, on_caller, || match boundary {
-                    true => sparse::polygonize_as_keyed::<_, i64>(blobs, &lattice, &settings).map(
+                    true => sparse::polygonize_as_keyed::<_, u32>(blobs, &lattice, &settings).map(
                         |(mesh, faces, keys, stats)| {
                             let b = boundary_edges(&keys, cells);
-                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats, Some(b))
+                            (MeshBuffers::new(mesh), stats, Some((flat_u32(faces), b)))
                         },
                     ),
                     false => sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
@@ -439,8 +454,12 @@ pub fn polygonize<'py>(
     let out = mesh_to_py(py, mesh, &stats, &lattice, &method)?;
     match edges {
         None => Ok(out),
-        Some((b, k)) => {
+        Some((faces, (b, k))) => {
             let mut items: Vec<Bound<'py, PyAny>> = out.iter().collect();
+            let n = faces.len() / 3;
+            items[1] = numpy::PyArray1::from_vec(py, faces)
+                .reshape([n, 3])?
+                .into_any();
             items.push(numpy::PyArray1::from_vec(py, b).into_any());
             items.push(numpy::PyArray1::from_vec(py, k).into_any());
             PyTuple::new(py, items)

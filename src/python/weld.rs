@@ -47,6 +47,45 @@ fn column<'py, T: numpy::Element>(
     })
 }
 
+/// A tile's triangles as the weld reads them: a uint32 array in place, any other integer
+/// array converted (an index outside `0..2³²` refused naming `faces`).
+enum Faces<'py> {
+    Borrowed(PyReadonlyArray2<'py, u32>),
+    Converted(Vec<[u32; 3]>),
+}
+
+impl<'py> Faces<'py> {
+    fn new(obj: &Bound<'py, PyAny>) -> PyResult<Self> {
+        let np = obj.py().import("numpy")?;
+        let a = np
+            .call_method1("asarray", (obj,))
+            .map_err(|e| value_error("faces", format!("not an array ({e})")))?;
+        if a.getattr("dtype")?.eq(np.getattr("uint32")?)? {
+            return Ok(Faces::Borrowed(rows::<u32>(&a, "uint32", "faces")?));
+        }
+        let wide = rows::<i64>(&a, "int64", "faces")?;
+        let flat = wide.as_slice()?;
+        if let Some(bad) = flat.iter().find(|&&i| u32::try_from(i).is_err()) {
+            return Err(value_error(
+                "faces",
+                format!("vertex index {bad} is outside 0..2³²"),
+            ));
+        }
+        Ok(Faces::Converted(
+            flat.chunks_exact(3)
+                .map(|t| [t[0] as u32, t[1] as u32, t[2] as u32])
+                .collect(),
+        ))
+    }
+
+    fn rows(&self) -> PyResult<&[[u32; 3]]> {
+        Ok(match self {
+            Faces::Borrowed(a) => bytemuck::cast_slice(a.as_slice()?),
+            Faces::Converted(v) => v,
+        })
+    }
+}
+
 /// `obj.shape` as Python prints it.
 fn shape(obj: &Bound<'_, PyAny>) -> String {
     obj.getattr("shape")
@@ -79,7 +118,8 @@ fn whole_lattice(cells: [u32; 3], origin: [f64; 3], cell: [f64; 3]) -> PyResult<
 
 /// Joins tile meshes made on windows of one lattice; see ``implicitmesh.distributed``.
 ///
-/// ``tiles`` is a sequence of ``(window, vertices (V, 3) float64, faces (F, 3) int64, normals
+/// ``tiles`` is a sequence of ``(window, vertices (V, 3) float64, faces (F, 3) uint32 (read in
+/// place; other integer types are converted), normals
 /// (V, 3) or (0, 3) float64, boundary (B,) uint32, keys (B,) uint64)``, ``window = [[i0, j0,
 /// k0], [i1, j1, k1]]`` the tile's cells, ``boundary`` and ``keys`` as
 /// ``polygonize(..., window=window, boundary=True)`` returns them; ``cells``, ``origin``,
@@ -111,7 +151,7 @@ pub fn weld_tiles<'py>(
         arrays.push((
             window,
             rows::<f64>(&v, "float64", "vertices")?,
-            rows::<i64>(&f, "int64", "faces")?,
+            Faces::new(&f)?,
             rows::<f64>(&n, "float64", "normals")?,
             column::<u32>(&b, "uint32", "boundary")?,
             column::<u64>(&k, "uint64", "keys")?,
@@ -123,7 +163,7 @@ pub fn weld_tiles<'py>(
             Ok(Tile {
                 window: *window,
                 vertices: bytemuck::cast_slice(v.as_slice()?),
-                faces: bytemuck::cast_slice(f.as_slice()?),
+                faces: f.rows()?,
                 normals: bytemuck::cast_slice(n.as_slice()?),
                 boundary: b.as_slice()?,
                 keys: k.as_slice()?,
