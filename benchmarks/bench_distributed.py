@@ -6,10 +6,11 @@ Setups, each in a fresh process (its peak resident size its own):
 - ``single``: ``implicitmesh.polygonize`` in one process with all its threads (rayon's pool, one
   thread per core);
 - ``dask-1`` and ``dask-2``: a ``LocalCluster`` of 1 or 2 worker processes, each with one Dask
-  thread and one rayon thread (``RAYON_NUM_THREADS=1`` in the workers' environment), so that a
-  worker uses one core: on 2 cores, ``dask-2`` uses the cores ``single`` uses, and ``dask-2``
-  against ``dask-1`` measures how independent the tasks are (a worker whose polygonizer ran on
-  both cores would leave nothing for a second worker to gain).
+  thread and one rayon thread (``RAYON_NUM_THREADS=1`` in the workers' environment, set by the
+  nannies), so that a worker uses one core: on 2 cores, ``dask-2`` uses the cores ``single``
+  uses, and ``dask-2`` against ``dask-1`` measures how independent the tasks are (a worker whose
+  polygonizer ran on both cores would leave nothing for a second worker to gain). The client
+  keeps all its rayon threads for the weld, which runs once the tiles are in.
 
 Fields: ``blobs``, primitives with centres uniform in [-0.8, 0.8]³ (radius chosen so that the
 spheres of influence cover the cube about 1.6 times: a foam of merged blobs), method
@@ -59,6 +60,9 @@ MANY = {False: (88, 4), True: (40, 4)}
 MANY_BOUNDS = [[-0.75] * 3, [0.75] * 3]
 #: No-op tasks, for the scheduler's cost per task alone.
 NOOP_TASKS = {False: 10_000, True: 1_000}
+#: The workers' environment: one rayon thread each (one Dask thread each too), so a worker uses
+#: one core.
+WORKER_ENV = {"RAYON_NUM_THREADS": "1"}
 #: Timed runs per case (after one warm-up on a small lattice); the median is reported.
 RUNS = {False: 3, True: 1}
 #: Targets of issue 25.
@@ -130,8 +134,6 @@ def pickled_parts(field, resolution: int, tile: int) -> list[int]:
 
 def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int) -> dict:
     """Polygonizes the saved field ``runs`` times with ``setup``; timings, counts and peaks."""
-    if setup != "single":
-        os.environ["RAYON_NUM_THREADS"] = "1"  # inherited by the worker processes, not used here
     import implicitmesh as im
 
     if setup == "many":
@@ -155,7 +157,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
 
     workers = int(setup.split("-")[1])
     cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, memory_limit=0)
+                                       dashboard_address=None, memory_limit=0, env=WORKER_ENV)
     with distributed.Client(cluster) as client:
         phases = Phases(imd)
         run = lambda res, t: imd.polygonize(field, bounds=BOX, resolution=res, method=method,  # noqa: E731
@@ -192,7 +194,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
 def many(file: str, resolution: int, tile: int, noop_tasks: int) -> dict:
     """Tiles of a few cells on 2 worker processes: the scheduler's and the weld's cost per tile,
     and no-op tasks for the scheduler's cost alone."""
-    os.environ["RAYON_NUM_THREADS"] = "1"
+    os.environ["RAYON_NUM_THREADS"] = "1"  # the single-process comparison below: one thread
     import distributed
 
     import implicitmesh as im
@@ -200,7 +202,7 @@ def many(file: str, resolution: int, tile: int, noop_tasks: int) -> dict:
 
     field = im.load(file)
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, memory_limit=0)
+                                       dashboard_address=None, memory_limit=0, env=WORKER_ENV)
     with distributed.Client(cluster) as client:
         phases = Phases(imd)
         imd.polygonize(field, bounds=MANY_BOUNDS, resolution=16, client=client, tile=8)  # warm-up
@@ -303,7 +305,7 @@ def render(raw: dict) -> str:
         "all its threads. `dask-1`, `dask-2`: `implicitmesh.distributed.polygonize` on a `LocalCluster` of 1 or 2 "
         "worker processes of one Dask thread and one rayon thread each (`RAYON_NUM_THREADS=1`), so a worker uses "
         "one core: on 2 cores `dask-2` has the cores `single` has, and `dask-2` against `dask-1` shows how "
-        "independent the tasks are. Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
+        "independent the tasks are; the client welds with all its threads. Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
         "200,000 primitives, scaled with the cube root of 1 / primitives), `method=\"sparse\"`. Variational: "
         "a partition fit of points sampled on `knot_hires` with their face normals (bench_scale's samples), "
         "`method=\"octree\"`, `normals=False`. Bounds [-1, 1]³. Each setup in a fresh process, after a warm-up "
