@@ -302,6 +302,13 @@ def test_output_directory_and_weld(client, blobs, tmp_path):
     assert done[-1] == sum(e["vertices"] for e in manifest["tiles"]) > len(whole.vertices)
     with pytest.raises(ValueError, match="directory"):
         imd.weld(tmp_path)
+    # A tile without edge keys (an older run's) is refused, naming the directory.
+    first = manifest["tiles"][0]["file"]
+    with np.load(out / first) as z:
+        arrays = {k: z[k] for k in ("vertices", "faces", "normals")}
+    np.savez(out / first, **arrays)
+    with pytest.raises(ValueError, match="directory: .*edge keys"):
+        imd.weld(out)
 
 
 def test_the_weld_checks_its_tiles():

@@ -396,7 +396,8 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
     Raises
     ------
     ValueError
-        When the directory has no manifest (the run did not finish) or a tile is missing.
+        When the directory has no manifest (the run did not finish), a tile is missing, or a
+        tile has no edge keys (written by an older implicitmesh).
     """
     directory = Path(directory)
     path = directory / MANIFEST
@@ -409,6 +410,10 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
         if not file.is_file():
             raise ValueError(f"directory: tile {e['file']} listed in the manifest is missing")
         with np.load(file) as z:
+            if "keys" not in z.files:
+                raise ValueError(
+                    f"directory: tile {e['file']} has no edge keys (written by an older implicitmesh); run polygonize again"
+                )
             parts.append((e, z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"]))
     return _weld(parts, manifest, progress)
 
