@@ -16,11 +16,13 @@
 //! summed in each mesh's own order (equal to rounding).
 //!
 //! Two parallel passes:
-//! 1. per block: values (or a sign), then the signs as eight 64-bit words (one per z-plane,
-//!    bit `i + 8j`), the crossed edges the block owns as bit words, and their vertices (and
-//!    normals, from the field's gradient over the block's own primitive list). A block owns the
-//!    edges starting at its points below its upper faces (at the lattice's upper sides, those
-//!    on them too), so every lattice edge has one owner.
+//! 1. a slab of z-layers of blocks at a time (the field's data for those layers only:
+//!    [`BlockField::keep_layers`]), per block: values (or a sign), then the signs as eight
+//!    64-bit words (one per z-plane, bit `i + 8j`), the crossed edges the block owns as bit
+//!    words, and their vertices (and normals, from the field's gradient over the block's own
+//!    primitive list), moved into the mesh after the slab. A block owns the edges starting at
+//!    its points below its upper faces (at the lattice's upper sides, those on them too), so
+//!    every lattice edge has one owner.
 //! 2. per evaluated block: its crossed cells, found eight words at a time; a triangle corner on
 //!    an edge another block owns looks up that block's rank of the edge (a popcount).
 //!
@@ -520,7 +522,18 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     ws.map.clear();
     ws.map.resize(num_blocks, NONE);
     let normals = settings.normals;
-    let mut mesh = Mesh::default();
+    // Room for as many vertices as the estimate of triangles (address space, touched as the
+    // slabs fill it), so that growing never copies the vertices.
+    let room = (estimate_triangles(lattice) as usize).min(u32::MAX as usize);
+    let mut mesh = Mesh {
+        vertices: crate::memory::reserve_huge(room),
+        normals: if normals {
+            crate::memory::reserve_huge(room)
+        } else {
+            Vec::new()
+        },
+        ..Default::default()
+    };
     // What the outputs found about their normals, for `finish_normals`.
     let mut found = BlockOutput::default();
     let mut listing = 0.0;
@@ -563,6 +576,10 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
             stats.evaluations += part.out.evaluations;
             found.zero_normal |= part.out.zero_normal;
             found.bad_normal |= part.out.bad_normal;
+        }
+        // The slab's block lists are made again for the next: the memory they held can go.
+        if mesh.vertices.len() * std::mem::size_of::<DVec3>() > KEEP_OUTPUT_BYTES {
+            crate::memory::release_free_memory();
         }
     }
     // The field's block data is not needed to triangulate, nor are large outputs; for a large
