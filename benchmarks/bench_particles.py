@@ -14,7 +14,9 @@ Every case runs in a fresh process (its peak resident size VmHWM is its own, par
 times are wall-clock seconds from particles to mesh, medians over the runs. The results (JSON and
 markdown) are written again as each case finishes, so a run stopped early keeps what it measured.
 ``--sizes`` and ``--cases`` run some cases only and keep the other cases already in the results
-(run the 10⁶ and the 4·10⁶ particles separately, say).
+(run the 10⁶ and the 4·10⁶ particles separately, say). Above :data:`ONE_RUN_ABOVE` particles
+(``--sizes 10000000 --cases slab/triquet``, the issue's 10⁷ at cells of s/4: ours only is
+enough) each case runs once.
 
     python -m benchmarks.bench_particles [--quick] [--results DIR] [--sizes N,...] [--cases NAME,...]
     python -m benchmarks.bench_particles one LAYOUT METHOD PARTICLES   # one JSON line
@@ -41,6 +43,8 @@ OURS = ("colour", "colour+normals", "triquet", "triquet+normals")
 PEERS = ("splashsurf-f32", "splashsurf-f64")
 #: Repetitions per case, each in its own process; the median is reported.
 RUNS = {False: 3, True: 1}
+#: Particles above which a case runs once (10⁷ particles take minutes and gigabytes).
+ONE_RUN_ABOVE = 4_500_000
 #: The colour field's threshold (splashsurf's default).
 ISO = 0.6
 #: The results' name: NAME.json and NAME.md in the results directory.
@@ -228,9 +232,10 @@ def measure(a: argparse.Namespace, save) -> dict:
                 "earlier_runs": earlier if kept else []}
 
     for layout, method, n in todo:
-        log(f"{layout}, {method}, {n:,} particles, {RUNS[a.quick]} run(s)")
+        runs = 1 if n > ONE_RUN_ABOVE else RUNS[a.quick]
+        log(f"{layout}, {method}, {n:,} particles, {runs} run(s)")
         cases.append({"layout": layout, "method": method, "n": n,
-                      "runs": [run_one(layout, method, n) for _ in range(RUNS[a.quick])]})
+                      "runs": [run_one(layout, method, n) for _ in range(runs)]})
         save(raw())
     return raw()
 

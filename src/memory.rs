@@ -54,6 +54,34 @@ fn advise_huge<T>(v: Vec<T>) -> Vec<T> {
     v
 }
 
+/// Gives the pages of freed memory back to the system, on the calling thread and on every
+/// thread of rayon's pool, where the allocator keeps them for reuse (many buffers freed at once
+/// stay resident otherwise, and a large buffer allocated next cannot use them): through the
+/// hook the global allocator's owner set ([`set_release_hook`]), else glibc's `malloc_trim`
+/// on Linux, else nothing.
+pub fn release_free_memory() {
+    let release = || match RELEASE.get() {
+        Some(hook) => hook(),
+        None => {
+            #[cfg(all(target_os = "linux", target_env = "gnu"))]
+            // SAFETY: malloc_trim only returns free pages of glibc's heaps to the system.
+            unsafe {
+                libc::malloc_trim(0);
+            }
+        }
+    };
+    rayon::broadcast(|_| release());
+    release();
+}
+
+/// What [`release_free_memory`] calls on each thread when the program's global allocator is not
+/// the system's (set once; later calls are ignored).
+pub fn set_release_hook(hook: fn()) {
+    let _ = RELEASE.set(hook);
+}
+
+static RELEASE: std::sync::OnceLock<fn()> = std::sync::OnceLock::new();
+
 /// Pieces of work per task of [`collect_counted`].
 const GROUP: usize = 1024;
 

@@ -13,7 +13,8 @@ for animation. Mesh refinement: :func:`subdivide` (1-to-4 with Newton projection
 field, Jin et al.), :func:`butterfly` and :func:`blend`.
 Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are;
 :func:`compare` counts the triangles two meshes do not share. Fitted fields pickle, and
-:func:`save` and :func:`load` keep them in ``.npz`` files.
+:func:`save` and :func:`load` keep them in ``.npz`` files. :func:`read_particles` reads
+simulation frames (``.npy``, ``.npz``, ``.ply``, meshio formats).
 """
 
 from ._core import BlobField, VariationalSurface, __version__
@@ -22,5 +23,6 @@ from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
 from .subdivision import blend, butterfly, subdivide
 from .io import load, save
+from .frames import read_particles
 
-__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "subdivide", "butterfly", "blend", "save", "load", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]

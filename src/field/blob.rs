@@ -23,6 +23,7 @@ use crate::simd::lanes::F64s;
 use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Settings of a blob field.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1038,26 +1039,38 @@ impl Field for BlobField {
 }
 
 /// Which primitives reach which block of a lattice (for [`BlockField`]): one compressed list per
-/// z-layer of blocks, each block's primitives in index order.
+/// z-layer of blocks, each block's primitives in index order; all layers
+/// ([`BlockField::blocks`]) or a few at a time ([`BlockField::keep_layers`]).
 pub struct BlockLists {
     /// Blocks per axis.
     dims: [u32; 3],
-    /// Per z-layer: `start` (one more than the layer's blocks) and `items`.
+    /// The z-layer of `layers[0]`.
+    first: u32,
+    /// Per z-layer from `first`: `start` (one more than the layer's blocks) and `items`.
     layers: Vec<(Vec<u32>, Vec<u32>)>,
+    /// The primitives that may reach each z-layer (`layer_candidates`), kept while layers are
+    /// still to be listed (empty once every layer is).
+    candidates: (Vec<u32>, Vec<u32>),
 }
 
 impl BlockLists {
-    /// The primitives that may reach block `b`, in index order.
+    /// The primitives that may reach block `b` (in a layer held), in index order.
     #[inline]
     pub fn list(&self, b: [u32; 3]) -> &[u32] {
-        let (start, items) = &self.layers[b[2] as usize];
+        let (start, items) = &self.layers[(b[2] - self.first) as usize];
         let k = (b[0] + self.dims[0] * b[1]) as usize;
         &items[start[k] as usize..start[k + 1] as usize]
     }
 
-    /// Total entries over all lists.
+    /// Total entries over the lists held.
     pub fn entries(&self) -> usize {
         self.layers.iter().map(|(_, i)| i.len()).sum()
+    }
+
+    /// Bytes held (capacities).
+    pub fn bytes(&self) -> usize {
+        let words = self.layers.iter().map(|(s, i)| s.capacity() + i.capacity());
+        4 * (words.sum::<usize>() + self.candidates.0.capacity() + self.candidates.1.capacity())
     }
 }
 
@@ -1169,6 +1182,83 @@ fn layer_candidates(
     (start, items)
 }
 
+/// A primitive's radius with the relative margin every block-list test uses.
+#[inline(always)]
+fn margin(r: f64) -> f64 {
+    r * (1.0 + 1e-9)
+}
+
+/// Candidate blocks along axis `a` for a sphere at `c` of radius `rm` (one more on each side
+/// for rounding), for the exact sphere-box test; `dims` blocks per axis.
+fn block_range(lattice: &Lattice, dims: [u32; 3], c: DVec3, rm: f64, a: usize) -> Range<u32> {
+    let span = lattice.cell[a] * (BLOCK_POINTS - 1) as f64;
+    let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
+    let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
+    let hi = hi.min((dims[a] - 1) as f64);
+    if hi < 0.0 || lo > hi {
+        return 0..0;
+    }
+    lo.max(0.0) as u32..hi as u32 + 1
+}
+
+impl BlobField {
+    /// The lists of z-layer `bz` of blocks (`start`, one more than the layer's blocks, and
+    /// `items`) from the primitives `here` that may reach it; `sides` are the blocks' box
+    /// coordinates per axis.
+    fn layer_lists(
+        &self,
+        lattice: &Lattice,
+        dims: [u32; 3],
+        sides: &[Vec<(f64, f64)>; 3],
+        bz: u32,
+        here: &[u32],
+    ) -> (Vec<u32>, Vec<u32>) {
+        let per_layer = (dims[0] * dims[1]) as usize;
+        let mut pairs: Vec<(u32, u32)> = Vec::new();
+        let (zlo, zhi) = sides[2][bz as usize];
+        for &i in here {
+            let (c, rm) = (self.centers[i as usize], margin(self.radii[i as usize]));
+            if c.z + rm < zlo || c.z - rm > zhi {
+                continue;
+            }
+            let xs = block_range(lattice, dims, c, rm, 0);
+            let ys = block_range(lattice, dims, c, rm, 1);
+            let r2 = rm * rm;
+            // The squared distance to each block's box as `box_distances2` sums it,
+            // (x² + y²) + z², from the gaps per axis; a row whose y² + z² exceeds r² has no
+            // block within reach (the rounded sums are monotone).
+            let gz2 = gap2(c.z, sides[2][bz as usize]);
+            for by in ys {
+                let gy2 = gap2(c.y, sides[1][by as usize]);
+                if gy2 + gz2 > r2 {
+                    continue;
+                }
+                for bx in xs.clone() {
+                    let gx2 = gap2(c.x, sides[0][bx as usize]);
+                    if (gx2 + gy2) + gz2 <= r2 {
+                        pairs.push((bx + dims[0] * by, i));
+                    }
+                }
+            }
+        }
+        // Counting sort by block, stable: each list stays in index order.
+        let mut start = vec![0u32; per_layer + 1];
+        for &(k, _) in &pairs {
+            start[k as usize + 1] += 1;
+        }
+        for k in 0..per_layer {
+            start[k + 1] += start[k];
+        }
+        let mut items = vec![0u32; pairs.len()];
+        let mut cursor = start.clone();
+        for &(k, i) in &pairs {
+            items[cursor[k as usize] as usize] = i;
+            cursor[k as usize] += 1;
+        }
+        (start, items)
+    }
+}
+
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
@@ -1202,22 +1292,32 @@ impl BlockField for BlobField {
     /// a non-zero term at one of its points). Built per z-layer of blocks in parallel, each
     /// layer from the primitives whose candidate layers hold it (`layer_candidates`).
     fn blocks(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
-        let step = (BLOCK_POINTS - 1) as f64;
-        let h = lattice.cell;
-        // The radius with the margin, in every test here.
-        let margin = |r: f64| r * (1.0 + 1e-9);
-        // Candidate blocks along axis a (one more on each side for rounding), for the exact
-        // sphere-box test.
-        let range = |c: DVec3, rm: f64, a: usize| -> std::ops::Range<u32> {
-            let span = h[a] * step;
-            let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
-            let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
-            let hi = hi.min((dims[a] - 1) as f64);
-            if hi < 0.0 || lo > hi {
-                return 0..0;
-            }
-            lo.max(0.0) as u32..hi as u32 + 1
-        };
+        let mut lists = self.blocks_by_layers(lattice, dims);
+        self.keep_layers(&mut lists, lattice, 0..dims[2]);
+        lists.candidates = Default::default();
+        lists
+    }
+
+    /// The candidates of each z-layer (4 bytes for each layer a primitive's sphere may reach),
+    /// no lists yet.
+    fn blocks_by_layers(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
+        let candidates = layer_candidates(dims[2], self.centers.len(), |i| {
+            block_range(lattice, dims, self.centers[i], margin(self.radii[i]), 2)
+        });
+        BlockLists {
+            dims,
+            first: 0,
+            layers: Vec::new(),
+            candidates,
+        }
+    }
+
+    /// Lists the blocks of `layers`, in parallel over the layers, after releasing the lists
+    /// held.
+    fn keep_layers(&self, blocks: &mut BlockLists, lattice: &Lattice, layers: Range<u32>) {
+        blocks.layers = Vec::new();
+        blocks.first = layers.start;
+        let dims = blocks.dims;
         // The lowest and highest coordinate of the blocks' boxes per axis ([`block_box`]).
         let sides: [Vec<(f64, f64)>; 3] = std::array::from_fn(|a| {
             (0..dims[a])
@@ -1227,62 +1327,15 @@ impl BlockField for BlobField {
                 })
                 .collect()
         });
-        let (start, candidates) = layer_candidates(dims[2], self.centers.len(), |i| {
-            range(self.centers[i], margin(self.radii[i]), 2)
-        });
-        let layers = (0..dims[2])
+        let (start, candidates) = &blocks.candidates;
+        blocks.layers = layers
             .into_par_iter()
             .map(|bz| {
-                let per_layer = (dims[0] * dims[1]) as usize;
-                let mut pairs: Vec<(u32, u32)> = Vec::new();
-                let (zlo, zhi) = {
-                    let (a, b) = block_box(lattice, [0, 0, bz]);
-                    (a.z, b.z)
-                };
                 let here =
                     &candidates[start[bz as usize] as usize..start[bz as usize + 1] as usize];
-                for &i in here {
-                    let (c, rm) = (self.centers[i as usize], margin(self.radii[i as usize]));
-                    if c.z + rm < zlo || c.z - rm > zhi {
-                        continue;
-                    }
-                    let (xs, ys) = (range(c, rm, 0), range(c, rm, 1));
-                    let r2 = rm * rm;
-                    // The squared distance to each block's box as `box_distances2` sums it,
-                    // (x² + y²) + z², from the gaps per axis; a row whose y² + z² exceeds r²
-                    // has no block within reach (the rounded sums are monotone).
-                    let gz2 = gap2(c.z, sides[2][bz as usize]);
-                    for by in ys {
-                        let gy2 = gap2(c.y, sides[1][by as usize]);
-                        if gy2 + gz2 > r2 {
-                            continue;
-                        }
-                        for bx in xs.clone() {
-                            let gx2 = gap2(c.x, sides[0][bx as usize]);
-                            if (gx2 + gy2) + gz2 <= r2 {
-                                pairs.push((bx + dims[0] * by, i));
-                            }
-                        }
-                    }
-                }
-                // Counting sort by block, stable: each list stays in index order.
-                let mut start = vec![0u32; per_layer + 1];
-                for &(k, _) in &pairs {
-                    start[k as usize + 1] += 1;
-                }
-                for k in 0..per_layer {
-                    start[k + 1] += start[k];
-                }
-                let mut items = vec![0u32; pairs.len()];
-                let mut cursor = start.clone();
-                for &(k, i) in &pairs {
-                    items[cursor[k as usize] as usize] = i;
-                    cursor[k as usize] += 1;
-                }
-                (start, items)
+                self.layer_lists(lattice, dims, &sides, bz, here)
             })
             .collect();
-        BlockLists { dims, layers }
     }
 
     /// Bounds F over the block from each listed primitive's nearest and farthest distance to
@@ -1550,6 +1603,35 @@ mod tests {
                 let want = 2.0 * kernel.value(d, 0.5);
                 assert!((b.potential(p) - want).abs() < 1e-12, "{kernel:?} d={d}");
             }
+        }
+    }
+
+    /// Lists made a few z-layers at a time are the lists of the whole lattice, layer for
+    /// layer, and only the layers asked for (and the candidates) are held.
+    #[test]
+    fn lists_by_layers_are_the_whole_lists() {
+        let b = random_blobs(300, 5);
+        let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [45, 38, 100]).unwrap();
+        let dims = crate::polygonize::sparse::block_grid(&l).dims;
+        let whole = b.blocks(&l, dims);
+        assert!(whole.candidates.1.is_empty());
+        let mut lists = b.blocks_by_layers(&l, dims);
+        assert_eq!(lists.entries(), 0);
+        for layers in [0..3, 3..4, 4..dims[2], 7..9] {
+            b.keep_layers(&mut lists, &l, layers.clone());
+            assert_eq!(lists.layers.len(), layers.len());
+            if layers.len() == 1 {
+                assert!(lists.bytes() < whole.bytes());
+            }
+            let mut entries = 0;
+            for z in layers {
+                for (x, y) in (0..dims[0]).flat_map(|x| (0..dims[1]).map(move |y| (x, y))) {
+                    assert_eq!(lists.list([x, y, z]), whole.list([x, y, z]));
+                    entries += whole.list([x, y, z]).len();
+                }
+            }
+            assert!(entries > 0);
+            assert_eq!(lists.entries(), entries);
         }
     }
 

@@ -24,6 +24,7 @@ pub mod voxels;
 use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::ops::Range;
 
 pub use differences::Differences;
 
@@ -161,6 +162,20 @@ pub trait BlockField: Field {
     /// Prepares the blocks of `lattice`: block `(bx, by, bz)` holds the lattice points
     /// `7·b .. 7·b + 8` along each axis (fewer at the lattice's upper sides), `blocks` per axis.
     fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks;
+
+    /// [`BlockField::blocks`] to be filled a few z-layers of blocks at a time by
+    /// [`BlockField::keep_layers`], so that the data of the whole lattice is never held at
+    /// once. By default the data of every layer, and [`BlockField::keep_layers`] does nothing.
+    fn blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
+        self.blocks(lattice, blocks)
+    }
+
+    /// Makes `blocks` (from [`BlockField::blocks_by_layers`]) hold the data of the z-layers
+    /// `layers` of blocks, and releases that of the others: only blocks in these layers may be
+    /// asked for until the next call.
+    fn keep_layers(&self, blocks: &mut Self::Blocks, lattice: &Lattice, layers: Range<u32>) {
+        let _ = (blocks, lattice, layers);
+    }
 
     /// For `block`, from bounds alone (no values): [`BlockSign::Outside`] or
     /// [`BlockSign::Inside`] when every point provably has that sign, otherwise
@@ -347,6 +362,12 @@ impl<F: BlockField> BlockField for Counting<F> {
     type Blocks = F::Blocks;
     fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
         self.inner.blocks(lattice, blocks)
+    }
+    fn blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
+        self.inner.blocks_by_layers(lattice, blocks)
+    }
+    fn keep_layers(&self, blocks: &mut Self::Blocks, lattice: &Lattice, layers: Range<u32>) {
+        self.inner.keep_layers(blocks, lattice, layers)
     }
     fn block_sign(&self, blocks: &Self::Blocks, lattice: &Lattice, block: &Block) -> BlockSign {
         self.inner.block_sign(blocks, lattice, block)

@@ -16,11 +16,13 @@
 //! summed in each mesh's own order (equal to rounding).
 //!
 //! Two parallel passes:
-//! 1. per block: values (or a sign), then the signs as eight 64-bit words (one per z-plane,
-//!    bit `i + 8j`), the crossed edges the block owns as bit words, and their vertices (and
-//!    normals, from the field's gradient over the block's own primitive list). A block owns the
-//!    edges starting at its points below its upper faces (at the lattice's upper sides, those
-//!    on them too), so every lattice edge has one owner.
+//! 1. a slab of z-layers of blocks at a time (the field's data for those layers only:
+//!    [`BlockField::keep_layers`]), per block: values (or a sign), then the signs as eight
+//!    64-bit words (one per z-plane, bit `i + 8j`), the crossed edges the block owns as bit
+//!    words, and their vertices (and normals, from the field's gradient over the block's own
+//!    primitive list), moved into the mesh after the slab. A block owns the edges starting at
+//!    its points below its upper faces (at the lattice's upper sides, those on them too), so
+//!    every lattice edge has one owner.
 //! 2. per evaluated block: its crossed cells, found eight words at a time; a triangle corner on
 //!    an edge another block owns looks up that block's rank of the edge (a popcount).
 //!
@@ -62,8 +64,8 @@ use super::bits::{
 };
 use super::bricks::Grid;
 use super::{
-    check_memory, estimate_triangles, fill_vanishing_normals, finish_mesh, gather, normalize,
-    CaseTable, Settings, Stats, BYTES_PER_TRIANGLE,
+    check_memory, estimate_triangles, fill_vanishing_normals, finish_mesh, normalize, CaseTable,
+    Settings, Stats, BYTES_PER_TRIANGLE,
 };
 use crate::error::{Error, Result};
 use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
@@ -284,6 +286,12 @@ pub(crate) fn blocks_not_ruled_out<F: BlockField + ?Sized>(
     Ok(())
 }
 
+/// Z-layers of blocks whose field data [`polygonize`] holds at once: a few per thread (each
+/// layer's lists are made by one thread).
+fn layers_per_slab() -> u32 {
+    (4 * rayon::current_num_threads() as u32).max(8)
+}
+
 /// Blocks bounded in parallel by [`blocks_not_ruled_out`] between checks for an interrupt.
 const BOUNDED_PER_BATCH: usize = 1 << 16;
 
@@ -432,7 +440,7 @@ fn polygonize_with_keys<F: BlockField + ?Sized, I: TriangleIndex>(
         normals: settings.normals && !settings.project,
         ..*settings
     };
-    let start = start_blocks(field, lattice, &inner)?;
+    let start = start_blocks(field, lattice, &inner, true)?;
     let mut ws = WORKSPACES
         .lock()
         .ok()
@@ -470,11 +478,14 @@ pub(crate) struct BlockStart<B> {
 }
 
 /// Starts a polygonization of `field` over the blocks of `lattice`: refuses a lattice whose
-/// output could exceed `settings.memory_limit`, then makes the field's data for its blocks.
+/// output could exceed `settings.memory_limit`, then makes the field's data for its blocks (for
+/// all of them, or with `by_layers` to be filled a few z-layers at a time:
+/// [`BlockField::blocks_by_layers`]).
 pub(crate) fn start_blocks<F: BlockField + ?Sized>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
+    by_layers: bool,
 ) -> Result<BlockStart<F::Blocks>> {
     let grid = block_grid(lattice);
     check_memory(
@@ -488,7 +499,11 @@ pub(crate) fn start_blocks<F: BlockField + ?Sized>(
     };
     crate::cancel::check()?;
     let t = Instant::now();
-    let blocks = field.blocks(lattice, grid.dims);
+    let blocks = if by_layers {
+        field.blocks_by_layers(lattice, grid.dims)
+    } else {
+        field.blocks(lattice, grid.dims)
+    };
     stats.add_time("blocks", t);
     Ok(BlockStart {
         grid,
@@ -509,29 +524,60 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     let BlockStart {
         grid,
         cases,
-        blocks,
+        mut blocks,
         mut stats,
     } = start;
     let grid = &grid;
 
-    // Pass 1: values, signs, owned vertices (and normals) per block.
-    crate::cancel::check()?;
+    // Pass 1: values, signs, owned vertices (and normals) per block, a slab of z-layers of
+    // blocks at a time: the field's data for the slab only, and the slab's vertices moved into
+    // the mesh before the next (the tasks' outputs hold one slab).
     let t = Instant::now();
     let num_blocks = grid.len();
-    // Up to BLOCKS_PER_TASK blocks per task, fewer on small lattices (parallel work there too).
-    let per_task = (num_blocks / 64).clamp(1, BLOCKS_PER_TASK);
-    let tasks = num_blocks.div_ceil(per_task);
-    ws.parts.resize_with(tasks, Part::default);
-    let normals = settings.normals;
+    let layer = (grid.dims[0] * grid.dims[1]) as usize;
+    // Up to BLOCKS_PER_TASK blocks per task, fewer on small lattices (parallel work there too),
+    // each task within one z-layer.
+    let per_task = (num_blocks / 64).clamp(1, BLOCKS_PER_TASK).min(layer);
+    let tasks_per_layer = layer.div_ceil(per_task);
+    let slab = layers_per_slab().min(grid.dims[2]);
     ws.parts
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(task, part)| {
+        .resize_with(tasks_per_layer * slab as usize, Part::default);
+    ws.active.clear();
+    ws.map.clear();
+    ws.map.resize(num_blocks, NONE);
+    let normals = settings.normals;
+    // Room for as many vertices as the estimate of triangles (address space, touched as the
+    // slabs fill it), so that growing never copies the vertices.
+    let room = (estimate_triangles(lattice) as usize).min(u32::MAX as usize);
+    let mut mesh = Mesh {
+        vertices: crate::memory::reserve_huge(room),
+        normals: if normals {
+            crate::memory::reserve_huge(room)
+        } else {
+            Vec::new()
+        },
+        ..Default::default()
+    };
+    // What the outputs found about their normals, for `finish_normals`.
+    let mut found = BlockOutput::default();
+    let mut listing = 0.0;
+    for z0 in (0..grid.dims[2]).step_by(slab as usize) {
+        crate::cancel::check()?;
+        let z1 = (z0 + slab).min(grid.dims[2]);
+        let tb = Instant::now();
+        field.keep_layers(&mut blocks, lattice, z0..z1);
+        listing += tb.elapsed().as_secs_f64();
+        let first_task = z0 as usize * tasks_per_layer;
+        let parts = &mut ws.parts[..(z1 - z0) as usize * tasks_per_layer];
+        parts.par_iter_mut().enumerate().for_each(|(k, part)| {
             part.active.clear();
             part.out.clear();
             let mut values = [0.0f64; 512];
-            let end = ((task + 1) * per_task).min(num_blocks);
-            for index in task * per_task..end {
+            let task = first_task + k;
+            let (z, nth) = (task / tasks_per_layer, task % tasks_per_layer);
+            let begin = z * layer + nth * per_task;
+            let end = (begin + per_task).min((z + 1) * layer);
+            for index in begin..end {
                 let b = grid.position(index as u32);
                 let (out, how) = (&mut part.out, (cases, normals));
                 let fb = (field, &blocks);
@@ -540,27 +586,38 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
                 }
             }
         });
-    // Prefix sum: global vertex indices, one list of evaluated blocks, the block map.
-    ws.active.clear();
-    ws.map.clear();
-    ws.map.resize(num_blocks, NONE);
-    let mut vertices = 0usize;
-    for part in &ws.parts {
-        for a in &part.active {
-            ws.map[grid.index(a.block)] = ws.active.len() as u32;
-            let base = u32::try_from(vertices + a.base as usize)
-                .map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
-            ws.active.push(Active { base, ..*a });
+        // In task order: global vertex indices, the list of evaluated blocks, the block map.
+        for part in parts.iter() {
+            let first = mesh.vertices.len();
+            for a in &part.active {
+                ws.map[grid.index(a.block)] = ws.active.len() as u32;
+                let base = u32::try_from(first + a.base as usize)
+                    .map_err(|_| Error::invalid("resolution", "more than 2³² vertices"))?;
+                ws.active.push(Active { base, ..*a });
+            }
+            mesh.vertices.extend_from_slice(&part.out.vertices);
+            mesh.normals.extend_from_slice(&part.out.normals);
+            stats.evaluations += part.out.evaluations;
+            found.zero_normal |= part.out.zero_normal;
+            found.bad_normal |= part.out.bad_normal;
         }
-        vertices += part.out.vertices.len();
-        stats.evaluations += part.out.evaluations;
+        // The slab's block lists are made again for the next: the memory they held can go.
+        if mesh.vertices.len() * std::mem::size_of::<DVec3>() > KEEP_OUTPUT_BYTES {
+            crate::memory::release_free_memory();
+        }
+    }
+    // The field's block data is not needed to triangulate, nor are large outputs; for a large
+    // mesh, their pages go back to the system before the triangles are allocated.
+    drop(blocks);
+    release_large_outputs(&mut ws.parts);
+    if mesh.vertices.len() * std::mem::size_of::<DVec3>() > KEEP_OUTPUT_BYTES {
+        crate::memory::release_free_memory();
     }
     stats.cells_visited = ws
         .active
         .iter()
         .map(|a| a.n.iter().map(|&v| v as u64 - 1).product::<u64>())
         .sum();
-    let mut mesh = gather_parts(&mut ws.parts, normals);
     let keys = if keyed {
         let keys = edge_keys(lattice, &ws.active);
         debug_assert_eq!(keys.len(), mesh.vertices.len());
@@ -568,8 +625,15 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     } else {
         Vec::new()
     };
-    let outputs: Vec<&BlockOutput> = ws.parts.iter().map(|p| &p.out).collect();
     stats.add_time("evaluate", t);
+    // The slabs' block data was made inside the evaluation's time: it counts as "blocks".
+    for (phase, s) in stats.seconds.iter_mut() {
+        match *phase {
+            "blocks" => *s += listing,
+            "evaluate" => *s -= listing,
+            _ => {}
+        }
+    }
 
     // Pass 2: triangles per evaluated block, each task into its own range of the final buffer.
     crate::cancel::check()?;
@@ -581,7 +645,7 @@ fn run<F: BlockField + ?Sized, I: TriangleIndex>(
     if normals {
         crate::cancel::check()?;
         let t = Instant::now();
-        finish_normals(&mut mesh, &triangles, &outputs)?;
+        finish_normals(&mut mesh, &triangles, &[&found])?;
         stats.normal_evaluations = mesh.vertices.len() as u64;
         stats.add_time("normals", t);
     }
@@ -607,36 +671,18 @@ fn edge_keys(lattice: &Lattice, active: &[Active]) -> Vec<u64> {
     })
 }
 
-/// The vertices (and normals) of the parts' outputs, in order, as one mesh without triangles.
-/// Outputs larger than [`KEEP_OUTPUT_BYTES`] in all are released as soon as they are copied
-/// (the vertices before the normals are gathered), so that the mesh and the outputs it is
-/// gathered from are not held twice; smaller ones keep their capacity for the next call.
-fn gather_parts(parts: &mut [Part], normals: bool) -> Mesh {
-    let release = parts.iter().map(|p| p.out.capacity_bytes()).sum::<usize>() > KEEP_OUTPUT_BYTES;
-    let vertices = gather(
-        &parts
-            .iter()
-            .map(|p| &p.out.vertices[..])
-            .collect::<Vec<_>>(),
-    );
-    if release {
-        parts.iter_mut().for_each(|p| p.out.vertices = Vec::new());
+/// Releases the tasks' outputs when they hold more than [`KEEP_OUTPUT_BYTES`] in all; smaller
+/// ones keep their capacity for the next call.
+fn release_large_outputs(parts: &mut [Part]) {
+    if parts.iter().map(|p| p.out.capacity_bytes()).sum::<usize>() > KEEP_OUTPUT_BYTES {
+        parts
+            .iter_mut()
+            .for_each(|p| p.out = BlockOutput::default());
     }
-    let mut mesh = Mesh {
-        vertices,
-        ..Default::default()
-    };
-    if normals {
-        mesh.normals = gather(&parts.iter().map(|p| &p.out.normals[..]).collect::<Vec<_>>());
-        if release {
-            parts.iter_mut().for_each(|p| p.out.normals = Vec::new());
-        }
-    }
-    mesh
 }
 
-/// Bytes of block outputs (vertices and normals, all parts) above which [`gather_parts`]
-/// releases them: the mesh is at least that large then, and holding both would double it.
+/// Bytes of the tasks' outputs (vertices and normals) above which [`release_large_outputs`]
+/// releases them.
 const KEEP_OUTPUT_BYTES: usize = 16 << 20;
 
 /// Triangles of the evaluated blocks `active` (with their cells in `reach`, or all crossed

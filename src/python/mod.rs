@@ -23,8 +23,22 @@ use pyo3::prelude::*;
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+extern "C" {
+    /// mimalloc's collection of the calling thread's free memory (in the linked mimalloc; its
+    /// binding is behind the crate's `extended` feature).
+    fn mi_collect(force: bool);
+}
+
+/// Returns the calling thread's free memory to the system now
+/// ([`crate::memory::release_free_memory`]).
+fn collect_free_memory() {
+    // SAFETY: mi_collect only releases memory mimalloc holds and no live allocation.
+    unsafe { mi_collect(true) }
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    crate::memory::set_release_hook(collect_free_memory);
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<variational::PyVariationalSurface>()?;
     m.add_class::<blob::PyBlobField>()?;

@@ -502,8 +502,10 @@ impl BlockTracking {
             blocks,
             mut stats,
             ..
-        } = start_blocks(field, lattice, &settings.common)?;
+        } = start_blocks(field, lattice, &settings.common, false)?;
         self.walk((field, &blocks), lattice, settings, cases, &mut stats)?;
+        // The field's block data is not needed to assemble the mesh.
+        drop(blocks);
         crate::cancel::check()?;
         let normals = settings.common.normals;
         let (mesh, triangles) = self.assemble(lattice, cases, normals, &mut stats)?;
