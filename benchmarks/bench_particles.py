@@ -8,7 +8,8 @@ smoothing_length=2.0, cube_size=0.5, iso_surface_threshold=0.6)`` (pysplashsurf 
 last two relative to the particle radius: support 2s, cells s/4). Ours over the same cells of
 s/4: ``BlobField.from_particles(P, s/2)`` (splashsurf's colour field, the cubic spline) and
 ``BlobField(P, 2s, 1.0, T, kernel="triquet")`` with T placing the surface where the colour field
-lies on a flat face of the fluid (see :func:`triquet_threshold`), each with normals off and on.
+lies on a flat face of the fluid (see :func:`triquet_threshold`), each with normals off and on, in
+double precision and (``-f32``) with ``precision="single"``.
 
 Every case runs in a fresh process (its peak resident size VmHWM is its own, particles included);
 times are wall-clock seconds from particles to mesh, medians over the runs. The results (JSON and
@@ -39,7 +40,8 @@ S = 0.01
 LAYOUTS = ("slab", "droplets")
 #: Particles per case (full, quick).
 SIZES = {False: (100_000, 1_000_000, 4_000_000), True: (20_000,)}
-OURS = ("colour", "colour+normals", "triquet", "triquet+normals")
+OURS = ("colour", "colour+normals", "triquet", "triquet+normals",
+        "colour-f32", "colour-f32+normals", "triquet-f32", "triquet-f32+normals")
 PEERS = ("splashsurf-f32", "splashsurf-f64")
 #: Repetitions per case, each in its own process; the median is reported.
 RUNS = {False: 3, True: 1}
@@ -135,30 +137,41 @@ def reconstruct(method: str, p) -> tuple[object, object, dict]:
         import pysplashsurf
 
         q = np.ascontiguousarray(p, dtype=np.float32 if method.endswith("f32") else np.float64)
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu_seconds()
         r = pysplashsurf.reconstruct_surface(q, particle_radius=S / 2, smoothing_length=2.0, cube_size=0.5,
                                              iso_surface_threshold=ISO)
         out["total_s"] = time.perf_counter() - t
+        out["cpu_s"] = cpu_seconds() - c
         m = r.mesh if hasattr(r, "mesh") else r
         v, f = (m.vertices, m.triangles) if hasattr(m, "vertices") else m
         return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64), out
     import implicitmesh as im
 
     normals = method.endswith("+normals")
+    precision = "single" if "-f32" in method else "double"
     bounds, cells = lattice(p)
-    t = time.perf_counter()
-    if method.startswith("colour"):
-        field = im.BlobField.from_particles(p, S / 2, iso_surface_threshold=ISO)
-    else:
+    if not method.startswith("colour"):
         out["threshold"] = triquet_threshold()
-        t = time.perf_counter()
-        field = im.BlobField(p, 2 * S, 1.0, out["threshold"])
+    t, c = time.perf_counter(), cpu_seconds()
+    if method.startswith("colour"):
+        field = im.BlobField.from_particles(p, S / 2, iso_surface_threshold=ISO, precision=precision)
+    else:
+        field = im.BlobField(p, 2 * S, 1.0, out["threshold"], precision=precision)
     out["field_s"] = time.perf_counter() - t
     mesh = im.polygonize(field, bounds=bounds, resolution=cells, method="sparse", normals=normals)
     out["total_s"] = time.perf_counter() - t
     out["polygonize_s"] = out["total_s"] - out["field_s"]
     out["evaluations"] = int(mesh.stats["evaluations"])
+    out["cpu_s"] = cpu_seconds() - c
     return mesh.vertices, mesh.faces, out
+
+
+def cpu_seconds() -> float:
+    """User and system CPU seconds of this process so far (all threads)."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
 
 
 def check_case(layout: str, method: str) -> None:
@@ -248,13 +261,14 @@ def render(raw: dict) -> str:
         runs = c["runs"]
         head = [c["layout"], f"{runs[0].get('n', c['n']):,}", c["method"]]
         if "error" in runs[0]:
-            rows.append(head + [f"failed: {runs[0]['error']}"] + [""] * 6)
+            rows.append(head + [f"failed: {runs[0]['error']}"] + [""] * 7)
             continue
         total = median(runs, "total_s")
         peer = by.get((c["layout"], "splashsurf-f32", c["n"]))
         ratio = fmt_ratio(median(peer, "total_s"), total) if peer and "error" not in peer[0] else "—"
         r0 = runs[0]
-        rows.append(head + [fmt_s(total), ratio, f"{median(runs, 'peak_mib'):,.0f}", f"{r0['triangles']:,}",
+        cpu = fmt_s(median(runs, "cpu_s")) if "cpu_s" in r0 else "—"
+        rows.append(head + [fmt_s(total), cpu, ratio, f"{median(runs, 'peak_mib'):,.0f}", f"{r0['triangles']:,}",
                             f"{r0['area']:.4g}", f"{r0['volume']:.4g}"])
     t = next((r["threshold"] for c in raw["cases"] for r in c["runs"] if "threshold" in r), None)
     return "\n".join([
@@ -265,18 +279,19 @@ def render(raw: dict) -> str:
         "six layers deep under droplets of radius 2–6 s. splashsurf: `pysplashsurf.reconstruct_surface(P, "
         "particle_radius=s/2, smoothing_length=2.0, cube_size=0.5, iso_surface_threshold=0.6)` with P as float32 "
         "or float64 (support 2s, cells s/4). Ours, `polygonize(method=\"sparse\")` over cells of s/4, normals off "
-        "unless `+normals`: `colour` is `BlobField.from_particles(P, s/2)` (splashsurf's colour field, cubic "
+        "unless `+normals`, `-f32` with `precision=\"single\"`: `colour` is `BlobField.from_particles(P, s/2)` (splashsurf's colour field, cubic "
         "spline), `triquet` is `BlobField(P, 2s, 1.0, T)` with T = "
         f"{'—' if t is None else f'{t:.4f}'} (the Triquet potential where the colour field crosses 0.6 outside a "
         "face of a lattice block). Each case in a fresh process (peak resident size VmHWM its own, the particles "
-        "included); seconds of wall-clock time from particles to mesh, medians over the runs. splashsurf f32 / "
+        "included); seconds of wall-clock time from particles to mesh (CPU s: user and system seconds of all "
+        "threads over the same span), medians over the runs. splashsurf f32 / "
         "ours: above 1, ours is faster.",
         "",
         run_markdown(run),
         *[f"- cases kept from the run of {r['date']} (`{r['command']}`)" for r in raw.get("earlier_runs", [])],
         "",
-        md_table(["layout", "particles", "method", "seconds", "splashsurf f32 / ours", "peak MiB", "triangles",
-                  "area", "volume"], rows, "llrrrrrrr"),
+        md_table(["layout", "particles", "method", "seconds", "CPU s", "splashsurf f32 / ours", "peak MiB",
+                  "triangles", "area", "volume"], rows, "llrrrrrrrr"),
         "",
     ])
 

@@ -95,6 +95,7 @@ class BlobField:
         *,
         voxel_size: float | None = None,
         kernel: str = "triquet",
+        precision: str = "double",
     ) -> None: ...
     @staticmethod
     def from_particles(
@@ -105,6 +106,7 @@ class BlobField:
         iso_surface_threshold: float = 0.6,
         kernel: str = "cubic_spline",
         voxel_size: float | None = None,
+        precision: str = "double",
         progress: bool | Callable[[int], object] | None = None,
     ) -> BlobField: ...
     def update(
@@ -129,6 +131,8 @@ class BlobField:
     def threshold(self) -> float: ...
     @property
     def kernel(self) -> str: ...
+    @property
+    def precision(self) -> str: ...
     @property
     def voxel_size(self) -> float: ...
     @property

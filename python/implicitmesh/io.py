@@ -32,6 +32,7 @@ def _state(field: Field) -> dict[str, Any]:
             "threshold": threshold,
             "voxel_size": kwargs["voxel_size"],
             "kernel": kwargs["kernel"],
+            "precision": kwargs["precision"],
         }
     raise ValueError(f"field: expected a VariationalSurface or a BlobField, got {type(field).__name__}")
 
@@ -84,5 +85,6 @@ def load(path: str | os.PathLike[str]) -> Field:
             state["threshold"],
             voxel_size=state["voxel_size"],
             kernel=state.get("kernel", "triquet"),
+            precision=state.get("precision", "double"),
         )
     raise ValueError(f"path: {os.fspath(path)!r} does not hold a field written by implicitmesh.save")

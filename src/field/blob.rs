@@ -10,16 +10,19 @@
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
 mod interior;
+mod single;
+
+pub use single::Precision;
 
 #[cfg(target_arch = "x86_64")]
 use super::blob_kernel::LaneProfile;
-use super::blob_kernel::{with_profile, BlobKernel, Profile, Triquet};
+use super::blob_kernel::{with_profile, BlobKernel, Profile, Real, Triquet};
 use super::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
 #[cfg(target_arch = "x86_64")]
-use crate::simd::lanes::F64s;
+use crate::simd::lanes::{F64s, Lanes};
 use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -34,6 +37,9 @@ pub struct BlobSettings {
     pub voxel_size: f64,
     /// The profile every primitive sums (default [`BlobKernel::Triquet`]).
     pub kernel: BlobKernel,
+    /// The float type of the field's values (default [`Precision::Double`]): point queries,
+    /// lattice values and block values all use it. Gradients are f64 in both.
+    pub precision: Precision,
 }
 
 impl Default for BlobSettings {
@@ -41,6 +47,7 @@ impl Default for BlobSettings {
         BlobSettings {
             voxel_size: 0.5,
             kernel: BlobKernel::Triquet,
+            precision: Precision::Double,
         }
     }
 }
@@ -301,10 +308,18 @@ impl BlobField {
     }
 
     /// Potential F(p) from the voxel lists (the same terms in the same order as
-    /// [`BlobField::potential_brute_force`] minus those that cannot reach `p`).
+    /// [`BlobField::potential_brute_force`] minus those that cannot reach `p`); in single
+    /// precision the f32 sum, widened.
     #[inline(always)]
     pub fn potential(&self, p: DVec3) -> f64 {
-        with_profile!(self.settings.kernel, K => self.potential_with::<K>(p))
+        match self.settings.precision {
+            Precision::Double => {
+                with_profile!(self.settings.kernel, K => self.potential_with::<K>(p))
+            }
+            Precision::Single => {
+                with_profile!(self.settings.kernel, K => self.potential_single::<K>(p) as f64)
+            }
+        }
     }
 
     /// [`BlobField::potential`] with the profile `K`.
@@ -319,9 +334,10 @@ impl BlobField {
     }
 
     /// `threshold − F` at each of `points`, from `grid`: voxel lists of this field's primitives
-    /// with any voxel side (the same terms in the same order as [`Field::values`], so the same
-    /// bits). Reads the per-primitive arrays: neither the field's voxel lists nor its packed
-    /// primitives are built.
+    /// with any voxel side, in f64 whatever the field's precision (the same terms in the same
+    /// order as [`Field::values`] in double precision, so the same bits). Reads the
+    /// per-primitive arrays: neither the field's voxel lists nor its packed primitives are
+    /// built.
     pub(crate) fn values_over_grid(&self, grid: &VoxelGrid, points: &[DVec3], out: &mut [f64]) {
         with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
             let mut f = 0.0;
@@ -350,17 +366,17 @@ impl BlobField {
 
     /// [`BlobField::splat_plane`] with the row loop given (a vector build of [`splat_row`]).
     #[inline(always)]
-    fn splat_plane_with(
+    fn splat_plane_with<T: Real>(
         &self,
         lattice: &Lattice,
         xs: &[f64],
         ys: &[f64],
         z: f64,
-        slab: &mut [f64],
-        row_fn: impl Fn(&mut [f64], &[f64], &RowTerm),
+        slab: &mut [T],
+        row_fn: impl Fn(&mut [T], &[f64], &RowTerm),
     ) {
         let (px, py) = (xs.len(), ys.len());
-        slab.fill(0.0);
+        slab.fill(T::of(0.0));
         let inv_h = DVec3::ONE / lattice.cell;
         // Index range of the lattice points in [c - r, c + r] along an axis, with a point of
         // margin for rounding (the exact test is t > 0 in the row loop); empty when outside.
@@ -402,8 +418,9 @@ impl BlobField {
                 row_fn(&mut slab[y * px + x0..=y * px + x1], &xs[x0..=x1], &term);
             }
         }
+        let threshold = T::of(self.threshold);
         for v in slab.iter_mut() {
-            *v = self.threshold - *v;
+            *v = threshold - *v;
         }
     }
 
@@ -444,21 +461,26 @@ impl BlobField {
     /// always eight wide (lanes beyond the lattice repeat its last point and are never read);
     /// `row_fn` adds one primitive's terms to a row from dx²/R² per lane (computed once per
     /// primitive), the row's k = 1 − (dy² + dz²)/R² and A (see [`unit_t`] and [`Profile::value`]).
+    ///
+    /// In f32 (`T`), each of dx²/R², k and A is computed in f64 and rounded to f32, then t and
+    /// the term in f32 ([`single::term`]).
     #[inline(always)]
-    fn splat_block_with(
+    fn splat_block_with<T: Real>(
         &self,
         list: &[u32],
         block: &BlockCoords,
-        out: &mut [f64; 512],
-        row_fn: impl Fn(&mut [f64; 8], &[f64; 8], f64, f64),
+        out: &mut [T; 512],
+        row_fn: impl Fn(&mut [T; 8], &[T; 8], T, T),
     ) {
         let BlockCoords { xs, ys, zs, n, .. } = block;
         let ny = n[1] as usize;
-        out.fill(0.0);
+        out.fill(T::of(0.0));
         for &i in list {
             let (c, inv, a, r) = self.primitive(i);
             // dx²/R² per lane, once per primitive (see `unit_t`).
             let qx: [f64; 8] = std::array::from_fn(|l| ((xs[l] - c.x) * (xs[l] - c.x)) * inv);
+            let qt: [T; 8] = qx.map(T::of);
+            let at = T::of(a);
             let dy2: [f64; 8] = std::array::from_fn(|j| (ys[j] - c.y) * (ys[j] - c.y));
             // The lane nearest the centre has a row's largest term (the rounded steps are
             // monotone), so where its term is zero the whole row gains exactly zero: only the
@@ -477,15 +499,16 @@ impl BlobField {
                 while rows != 0 {
                     let j = rows.trailing_zeros() as usize;
                     rows &= rows - 1;
-                    let row: &mut [f64; 8] = (&mut out[8 * j + 64 * k..8 * j + 64 * k + 8])
+                    let row: &mut [T; 8] = (&mut out[8 * j + 64 * k..8 * j + 64 * k + 8])
                         .try_into()
                         .unwrap();
-                    row_fn(row, &qx, ks[j], a);
+                    row_fn(row, &qt, T::of(ks[j]), at);
                 }
             }
         }
+        let threshold = T::of(self.threshold);
         for v in out.iter_mut() {
-            *v = self.threshold - *v;
+            *v = threshold - *v;
         }
     }
 
@@ -554,6 +577,9 @@ impl BlobField {
     /// Fills a block's values (see [`BlockField::block_values`]) from the primitives of `list`
     /// with the vector path of `isa` (which the CPU must have): the same bits on every path.
     fn splat_block(&self, isa: Isa, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
+        if self.settings.precision == Precision::Single {
+            return self.splat_block_single(isa, list, block, out);
+        }
         with_profile!(self.settings.kernel, K => match isa {
             // SAFETY: the caller passes an instruction set the CPU has.
             #[cfg(target_arch = "x86_64")]
@@ -566,21 +592,26 @@ impl BlobField {
             Isa::Avx512 => unsafe { self.splat_block_lanes_avx512::<K>(list, block, out) },
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe { self.splat_block_lanes_avx2::<K>(list, block, out) },
-            Isa::Generic => self.splat_block_generic::<K>(list, block, out),
+            Isa::Avx2 => unsafe {
+                self.splat_block_lanes_avx2::<K, std::arch::x86_64::__m256d>(list, block, out)
+            },
+            Isa::Generic => self.splat_block_generic::<K, f64>(list, block, out),
         })
     }
 
     /// [`BlobField::splat_block_generic`] with each row's terms `V::LANES` at a time
-    /// ([`LaneProfile::value_lanes`]): the same operations in the same order, so the same bits.
+    /// ([`LaneProfile::value_lanes`]), in f64 or f32: the same operations in the same order, so
+    /// the same bits.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn splat_block_lanes<K: LaneProfile, V: F64s>(
+    unsafe fn splat_block_lanes<K: LaneProfile, V: Lanes>(
         &self,
         list: &[u32],
         block: &BlockCoords,
-        out: &mut [f64; 512],
-    ) {
+        out: &mut [V::Elem; 512],
+    ) where
+        V::Elem: Real,
+    {
         self.splat_block_with(list, block, out, |row, qx, k, a| {
             // SAFETY: the caller runs where V's feature is; a row holds 8 values, a multiple of
             // V::LANES.
@@ -608,30 +639,33 @@ impl BlobField {
         unsafe { self.splat_block_lanes::<K, std::arch::x86_64::__m512d>(list, block, out) }
     }
 
-    /// [`BlobField::splat_block_lanes`] with AVX2, a row per two vectors.
+    /// [`BlobField::splat_block_lanes`] with AVX2 vectors `V`: a row per two `__m256d`, or per
+    /// `__m256` in f32.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn splat_block_lanes_avx2<K: LaneProfile>(
+    unsafe fn splat_block_lanes_avx2<K: LaneProfile, V: Lanes>(
         &self,
         list: &[u32],
         block: &BlockCoords,
-        out: &mut [f64; 512],
-    ) {
-        // SAFETY: AVX2 is enabled here.
-        unsafe { self.splat_block_lanes::<K, std::arch::x86_64::__m256d>(list, block, out) }
+        out: &mut [V::Elem; 512],
+    ) where
+        V::Elem: Real,
+    {
+        // SAFETY: AVX2 is enabled here (and V needs no more).
+        unsafe { self.splat_block_lanes::<K, V>(list, block, out) }
     }
 
-    /// [`BlobField::splat_block_with`] with the profile's scalar row loop.
+    /// [`BlobField::splat_block_with`] with the profile's scalar row loop (in f64 or f32).
     #[inline(always)]
-    fn splat_block_generic<K: Profile>(
+    fn splat_block_generic<K: Profile, T: Real>(
         &self,
         list: &[u32],
         block: &BlockCoords,
-        out: &mut [f64; 512],
+        out: &mut [T; 512],
     ) {
         self.splat_block_with(list, block, out, |row, qx, k, a| {
-            for (v, q) in row.iter_mut().zip(qx) {
-                *v += a * K::value(k - q);
+            for (v, &q) in row.iter_mut().zip(qx) {
+                *v = *v + a * K::value(k - q);
             }
         })
     }
@@ -830,6 +864,10 @@ impl BlobField {
     pub fn settings(&self) -> BlobSettings {
         self.settings
     }
+    /// Sets the precision of the field's values ([`BlobSettings::precision`]).
+    pub fn set_precision(&mut self, precision: Precision) {
+        self.settings.precision = precision;
+    }
 
     /// Bounding box of the spheres of influence (None when there are no primitives).
     pub fn bounding_box(&self) -> Option<(DVec3, DVec3)> {
@@ -998,6 +1036,9 @@ impl Field for BlobField {
             debug_assert!(k < z1);
             let z = lattice.point([0, 0, k]).z;
             match isa {
+                _ if self.settings.precision == Precision::Single => {
+                    self.splat_plane_single::<K>(lattice, [&xs, &ys], z, slab)
+                }
                 // SAFETY: the variant is only chosen when the CPU has the feature.
                 #[cfg(target_arch = "x86_64")]
                 Isa::Avx512 if is_triquet::<K>() => unsafe {
@@ -1015,7 +1056,12 @@ impl Field for BlobField {
 
     #[inline]
     fn value(&self, p: DVec3) -> f64 {
-        self.threshold - self.potential(p)
+        match self.settings.precision {
+            Precision::Double => self.threshold - self.potential(p),
+            Precision::Single => {
+                with_profile!(self.settings.kernel, K => self.value_single::<K>(p))
+            }
+        }
     }
 
     #[inline]
@@ -1026,9 +1072,18 @@ impl Field for BlobField {
     /// The batch loops call the point functions inlined: a call per point (the trait's default)
     /// costs as much as the terms themselves here.
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
-        with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
-            self.threshold - self.potential_with::<K>(p)
-        }));
+        match self.settings.precision {
+            Precision::Double => {
+                with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+                    self.threshold - self.potential_with::<K>(p)
+                }))
+            }
+            Precision::Single => {
+                with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+                    self.value_single::<K>(p)
+                }))
+            }
+        }
     }
 
     fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
@@ -1131,6 +1186,7 @@ impl BlobField {
     #[inline(always)]
     fn box_sign_with<K: Profile>(&self, list: &[u32], plo: DVec3, phi: DVec3) -> BlockSign {
         let (mut fmin, mut fmax, mut scale) = (0.0f64, 0.0f64, self.threshold.abs());
+        let mut terms = 0.0f64;
         for &i in list {
             let i = i as usize;
             let (c, inv, a) = (self.centers[i], self.inv_r2[i], self.strengths[i]);
@@ -1141,9 +1197,19 @@ impl BlobField {
             );
             fmax += big.max(small);
             fmin += big.min(small);
+            terms += big.abs().max(small.abs());
             scale += a.abs();
         }
-        let margin = 1e-9 * scale;
+        let margin = 1e-9 * scale
+            + match self.settings.precision {
+                Precision::Double => 0.0,
+                Precision::Single => single::rounding(
+                    self.threshold,
+                    scale - self.threshold.abs(),
+                    terms,
+                    list.len(),
+                ),
+            };
         if fmax < self.threshold - margin {
             BlockSign::Outside
         } else if fmin > self.threshold + margin {
@@ -1349,8 +1415,22 @@ impl BlockField for BlobField {
         if sign != BlockSign::Mixed {
             return sign;
         }
-        // The bounds over the whole block are loose where many terms overlap: try its eight
-        // octants (points 0..=3 and 4..=7 per axis), and stop at the first that may be crossed.
+        // Inside the surface, the bounds over boxes of many points are loose (each term's
+        // smallest value is at the box's farthest corner): bound pairs of points instead, when
+        // the potential is above the threshold at the block's eight corners (most blocks the
+        // surface crosses have a corner outside, found at the cost of a term per primitive and
+        // corner).
+        let (isa, coords) = (Isa::detect(), BlockCoords::new(lattice, lo, n));
+        if self.corners_inside(isa, list, &coords) {
+            return if self.block_inside(isa, list, &coords) {
+                BlockSign::Inside
+            } else {
+                BlockSign::Mixed
+            };
+        }
+        // Outside the surface the bounds over the whole block are loose where many terms
+        // overlap: try its eight octants (points 0..=3 and 4..=7 per axis), and stop at the
+        // first that may be crossed.
         if n.iter().all(|&v| v > 4) {
             let half = |a: usize, s: u32| -> (u32, u32) {
                 if s == 0 {
@@ -1359,7 +1439,6 @@ impl BlockField for BlobField {
                     (lo[a] + 4, lo[a] + n[a] - 1)
                 }
             };
-            let mut first = None;
             for o in 0..8u32 {
                 let (x, y, z) = (half(0, o & 1), half(1, (o >> 1) & 1), half(2, o >> 2));
                 let s = self.box_sign(
@@ -1367,20 +1446,11 @@ impl BlockField for BlobField {
                     lattice.point([x.0, y.0, z.0]),
                     lattice.point([x.1, y.1, z.1]),
                 );
-                if s == BlockSign::Mixed || first.is_some_and(|f| f != s) {
-                    first = None;
-                    break;
+                if s != BlockSign::Outside {
+                    return BlockSign::Mixed;
                 }
-                first = Some(s);
             }
-            if let Some(s) = first {
-                return s;
-            }
-        }
-        // Inside the surface, the bounds over boxes of many points are loose (each term's
-        // smallest value is at the box's farthest corner): bound pairs of points instead.
-        if self.block_inside(Isa::detect(), list, &BlockCoords::new(lattice, lo, n)) {
-            return BlockSign::Inside;
+            return BlockSign::Outside;
         }
         BlockSign::Mixed
     }
@@ -1435,12 +1505,15 @@ mod tests {
     #[test]
     fn every_vector_path_gives_the_same_bits() {
         for kernel in BlobKernel::ALL {
-            every_vector_path_gives_the_same_bits_with(kernel);
+            for precision in [Precision::Double, Precision::Single] {
+                every_vector_path_gives_the_same_bits_with(kernel, precision);
+            }
         }
     }
 
-    fn every_vector_path_gives_the_same_bits_with(kernel: BlobKernel) {
-        let f = random_blobs_with(300, 17, kernel);
+    fn every_vector_path_gives_the_same_bits_with(kernel: BlobKernel, precision: Precision) {
+        let mut f = random_blobs_with(300, 17, kernel);
+        f.set_precision(precision);
         let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [37, 30, 45]).unwrap();
         let all: Vec<u32> = (0..300).collect();
         let points = random_points(23, -0.9, 0.9, 5);
@@ -1454,15 +1527,31 @@ mod tests {
             let block = BlockCoords::new(&lattice, lo, n);
             let mut want = [0.0; 512];
             f.splat_block(Isa::Generic, &all, &block, &mut want);
+            // The block's points (the values beyond them are not read).
+            let inside: Vec<usize> = (0..512)
+                .filter(|i| {
+                    i % 8 < n[0] as usize && i / 8 % 8 < n[1] as usize && i / 64 < n[2] as usize
+                })
+                .collect();
             for &isa in &isas {
                 let mut got = [1.0; 512];
                 f.splat_block(isa, &all, &block, &mut got);
                 assert!(
-                    want.iter()
-                        .zip(&got)
-                        .all(|(a, b)| a.to_bits() == b.to_bits()),
-                    "{isa:?}"
+                    inside
+                        .iter()
+                        .all(|&i| want[i].to_bits() == got[i].to_bits()),
+                    "{isa:?} {precision:?}"
                 );
+            }
+            // The values at the block's points (single: f32 values, widened).
+            let pts: Vec<DVec3> = (0..512)
+                .map(|i| DVec3::new(block.xs[i % 8], block.ys[i / 8 % 8], block.zs[i / 64]))
+                .collect();
+            let mut v = vec![0.0; 512];
+            f.values(&pts, &mut v);
+            assert!(inside.iter().all(|&i| want[i].to_bits() == v[i].to_bits()));
+            if precision == Precision::Single {
+                assert!(want.iter().all(|w| *w as f32 as f64 == *w));
             }
         }
         let mut want = vec![DVec3::ZERO; points.len()];
@@ -1514,12 +1603,15 @@ mod tests {
     #[test]
     fn splatted_lattice_values_are_bit_identical() {
         for kernel in BlobKernel::ALL {
-            splatted_lattice_values_are_bit_identical_with(kernel);
+            for precision in [Precision::Double, Precision::Single] {
+                splatted_lattice_values_are_bit_identical_with(kernel, precision);
+            }
         }
     }
 
-    fn splatted_lattice_values_are_bit_identical_with(kernel: BlobKernel) {
-        let b = random_blobs_with(120, 31, kernel);
+    fn splatted_lattice_values_are_bit_identical_with(kernel: BlobKernel, precision: Precision) {
+        let mut b = random_blobs_with(120, 31, kernel);
+        b.set_precision(precision);
         let l = Lattice::new(
             DVec3::new(-1.0, -0.9, -1.1),
             DVec3::new(1.1, 1.0, 0.9),

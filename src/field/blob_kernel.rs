@@ -13,7 +13,7 @@
 
 use crate::error::{Error, Result};
 #[cfg(target_arch = "x86_64")]
-use crate::simd::lanes::F64s;
+use crate::simd::lanes::Lanes;
 
 /// The kernel a blob field sums (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -86,10 +86,57 @@ impl BlobKernel {
     }
 }
 
+/// The float types a profile's value is computed in (f64, or f32 for fields in single
+/// precision): the operations [`Profile::value`] uses, each correctly rounded.
+pub trait Real:
+    Copy
+    + PartialOrd
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+{
+    /// `x` rounded to this type (exact for the profiles' constants).
+    fn of(x: f64) -> Self;
+    /// `self > o ? self : o`, `o` where `self` is NaN.
+    fn max(self, o: Self) -> Self;
+    fn sqrt(self) -> Self;
+}
+
+impl Real for f64 {
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        f64::max(self, o)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+}
+
+impl Real for f32 {
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x as f32
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        f32::max(self, o)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f32::sqrt(self)
+    }
+}
+
 /// One radial profile w(q), q = d/R ∈ [0, 1], w(0) = 1, read through t = 1 − q².
 pub trait Profile: 'static {
-    /// w at t = 1 − q² as rounded by the caller; +0.0 for t ≤ 0.
-    fn value(t: f64) -> f64;
+    /// w at t = 1 − q² as rounded by the caller; +0.0 for t ≤ 0. The same operations in f64 and
+    /// f32.
+    fn value<T: Real>(t: T) -> T;
 
     /// g(s) = −w′(q)/(q·GRADIENT_SCALE) at s = 1 − q² (unclamped): the gradient of A·w(|p − c|/R)
     /// is −GRADIENT_SCALE·(A/R²)·g(s)·(p − c). +0.0 for s ≤ 0.
@@ -105,8 +152,8 @@ pub struct Triquet;
 
 impl Profile for Triquet {
     #[inline(always)]
-    fn value(t: f64) -> f64 {
-        let t = t.max(0.0);
+    fn value<T: Real>(t: T) -> T {
+        let t = t.max(T::of(0.0));
         t * t
     }
     #[inline(always)]
@@ -120,19 +167,20 @@ impl Profile for Triquet {
 
 /// q from t = 1 − q² (clamped to [0, 1]).
 #[inline(always)]
-fn q_of(t: f64) -> (f64, f64) {
-    let q2 = 1.0 - t.max(0.0);
-    (q2, q2.max(0.0).sqrt())
+fn q_of<T: Real>(t: T) -> (T, T) {
+    let zero = T::of(0.0);
+    let q2 = T::of(1.0) - t.max(zero);
+    (q2, q2.max(zero).sqrt())
 }
 
 /// [`q_of`] of each lane (the same bits).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn q_of_lanes<V: F64s>(t: V) -> (V, V) {
+unsafe fn q_of_lanes<V: Lanes>(t: V) -> (V, V) {
     // SAFETY: the caller runs where V's feature is.
     unsafe {
-        let zero = V::splat(0.0);
-        let q2 = V::splat(1.0).sub(t.max(zero));
+        let zero = V::constant(0.0);
+        let q2 = V::constant(1.0).sub(t.max(zero));
         (q2, q2.max(zero).sqrt())
     }
 }
@@ -142,13 +190,14 @@ pub struct CubicSpline;
 
 impl Profile for CubicSpline {
     #[inline(always)]
-    fn value(t: f64) -> f64 {
+    fn value<T: Real>(t: T) -> T {
         let (q2, q) = q_of(t);
-        if q <= 0.5 {
-            1.0 + 6.0 * q2 * (q - 1.0)
+        let one = T::of(1.0);
+        if q <= T::of(0.5) {
+            one + T::of(6.0) * q2 * (q - one)
         } else {
-            let u = 1.0 - q;
-            2.0 * (u * u * u)
+            let u = one - q;
+            T::of(2.0) * (u * u * u)
         }
     }
     /// −w′/q: 12 − 18q for q ≤ 1/2, 6(1 − q)²/q beyond.
@@ -172,11 +221,12 @@ pub struct Wendland;
 
 impl Profile for Wendland {
     #[inline(always)]
-    fn value(t: f64) -> f64 {
+    fn value<T: Real>(t: T) -> T {
         let (_, q) = q_of(t);
-        let u = 1.0 - q;
+        let one = T::of(1.0);
+        let u = one - q;
         let u2 = u * u;
-        (u2 * u2) * (1.0 + 4.0 * q)
+        (u2 * u2) * (one + T::of(4.0) * q)
     }
     /// −w′/q = 20(1 − q)³.
     #[inline(always)]
@@ -193,18 +243,18 @@ impl Profile for Wendland {
 /// A [`Profile`] evaluated a vector of lanes at a time.
 #[cfg(target_arch = "x86_64")]
 pub(crate) trait LaneProfile: Profile {
-    /// [`Profile::value`] of each lane: the same operations in the same order, so the same
-    /// bits. The caller runs where `V`'s feature is.
-    unsafe fn value_lanes<V: F64s>(t: V) -> V;
+    /// [`Profile::value`] of each lane (f64 or f32): the same operations in the same order, so
+    /// the same bits. The caller runs where `V`'s feature is.
+    unsafe fn value_lanes<V: Lanes>(t: V) -> V;
 }
 
 #[cfg(target_arch = "x86_64")]
 impl LaneProfile for Triquet {
     #[inline(always)]
-    unsafe fn value_lanes<V: F64s>(t: V) -> V {
+    unsafe fn value_lanes<V: Lanes>(t: V) -> V {
         // SAFETY: the caller runs where V's feature is.
         unsafe {
-            let t = t.max(V::splat(0.0));
+            let t = t.max(V::constant(0.0));
             t.mul(t)
         }
     }
@@ -214,15 +264,15 @@ impl LaneProfile for Triquet {
 impl LaneProfile for CubicSpline {
     /// Both branches, then each lane's.
     #[inline(always)]
-    unsafe fn value_lanes<V: F64s>(t: V) -> V {
+    unsafe fn value_lanes<V: Lanes>(t: V) -> V {
         // SAFETY: the caller runs where V's feature is.
         unsafe {
             let (q2, q) = q_of_lanes(t);
-            let one = V::splat(1.0);
-            let near = one.add(V::splat(6.0).mul(q2).mul(q.sub(one)));
+            let one = V::constant(1.0);
+            let near = one.add(V::constant(6.0).mul(q2).mul(q.sub(one)));
             let u = one.sub(q);
-            let far = V::splat(2.0).mul(u.mul(u).mul(u));
-            q.select_le(V::splat(0.5), near, far)
+            let far = V::constant(2.0).mul(u.mul(u).mul(u));
+            q.select_le(V::constant(0.5), near, far)
         }
     }
 }
@@ -230,14 +280,14 @@ impl LaneProfile for CubicSpline {
 #[cfg(target_arch = "x86_64")]
 impl LaneProfile for Wendland {
     #[inline(always)]
-    unsafe fn value_lanes<V: F64s>(t: V) -> V {
+    unsafe fn value_lanes<V: Lanes>(t: V) -> V {
         // SAFETY: the caller runs where V's feature is.
         unsafe {
             let (_, q) = q_of_lanes(t);
-            let one = V::splat(1.0);
+            let one = V::constant(1.0);
             let u = one.sub(q);
             let u2 = u.mul(u);
-            u2.mul(u2).mul(one.add(V::splat(4.0).mul(q)))
+            u2.mul(u2).mul(one.add(V::constant(4.0).mul(q)))
         }
     }
 }
@@ -267,6 +317,8 @@ pub(crate) use with_profile;
 #[cfg(test)]
 mod tests {
     use super::*;
+    #[cfg(target_arch = "x86_64")]
+    use crate::simd::Isa;
 
     /// w(q) by the textbook formulas.
     fn textbook(k: BlobKernel, q: f64) -> f64 {
@@ -298,59 +350,65 @@ mod tests {
         assert!(BlobKernel::parse("gauss").is_err());
     }
 
-    /// Every vector path's values are the scalar values' bits, on both sides of the cubic
-    /// spline's q = 1/2 and where the profiles vanish.
+    /// Every vector path's values are the scalar values' bits, in f64 and f32, on both sides of
+    /// the cubic spline's q = 1/2 and where the profiles vanish.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn lane_values_are_the_scalar_bits() {
-        use crate::simd::Isa;
-        use std::arch::x86_64::{__m256d, __m512d};
+        use std::arch::x86_64::{__m256, __m256d, __m512, __m512d};
         fn check<K: LaneProfile>() {
-            let mut ts: Vec<f64> = (0..4000).map(|i| i as f64 / 3000.0 - 0.25).collect();
             let quarter = 0.75f64; // t at q = 1/2
-            ts.extend([
-                -1.0,
-                -0.0,
-                0.0,
-                1.0,
-                quarter,
-                f64::from_bits(quarter.to_bits() + 1),
-            ]);
-            ts.extend([f64::from_bits(quarter.to_bits() - 1), 1e-300, -1e-300]);
-            ts.resize(ts.len().next_multiple_of(8), 0.5);
-            let want: Vec<u64> = ts.iter().map(|&t| K::value(t).to_bits()).collect();
-            for isa in Isa::available() {
-                let mut got = vec![0.0; ts.len()];
-                for (t, g) in ts.chunks_exact(8).zip(got.chunks_exact_mut(8)) {
-                    // SAFETY: each path runs only where the CPU has its feature.
-                    unsafe {
-                        match isa {
-                            Isa::Avx512 => avx512::<K>(t, g),
-                            Isa::Avx2 => avx2::<K>(t, g),
-                            Isa::Generic => g.copy_from_slice(
-                                &t.iter().map(|&t| K::value(t)).collect::<Vec<_>>(),
-                            ),
-                        }
-                    }
-                }
-                let got: Vec<u64> = got.iter().map(|v| v.to_bits()).collect();
-                assert_eq!(got, want, "{isa:?}");
-            }
-        }
-        #[target_feature(enable = "avx512f")]
-        unsafe fn avx512<K: LaneProfile>(t: &[f64], out: &mut [f64]) {
-            unsafe { K::value_lanes(__m512d::load(t)).store(out) }
-        }
-        #[target_feature(enable = "avx2")]
-        unsafe fn avx2<K: LaneProfile>(t: &[f64], out: &mut [f64]) {
-            unsafe {
-                K::value_lanes(__m256d::load(t)).store(out);
-                K::value_lanes(__m256d::load(&t[4..])).store(&mut out[4..]);
-            }
+            let mut ts: Vec<f64> = (0..4000).map(|i| i as f64 / 3000.0 - 0.25).collect();
+            ts.extend([-1.0, -0.0, 0.0, 1.0, quarter, 1e-300, -1e-300]);
+            ts.extend([quarter.to_bits() + 1, quarter.to_bits() - 1].map(f64::from_bits));
+            let q32 = 0.75f32;
+            let mut ts32: Vec<f32> = ts.iter().map(|&t| t as f32).collect();
+            ts32.extend([q32.to_bits() + 1, q32.to_bits() - 1].map(f32::from_bits));
+            ts32.extend([1e-38, -1e-38]);
+            same_bits(&ts, K::value, |isa, t, out| match isa {
+                Isa::Avx512 => vectors::<K, __m512d>(t, out),
+                _ => vectors::<K, __m256d>(t, out),
+            });
+            same_bits(&ts32, K::value, |isa, t, out| match isa {
+                Isa::Avx512 => vectors::<K, __m512>(t, out),
+                _ => vectors::<K, __m256>(t, out),
+            });
         }
         check::<Triquet>();
         check::<CubicSpline>();
         check::<Wendland>();
+    }
+
+    /// Checks that `vector(isa, t, out)`, run on every instruction set with vectors, gives the
+    /// bits of `scalar` at each of `ts` (compared by their shortest decimal forms, which tell
+    /// apart every two floats of one type, −0.0 and +0.0 included).
+    #[cfg(target_arch = "x86_64")]
+    fn same_bits<T: Real + std::fmt::Debug + Default>(
+        ts: &[T],
+        scalar: fn(T) -> T,
+        vector: impl Fn(Isa, &[T], &mut [T]),
+    ) {
+        let mut ts = ts.to_vec();
+        ts.resize(ts.len().next_multiple_of(16), T::of(0.5));
+        let want: Vec<String> = ts.iter().map(|&t| format!("{:?}", scalar(t))).collect();
+        for isa in Isa::available().into_iter().filter(|&i| i != Isa::Generic) {
+            let mut got = vec![T::default(); ts.len()];
+            for (t, g) in ts.chunks_exact(16).zip(got.chunks_exact_mut(16)) {
+                vector(isa, t, g);
+            }
+            let got: Vec<String> = got.iter().map(|v| format!("{v:?}")).collect();
+            assert_eq!(got, want, "{isa:?}");
+        }
+    }
+
+    /// `K`'s values at sixteen values of `t` with vectors `V` (the CPU must have their feature).
+    #[cfg(target_arch = "x86_64")]
+    fn vectors<K: LaneProfile, V: Lanes>(t: &[V::Elem], out: &mut [V::Elem]) {
+        for h in (0..16).step_by(V::LANES) {
+            // SAFETY: called only on the instruction sets the CPU has (`same_bits`), and
+            // `value_lanes` inlines into code with V's feature.
+            unsafe { K::value_lanes(V::load(&t[h..])).store(&mut out[h..]) }
+        }
     }
 
     /// σ/R³ · w integrates to 1 (midpoint rule on a grid of R/40).

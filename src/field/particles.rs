@@ -8,7 +8,7 @@
 //! profile of [`BlobKernel`], 1 at the centre), (m/ρᵢ) W(d, H) = w(d/H) / Σⱼ w(|xᵢ − xⱼ|/H), so
 //! the strength of particle i is Aᵢ = 1 / Σⱼ w(|xᵢ − xⱼ|/H) and neither m, ρ₀ nor σ appears.
 
-use super::blob::{BlobField, BlobSettings, PerPrimitive};
+use super::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
 use super::blob_kernel::BlobKernel;
 use super::voxels::VoxelGrid;
 use crate::error::{check_finite_points, Error, Result};
@@ -27,6 +27,9 @@ pub struct ParticleSettings {
     pub kernel: BlobKernel,
     /// Voxel side of the field's grid as a multiple of H (see [`BlobSettings::voxel_size`]).
     pub voxel_size: f64,
+    /// The field's precision ([`BlobSettings::precision`]); the densities are computed in f64
+    /// whichever it is.
+    pub precision: Precision,
 }
 
 impl Default for ParticleSettings {
@@ -36,6 +39,7 @@ impl Default for ParticleSettings {
             iso_surface_threshold: 0.6,
             kernel: BlobKernel::CubicSpline,
             voxel_size: BlobSettings::default().voxel_size,
+            precision: Precision::Double,
         }
     }
 }
@@ -56,6 +60,7 @@ pub fn colour_field(
     let blob = BlobSettings {
         voxel_size: settings.voxel_size,
         kernel: settings.kernel,
+        precision: Precision::Double,
     };
     let mut field = BlobField::new(
         particles,
@@ -67,6 +72,7 @@ pub fn colour_field(
     let sums = kernel_sums(&field, support)?;
     let strengths: Vec<f64> = sums.iter().map(|s| 1.0 / s).collect();
     field.set_strengths(PerPrimitive::Each(&strengths))?;
+    field.set_precision(settings.precision);
     Ok(field)
 }
 

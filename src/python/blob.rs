@@ -1,7 +1,7 @@
 //! `BlobField`: the Python class over the core's blob field.
 
 use super::convert::{field_gradients, field_values, points, points_to_py, values, values_to_py};
-use crate::field::blob::{self, BlobField, PerPrimitive};
+use crate::field::blob::{self, BlobField, PerPrimitive, Precision};
 use crate::field::blob_kernel::BlobKernel;
 use crate::field::particles::{self, ParticleSettings};
 use glam::DVec3;
@@ -45,6 +45,14 @@ fn as_per(v: &Result<f64, Vec<f64>>) -> PerPrimitive<'_> {
 ///     q = 1/2 and 2(1 − q)³ beyond; ``"wendland"`` Wendland C2, (1 − q)⁴(1 + 4q). The
 ///     potential is Σ A·w(d/R); the SPH kernels normalised to integral 1 are these times
 ///     8/(πR³) and 21/(2πR³). See :meth:`from_particles` for splashsurf's colour field.
+/// precision : {"double", "single"}
+///     The float type of the field's values: ``"double"`` (default) float64 throughout;
+///     ``"single"`` sums the terms in float32 (as splashsurf does by default; the sparse
+///     polygonizer splats twice as many values per vector). Evaluation, dense and sparse
+///     polygonization all see the same float32 values (returned widened to float64); vertices
+///     and normals stay float64. The mesh has the same faces as in double precision wherever no
+///     lattice value lies within float32 rounding (about 1e-7 of the potential) of the
+///     threshold.
 #[pyclass(name = "BlobField", module = "implicitmesh")]
 pub struct PyBlobField {
     pub inner: BlobField,
@@ -53,7 +61,8 @@ pub struct PyBlobField {
 #[pymethods]
 impl PyBlobField {
     #[new]
-    #[pyo3(signature = (centers, radii, strengths=None, threshold=0.5, *, voxel_size=None, kernel="triquet"))]
+    #[pyo3(signature = (centers, radii, strengths=None, threshold=0.5, *, voxel_size=None, kernel="triquet", precision="double"))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         centers: &Bound<'_, PyAny>,
@@ -62,6 +71,7 @@ impl PyBlobField {
         threshold: f64,
         voxel_size: Option<f64>,
         kernel: &str,
+        precision: &str,
     ) -> PyResult<Self> {
         let c = points(centers, "centers")?;
         let r = per_primitive(radii, "radii")?;
@@ -72,6 +82,7 @@ impl PyBlobField {
         let settings = blob::BlobSettings {
             voxel_size: voxel_size.unwrap_or(blob::BlobSettings::default().voxel_size),
             kernel: BlobKernel::parse(kernel)?,
+            precision: Precision::parse(precision)?,
         };
         let inner =
             py.detach(|| BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings))?;
@@ -106,6 +117,9 @@ impl PyBlobField {
     ///     W (see the class docstring). Default ``"cubic_spline"``, splashsurf's.
     /// voxel_size : float, optional
     ///     Side of the acceleration voxels as a multiple of H (default 0.5).
+    /// precision : {"double", "single"}
+    ///     The float type of the field's values (see the class docstring); the densities are
+    ///     computed in float64 either way. Default ``"double"``.
     /// progress : bool or callable, optional
     ///     ``True``: show the particle densities computed so far (a tqdm bar when tqdm is
     ///     installed, else a line on standard error); a callable gets that count (an int) about
@@ -122,9 +136,9 @@ impl PyBlobField {
     ///     On Ctrl-C, between chunks of 65,536 particles.
     /// ValueError
     ///     For a wrong shape, NaN/inf positions, a non-positive radius, smoothing length,
-    ///     threshold or voxel size, or an unknown kernel.
+    ///     threshold or voxel size, or an unknown kernel or precision.
     #[staticmethod]
-    #[pyo3(signature = (particles, particle_radius, *, smoothing_length=2.0, iso_surface_threshold=0.6, kernel="cubic_spline", voxel_size=None, progress=None))]
+    #[pyo3(signature = (particles, particle_radius, *, smoothing_length=2.0, iso_surface_threshold=0.6, kernel="cubic_spline", voxel_size=None, precision="double", progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_particles(
         py: Python<'_>,
@@ -134,6 +148,7 @@ impl PyBlobField {
         iso_surface_threshold: f64,
         kernel: &str,
         voxel_size: Option<f64>,
+        precision: &str,
         progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let p = points(particles, "particles")?;
@@ -142,6 +157,7 @@ impl PyBlobField {
             iso_surface_threshold,
             kernel: BlobKernel::parse(kernel)?,
             voxel_size: voxel_size.unwrap_or(ParticleSettings::default().voxel_size),
+            precision: Precision::parse(precision)?,
         };
         let r = py.import("implicitmesh._progress")?.call_method1(
             "reporter",
@@ -241,6 +257,11 @@ impl PyBlobField {
     fn kernel(&self) -> &'static str {
         self.inner.settings().kernel.name()
     }
+    /// str: the float type of the field's values (``"double"`` or ``"single"``).
+    #[getter]
+    fn precision(&self) -> &'static str {
+        self.inner.settings().precision.name()
+    }
     /// float: the potential of the surface.
     #[getter]
     fn threshold(&self) -> f64 {
@@ -280,6 +301,7 @@ impl PyBlobField {
         let kwargs = pyo3::types::PyDict::new(py);
         kwargs.set_item("voxel_size", self.inner.settings().voxel_size)?;
         kwargs.set_item("kernel", self.kernel())?;
+        kwargs.set_item("precision", self.precision())?;
         Ok((
             (
                 self.centers(py)?,
@@ -295,10 +317,11 @@ impl PyBlobField {
     }
     fn __repr__(&self) -> String {
         format!(
-            "BlobField(primitives={}, threshold={}, kernel={:?})",
+            "BlobField(primitives={}, threshold={}, kernel={:?}, precision={:?})",
             self.inner.centers().len(),
             self.inner.threshold(),
-            self.kernel()
+            self.kernel(),
+            self.precision()
         )
     }
 }

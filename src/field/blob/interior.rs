@@ -22,13 +22,13 @@
 //! The bound needs every strength of the list positive: the terms then only add, a partial sum
 //! is a bound too, and the loop stops once every pair is above the threshold.
 
-use super::{BlobField, BlockCoords};
+use super::{single, BlobField, BlockCoords, Precision};
 #[cfg(target_arch = "x86_64")]
 use crate::field::blob_kernel::LaneProfile;
 use crate::field::blob_kernel::{with_profile, Profile};
 use crate::field::BLOCK_POINTS;
 #[cfg(target_arch = "x86_64")]
-use crate::simd::lanes::F64s;
+use crate::simd::lanes::{F64s, Lanes};
 use crate::simd::Isa;
 use glam::DVec3;
 
@@ -51,6 +51,36 @@ fn farthest(v: [f64; BLOCK_POINTS]) -> [f64; PAIRS] {
     std::array::from_fn(|p| v[2 * p].max(v[2 * p + 1]))
 }
 
+/// One primitive's terms over a block's pairs: the farthest dx²/R² per pair, dy² per row, dz²
+/// per plane, 1/R², the smallest of the pairs' dx²/R², and A.
+struct PrimitiveTerms {
+    qx: [f64; PAIRS],
+    dy2: [f64; BLOCK_POINTS],
+    dz2: [f64; BLOCK_POINTS],
+    inv: f64,
+    nearest: f64,
+    a: f64,
+}
+
+impl PrimitiveTerms {
+    /// Calls `row_fn` with each row of plane `k` the primitive reaches (k = 1 − (dy² + dz²)/R²
+    /// above the nearest pair's dx²/R²): the row, the pairs' dx²/R², k and A.
+    #[inline(always)]
+    fn rows(
+        &self,
+        plane: &mut [[f64; PAIRS]; BLOCK_POINTS],
+        k: usize,
+        row_fn: impl Fn(&mut [f64; PAIRS], &[f64; PAIRS], f64, f64),
+    ) {
+        for (row, dy2) in plane.iter_mut().zip(self.dy2) {
+            let k = 1.0 - (dy2 + self.dz2[k]) * self.inv;
+            if k > self.nearest {
+                row_fn(row, &self.qx, k, self.a);
+            }
+        }
+    }
+}
+
 impl BlobField {
     /// Whether every point of `block` is provably inside (potential above the threshold), from
     /// the primitives of `list` (every primitive reaching the block, in index order), with the
@@ -58,12 +88,19 @@ impl BlobField {
     /// not positive.
     pub(super) fn block_inside(&self, isa: Isa, list: &[u32], block: &BlockCoords) -> bool {
         with_profile!(self.settings.kernel, K => match isa {
-            // SAFETY: the caller passes an instruction set the CPU has (AVX-512 implies AVX2).
+            // SAFETY: the caller passes an instruction set the CPU has.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 | Isa::Avx512 => unsafe { self.block_inside_avx2::<K>(list, block) },
-            _ => self.block_inside_with(list, block, |row, qx, k, a| {
-                for (v, q) in row.iter_mut().zip(qx) {
-                    *v += a * K::value(k - q);
+            Isa::Avx512 => unsafe { self.block_inside_avx512::<K>(list, block) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { self.block_inside_avx2::<K>(list, block) },
+            Isa::Generic => self.block_inside_with(list, block, |low, term, planes| {
+                for k in planes {
+                    term.rows(&mut low[k], k, |row, qx, k, a| {
+                        for (v, q) in row.iter_mut().zip(qx) {
+                            *v += a * K::value(k - q);
+                        }
+                    })
                 }
             }),
         })
@@ -75,24 +112,167 @@ impl BlobField {
     #[target_feature(enable = "avx2")]
     unsafe fn block_inside_avx2<K: LaneProfile>(&self, list: &[u32], block: &BlockCoords) -> bool {
         use std::arch::x86_64::__m256d;
-        self.block_inside_with(list, block, |row, qx, k, a| {
-            // SAFETY: AVX2 is enabled here; a row holds four values, one vector.
-            unsafe {
-                let t = __m256d::splat(k).sub(__m256d::load(qx));
-                let v = __m256d::load(row).add(__m256d::splat(a).mul(K::value_lanes(t)));
-                v.store(row);
+        self.block_inside_with(list, block, |low, term, planes| {
+            for k in planes {
+                term.rows(&mut low[k], k, |row, qx, k, a| {
+                    // SAFETY: AVX2 is enabled here; a row holds four values, one vector.
+                    unsafe {
+                        let t = __m256d::splat(k).sub(__m256d::load(qx));
+                        let v = __m256d::load(row).add(__m256d::splat(a).mul(K::value_lanes(t)));
+                        v.store(row);
+                    }
+                })
             }
         })
     }
 
-    /// [`BlobField::block_inside`] with `row_fn` adding one primitive's terms A·w(k − dx²/R²)
-    /// to a row of pairs (from the farthest dx²/R² per pair, the row's k and A).
+    /// [`BlobField::block_inside_with`] with AVX-512: a plane's rows' k in one vector, compared
+    /// with the nearest pair's dx²/R² for the rows reached, then two rows of pairs per vector
+    /// (rows 2m and 2m + 1 when either is reached). A row not reached gains +0.0 (its every t
+    /// is at most 0, and the strengths are positive), which changes no sum: the same bits as
+    /// the other paths.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn block_inside_avx512<K: LaneProfile>(
+        &self,
+        list: &[u32],
+        block: &BlockCoords,
+    ) -> bool {
+        use std::arch::x86_64::*;
+        // Lanes 0..4 read row j, lanes 4..8 row j + 1.
+        let pair = _mm512_set_epi64(1, 1, 1, 1, 0, 0, 0, 0);
+        let one = _mm512_set1_pd(1.0);
+        self.block_inside_with(list, block, |low, term, planes| {
+            // SAFETY: AVX-512F is enabled here; `dy2` holds eight f64, `qx` four, and a pair
+            // of rows of a plane eight from 4j (j ≤ 6).
+            unsafe {
+                let dy2 = _mm512_loadu_pd(term.dy2.as_ptr());
+                let inv = _mm512_set1_pd(term.inv);
+                let nearest = _mm512_set1_pd(term.nearest);
+                let qx = _mm512_broadcast_f64x4(_mm256_loadu_pd(term.qx.as_ptr()));
+                let a = _mm512_set1_pd(term.a);
+                for k in planes {
+                    let dz2 = _mm512_set1_pd(term.dz2[k]);
+                    let ks = _mm512_sub_pd(one, _mm512_mul_pd(_mm512_add_pd(dy2, dz2), inv));
+                    let rows = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(ks, nearest) as u32;
+                    let mut pairs = (rows | rows >> 1) & 0x55;
+                    let base = low[k].as_mut_ptr() as *mut f64;
+                    while pairs != 0 {
+                        let j = pairs.trailing_zeros() as usize;
+                        pairs &= pairs - 1;
+                        let idx = _mm512_add_epi64(pair, _mm512_set1_epi64(j as i64));
+                        let t = _mm512_sub_pd(_mm512_permutexvar_pd(idx, ks), qx);
+                        let p = base.add(PAIRS * j);
+                        let w = K::value_lanes(t);
+                        _mm512_storeu_pd(p, _mm512_add_pd(_mm512_loadu_pd(p), _mm512_mul_pd(a, w)));
+                    }
+                }
+            }
+        })
+    }
+
+    /// Whether the potential at each of the block's eight corners is above the threshold, from
+    /// the primitives of `list` (in f64, the order of [`super::unit_t`]), with the vector path
+    /// of `isa` (which the CPU must have). When it is not, a point of the block is not inside
+    /// and [`BlobField::block_inside`] cannot succeed: this costs one term per primitive and
+    /// corner, where `block_inside` takes one per primitive and pair of points reached.
+    pub(super) fn corners_inside(&self, isa: Isa, list: &[u32], block: &BlockCoords) -> bool {
+        let BlockCoords { xs, ys, zs, n, .. } = block;
+        let last = n.map(|v| v as usize - 1);
+        let corner = |c: usize, axis: &[f64; BLOCK_POINTS], a: usize| {
+            axis[if c >> a & 1 == 1 { last[a] } else { 0 }]
+        };
+        let cx: [f64; 8] = std::array::from_fn(|c| corner(c, xs, 0));
+        let cy: [f64; 8] = std::array::from_fn(|c| corner(c, ys, 1));
+        let cz: [f64; 8] = std::array::from_fn(|c| corner(c, zs, 2));
+        let mut f = [0.0f64; 8];
+        with_profile!(self.settings.kernel, K => match isa {
+            // SAFETY: the caller passes an instruction set the CPU has.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { self.corners_avx512::<K>(list, [&cx, &cy, &cz], &mut f) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { self.corners_avx2::<K>(list, [&cx, &cy, &cz], &mut f) },
+            Isa::Generic => {
+                for &i in list {
+                    let (c, inv, a, _) = self.primitive(i);
+                    for (k, f) in f.iter_mut().enumerate() {
+                        let d = DVec3::new(cx[k], cy[k], cz[k]) - c;
+                        *f += a * K::value(super::unit_t(d, inv));
+                    }
+                }
+            }
+        });
+        f.iter().all(|&f| f > self.threshold)
+    }
+
+    /// The potentials of [`BlobField::corners_inside`], `V::LANES` corners per vector.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn corners_lanes<K: LaneProfile, V: F64s>(
+        &self,
+        list: &[u32],
+        [cx, cy, cz]: [&[f64; 8]; 3],
+        out: &mut [f64; 8],
+    ) {
+        // SAFETY (every vector operation below): the caller runs where V's feature is; eight
+        // values are a whole number of vectors.
+        unsafe {
+            let one = V::splat(1.0);
+            for h in (0..8).step_by(V::LANES) {
+                let (x, y, z) = (V::load(&cx[h..]), V::load(&cy[h..]), V::load(&cz[h..]));
+                let mut f = V::splat(0.0);
+                for &i in list {
+                    let (c, inv, a, _) = self.primitive(i);
+                    let (dx, dy, dz) = (
+                        x.sub(V::splat(c.x)),
+                        y.sub(V::splat(c.y)),
+                        z.sub(V::splat(c.z)),
+                    );
+                    let vinv = V::splat(inv);
+                    let k = one.sub(dy.mul(dy).add(dz.mul(dz)).mul(vinv));
+                    let t = k.sub(dx.mul(dx).mul(vinv));
+                    f = f.add(V::splat(a).mul(K::value_lanes(t)));
+                }
+                f.store(&mut out[h..]);
+            }
+        }
+    }
+
+    /// [`BlobField::corners_lanes`] with AVX-512, the eight corners in one vector.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn corners_avx512<K: LaneProfile>(
+        &self,
+        list: &[u32],
+        c: [&[f64; 8]; 3],
+        out: &mut [f64; 8],
+    ) {
+        // SAFETY: AVX-512F is enabled here.
+        unsafe { self.corners_lanes::<K, std::arch::x86_64::__m512d>(list, c, out) }
+    }
+
+    /// [`BlobField::corners_lanes`] with AVX2, four corners per vector.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn corners_avx2<K: LaneProfile>(
+        &self,
+        list: &[u32],
+        c: [&[f64; 8]; 3],
+        out: &mut [f64; 8],
+    ) {
+        // SAFETY: AVX2 is enabled here.
+        unsafe { self.corners_lanes::<K, std::arch::x86_64::__m256d>(list, c, out) }
+    }
+
+    /// [`BlobField::block_inside`] with `primitive_fn` adding one primitive's terms
+    /// ([`PrimitiveTerms`]) to the planes of pairs it may reach (a range of planes).
     #[inline(always)]
     fn block_inside_with(
         &self,
         list: &[u32],
         block: &BlockCoords,
-        row_fn: impl Fn(&mut [f64; PAIRS], &[f64; PAIRS], f64, f64),
+        primitive_fn: impl Fn(&mut Pairs, &PrimitiveTerms, std::ops::Range<usize>),
     ) -> bool {
         if list.len() > MAX_LIST {
             return false;
@@ -107,6 +287,15 @@ impl BlobField {
             scale += a;
         }
         let goal = self.threshold + 1e-9 * scale;
+        let goal = match self.settings.precision {
+            Precision::Double => goal,
+            Precision::Single => single::inside_goal(
+                self.threshold,
+                scale - self.threshold.abs(),
+                list.len(),
+                goal,
+            ),
+        };
         let above = |low: &Pairs| low.iter().flatten().flatten().all(|&v| v > goal);
         let BlockCoords { xs, ys, zs, .. } = block;
         // The primitives centred within a quarter of the block's side of its box add the most:
@@ -137,16 +326,15 @@ impl BlobField {
             // Terms left out are bounded below by 0: only the planes and rows the primitive
             // reaches are summed (as in the splat).
             let nearest = qx.iter().fold(f64::INFINITY, |m, &q| m.min(q));
-            for k in block.planes(c.z, r) {
-                let dz = zs[k] - c.z;
-                let dz2 = dz * dz;
-                for (row, dy2) in low[k].iter_mut().zip(dy2) {
-                    let k = 1.0 - (dy2 + dz2) * inv;
-                    if k > nearest {
-                        row_fn(row, &qx, k, a);
-                    }
-                }
-            }
+            let term = PrimitiveTerms {
+                qx,
+                dy2,
+                dz2: std::array::from_fn(|k| (zs[k] - c.z) * (zs[k] - c.z)),
+                inv,
+                nearest,
+                a,
+            };
+            primitive_fn(&mut low, &term, block.planes(c.z, r));
             if m % CHECK_EVERY == CHECK_EVERY - 1 && above(&low) {
                 return true;
             }
