@@ -8,6 +8,7 @@
 pub mod analytic;
 pub mod blob;
 pub mod blob_kernel;
+pub mod cholesky;
 pub mod constraints;
 pub mod differences;
 pub mod duplicates;

@@ -187,12 +187,19 @@ fn subtract_lower(
 }
 
 /// Cholesky factorization in place of the lower triangle of `a` (faer's, which cannot be
-/// stopped), by blocks of [`COLUMNS_PER_STEP`] columns when `a` is larger than one block, with
+/// stopped; systems of at most [`super::cholesky::MAX_ORDER`] unknowns with `par` [`Par::Seq`] use
+/// [`super::cholesky`]), by blocks of [`COLUMNS_PER_STEP`] columns when `a` is larger than one block, with
 /// a check for interruption between blocks and, unless `par` is [`Par::Seq`] (a fit inside
 /// someone else's parallel loop, which reports its own progress), a progress report of the
 /// columns done. `Ok(false)` when `a` is not positive definite.
 fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
     let m = a.nrows();
+    // A patch's system inside someone else's parallel loop: the small-system factorization.
+    if matches!(par, Par::Seq) && m <= super::cholesky::MAX_ORDER {
+        if let Some(ok) = super::cholesky::factor_lower(a.as_mut()) {
+            return Ok(ok);
+        }
+    }
     let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
         m.min(COLUMNS_PER_STEP),
         par,

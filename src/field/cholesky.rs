@@ -1,0 +1,249 @@
+//! Cholesky factorization of the small dense systems of partition-of-unity patches (a few
+//! hundred unknowns each, thousands per fit, one per rayon task).
+//!
+//! Left-looking by blocks of [`NB`] columns: each block of columns is first updated with the
+//! columns already factorized, A[j.., J] −= L[j.., ..j] L[J, ..j]ᵀ (all of the flops, in an
+//! AVX-512 kernel that keeps a 16 × 8 tile of the result in registers), then factorized as a
+//! narrow panel. At these sizes this is faster than a general blocked factorization, whose
+//! recursion and packing cost more than the flops of a 200 × 200 system.
+
+use faer::MatMut;
+
+/// Columns per block (one broadcast per column and row of the kernel's tile).
+const NB: usize = 8;
+/// Rows of the kernel's tile (two vectors of eight).
+const MR: usize = 16;
+/// Largest order factorized here; larger systems go to faer's blocked factorization.
+pub const MAX_ORDER: usize = 1024;
+
+/// Factorizes in place the lower triangle of the symmetric positive definite `a` as L Lᵀ (the
+/// strict upper triangle is neither read nor written). `None` when this does not apply (no
+/// AVX-512, a row stride other than 1, or an order above [`MAX_ORDER`]): the caller factorizes
+/// another way. `Some(false)` when `a` is not positive definite (a pivot that is not positive
+/// and finite); `a` is then partly overwritten.
+pub fn factor_lower(mut a: MatMut<'_, f64>) -> Option<bool> {
+    let m = a.nrows();
+    if m != a.ncols() || m > MAX_ORDER || (m > 1 && a.row_stride() != 1) {
+        return None;
+    }
+    if m == 0 {
+        return Some(true);
+    }
+    let ld = if m > 1 { a.col_stride() } else { 1 };
+    if ld < m as isize {
+        return None;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::Isa::detect() == crate::simd::Isa::Avx512 {
+        // SAFETY: AVX-512F is present; `a` is an m × m view with unit row stride and column
+        // stride ld ≥ m, so every (i, j) with i, j < m is at offset i + j·ld of its pointer, and
+        // the view is borrowed mutably for the call.
+        return Some(unsafe { avx512::factor(a.as_ptr_mut(), ld as usize, m) });
+    }
+    let _ = &mut a;
+    None
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{MR, NB};
+    use std::arch::x86_64::*;
+
+    /// The factorization of [`super::factor_lower`] on the m × m matrix at `p` (column `j` at
+    /// `p + j·ld`).
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn factor(p: *mut f64, ld: usize, m: usize) -> bool {
+        // Rows J of the columns already factorized, packed by column: pack[k·NB + c] = L[j0 + c, k]
+        // (zero for c ≥ nb), read by the kernel's broadcasts.
+        let mut pack = vec![0.0f64; NB * m];
+        let mut j0 = 0;
+        while j0 < m {
+            let nb = NB.min(m - j0);
+            if j0 > 0 {
+                for k in 0..j0 {
+                    for c in 0..NB {
+                        // SAFETY: rows j0 + c < m of column k < m.
+                        pack[k * NB + c] = if c < nb {
+                            unsafe { *p.add(j0 + c + k * ld) }
+                        } else {
+                            0.0
+                        };
+                    }
+                }
+                let mut i = j0;
+                while i < m {
+                    // SAFETY: as `factor`'s contract; the tile's rows are i..min(i + MR, m).
+                    unsafe { update_tile(p, ld, m, i, j0, nb, &pack) };
+                    i += MR;
+                }
+            }
+            // SAFETY: as above.
+            if !unsafe { panel(p, ld, m, j0, nb) } {
+                return false;
+            }
+            j0 += nb;
+        }
+        true
+    }
+
+    /// Mask of the first `n` lanes (n clamped to 0..=8).
+    #[inline(always)]
+    fn lanes(n: usize) -> __mmask8 {
+        if n >= 8 {
+            0xff
+        } else {
+            ((1u16 << n) - 1) as __mmask8
+        }
+    }
+
+    /// A[i..i+MR, j0 + c] −= Σ_{k < j0} L[i.., k] L[j0 + c, k] for c < nb, on rows at or below the
+    /// diagonal only.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn update_tile(
+        p: *mut f64,
+        ld: usize,
+        m: usize,
+        i: usize,
+        j0: usize,
+        nb: usize,
+        pack: &[f64],
+    ) {
+        let rows = (m - i).min(MR);
+        let (m0, m1) = (lanes(rows), lanes(rows.saturating_sub(8)));
+        let mut acc0 = [_mm512_setzero_pd(); NB];
+        let mut acc1 = [_mm512_setzero_pd(); NB];
+        for k in 0..j0 {
+            // SAFETY: masked loads touch only rows i..i + rows < m of column k.
+            let col = unsafe { p.add(i + k * ld) };
+            let x0 = unsafe { _mm512_maskz_loadu_pd(m0, col) };
+            let x1 = unsafe { _mm512_maskz_loadu_pd(m1, col.add(8)) };
+            let b = &pack[k * NB..k * NB + NB];
+            for c in 0..NB {
+                let bc = _mm512_set1_pd(b[c]);
+                acc0[c] = _mm512_fmadd_pd(x0, bc, acc0[c]);
+                acc1[c] = _mm512_fmadd_pd(x1, bc, acc1[c]);
+            }
+        }
+        for c in 0..nb {
+            // Rows below the diagonal of column j0 + c: in the first tile (i = j0), rows ≥ c.
+            let below = if i == j0 { !lanes(c) } else { 0xff };
+            let (w0, w1) = (m0 & below, m1);
+            // SAFETY: masked accesses to rows i..i + rows of column j0 + c < m.
+            let col = unsafe { p.add(i + (j0 + c) * ld) };
+            unsafe {
+                let y0 = _mm512_maskz_loadu_pd(w0, col);
+                _mm512_mask_storeu_pd(col, w0, _mm512_sub_pd(y0, acc0[c]));
+                let y1 = _mm512_maskz_loadu_pd(w1, col.add(8));
+                _mm512_mask_storeu_pd(col.add(8), w1, _mm512_sub_pd(y1, acc1[c]));
+            }
+        }
+    }
+
+    /// Factorizes the panel of columns j0..j0 + nb (rows j0..m), already updated with the columns
+    /// before it; false at a pivot that is not positive and finite.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn panel(p: *mut f64, ld: usize, m: usize, j0: usize, nb: usize) -> bool {
+        for c in 0..nb {
+            let j = j0 + c;
+            // SAFETY: column j, rows j..m, and columns j0..j (distinct, ld ≥ m apart).
+            let dst = unsafe { std::slice::from_raw_parts_mut(p.add(j + j * ld), m - j) };
+            for c2 in j0..j {
+                let src = unsafe { std::slice::from_raw_parts(p.add(j + c2 * ld), m - j) };
+                let l = src[0];
+                for (d, s) in dst.iter_mut().zip(src) {
+                    *d -= s * l;
+                }
+            }
+            let pivot = dst[0];
+            if !(pivot > 0.0 && pivot.is_finite()) {
+                return false;
+            }
+            let l = pivot.sqrt();
+            dst[0] = l;
+            let inv = 1.0 / l;
+            dst[1..].iter_mut().for_each(|d| *d *= inv);
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::Mat;
+
+    /// A random symmetric positive definite matrix of order m, its lower triangle stored with
+    /// column stride `ld` (and the strict upper triangle set to a marker).
+    fn spd(m: usize, ld: usize, seed: u64) -> (Vec<f64>, Mat<f64>) {
+        let mut s = seed;
+        let mut r = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let b = Mat::<f64>::from_fn(m, m, |_, _| r());
+        let mut a = &b * b.transpose();
+        for i in 0..m {
+            a[(i, i)] += 0.1 * m as f64;
+        }
+        let mut store = vec![7.0; ld * m];
+        for j in 0..m {
+            for i in j..m {
+                store[i + j * ld] = a[(i, j)];
+            }
+        }
+        (store, a)
+    }
+
+    #[test]
+    fn factors_reproduce_the_matrix_and_leave_the_upper_triangle() {
+        if crate::simd::Isa::detect() != crate::simd::Isa::Avx512 {
+            return;
+        }
+        for &m in &[1usize, 2, 7, 8, 9, 15, 16, 17, 31, 40, 100, 257] {
+            let ld = m + 3;
+            let (mut store, a) = spd(m, ld, 17 + m as u64);
+            let view = MatMut::from_column_major_slice_with_stride_mut(&mut store, m, m, ld);
+            assert_eq!(factor_lower(view), Some(true), "m = {m}");
+            let l = Mat::<f64>::from_fn(m, m, |i, j| if i >= j { store[i + j * ld] } else { 0.0 });
+            let back = &l * l.transpose();
+            let scale = (0..m).map(|i| a[(i, i)]).fold(0.0, f64::max);
+            for j in 0..m {
+                for i in 0..m {
+                    assert!((back[(i, j)] - a[(i, j)]).abs() <= 1e-13 * scale, "m = {m}");
+                    if i < j {
+                        assert_eq!(store[i + j * ld], 7.0, "upper triangle written, m = {m}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn refuses_matrices_that_are_not_positive_definite() {
+        if crate::simd::Isa::detect() != crate::simd::Isa::Avx512 {
+            return;
+        }
+        for &m in &[5usize, 20, 60] {
+            let (mut store, _) = spd(m, m, 3);
+            // A negative pivot in the middle, then NaN.
+            store[(m / 2) * (m + 1)] = -1e6;
+            let view = MatMut::from_column_major_slice_mut(&mut store, m, m);
+            assert_eq!(factor_lower(view), Some(false));
+            let (mut store, _) = spd(m, m, 4);
+            store[m - 1] = f64::NAN;
+            let view = MatMut::from_column_major_slice_mut(&mut store, m, m);
+            assert_eq!(factor_lower(view), Some(false));
+        }
+    }
+
+    #[test]
+    fn leaves_other_layouts_to_the_caller() {
+        let mut store = vec![1.0; (MAX_ORDER + 1) * 2];
+        let view = MatMut::from_column_major_slice_mut(&mut store, MAX_ORDER + 1, 2);
+        assert_eq!(factor_lower(view), None);
+    }
+}
