@@ -11,8 +11,8 @@ use crate::polygonize::weld::boundary_edges;
 use crate::polygonize::{
     dense, difference_step, octree, sparse, tracking, Ambiguity, Settings, Stats,
 };
-use pyo3::prelude::*;
 use numpy::PyArrayMethods;
+use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyTuple};
 
 pub fn parse_ambiguity(s: &str) -> PyResult<Ambiguity> {
