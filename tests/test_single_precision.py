@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import implicitmesh as im
-from tests.test_particles import closed_and_oriented, jittered_block, same_mesh
+from test_particles import closed_and_oriented, jittered_block, same_mesh
 
 KERNELS = ("triquet", "cubic_spline", "wendland")
 
