@@ -75,7 +75,8 @@ pub fn release_free_memory() {
 }
 
 /// What [`release_free_memory`] calls on each thread when the program's global allocator is not
-/// the system's (set once; later calls are ignored).
+/// the system's (set once; later calls are ignored). Only the Python module sets one.
+#[cfg_attr(not(feature = "python"), allow(dead_code))]
 pub fn set_release_hook(hook: fn()) {
     let _ = RELEASE.set(hook);
 }

@@ -1,7 +1,7 @@
 //! Cholesky factorization of the small dense systems of partition-of-unity patches (a few
 //! hundred unknowns each, thousands per fit, one per rayon task).
 //!
-//! Left-looking by blocks of [`NB`] columns: each block of columns is first updated with the
+//! Left-looking by blocks of 8 columns: each block of columns is first updated with the
 //! columns already factorized, A[j.., J] −= L[j.., ..j] L[J, ..j]ᵀ (all of the flops, in an
 //! AVX-512 kernel that keeps a 16 × 8 tile of the result in registers), then factorized as a
 //! narrow panel. At these sizes this is faster than a general blocked factorization, whose
