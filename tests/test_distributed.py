@@ -311,6 +311,48 @@ def test_output_directory_and_weld(client, blobs, tmp_path):
         imd.weld(out)
 
 
+@pytest.mark.parametrize("case", ["blobs", "octahedron"])
+def test_gathered_tiles_weld_as_the_core_welds_them(client, blobs, tmp_path, case):
+    """The gathered run welds each tile as it arrives (implicitmesh._streamed_weld); its arrays
+    are those the core's weld makes of the same tiles written to a directory, bit for bit and
+    in the same order, also where several vertices share a position on tile faces."""
+    if case == "blobs":
+        field, kw = blobs, {"bounds": BOX, "resolution": 40, "method": "sparse", "tile": 15}
+    else:
+        field, kw = (lambda p: np.abs(p).sum(axis=1) - 0.75), {"bounds": BOX, "resolution": 16, "method": "dense", "tile": 3}
+    gathered = imd.polygonize(field, client=client, **kw)
+    welded = imd.weld(imd.polygonize(field, client=client, output=tmp_path / "run", **kw))
+    for name in ("vertices", "faces", "normals"):
+        a, b = getattr(gathered, name), getattr(welded, name)
+        assert a.dtype == b.dtype and np.array_equal(a.view(np.uint64 if a.dtype == np.float64 else a.dtype), b.view(np.uint64 if b.dtype == np.float64 else b.dtype))
+    assert gathered.stats == welded.stats
+    assert_same_mesh(gathered, im.polygonize(field, **{k: v for k, v in kw.items() if k != "tile"}))
+
+
+def test_the_streamed_weld_checks_its_tiles():
+    from implicitmesh._streamed_weld import StreamedWeld
+
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    none = (np.zeros(0, np.uint32), np.zeros(0, np.uint64))
+    with pytest.raises(ValueError, match="faces"):
+        StreamedWeld(1, False).add(v, np.array([[0, 1, 3]], np.uint32), np.zeros((0, 3)), *none)
+    with pytest.raises(ValueError, match="normals"):
+        StreamedWeld(1, True).add(v, np.array([[0, 1, 2]], np.uint32), v[:1], *none)
+    # One edge at two positions in two tiles.
+    weld = StreamedWeld(2, False)
+    one = (np.array([0], np.uint32), np.array([7], np.uint64))
+    weld.add(v, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *one)
+    with pytest.raises(ValueError, match="tiles"):
+        weld.add(v + 0.5, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *one)
+    # Joined by key, the second tile's first vertex is the first tile's; more rows than the
+    # estimate grow the arrays.
+    weld = StreamedWeld(1, True)
+    for shift in (0.0, 1.0):
+        weld.add(v + [shift, 0, 0] * (np.arange(3) > 0)[:, None], np.array([[0, 1, 2]], np.uint32), v, *one)
+    out_v, out_f, out_n = weld.result()
+    assert len(out_v) == len(out_n) == 5 and out_f.tolist() == [[0, 1, 2], [0, 3, 4]] and out_f.dtype == np.int64
+
+
 def test_the_weld_checks_its_tiles():
     from implicitmesh import _core
 
@@ -389,19 +431,53 @@ def test_without_dask_the_error_names_the_extra(monkeypatch, blobs):
         imd.polygonize(blobs, bounds=BOX, resolution=8)
 
 
+def tasks_left(client, wait: float = 5.0) -> int:
+    """The tasks the scheduler still holds, once it holds none or after ``wait`` seconds."""
+    left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+    end = time.monotonic() + wait
+    while left and time.monotonic() < end:
+        time.sleep(0.1)
+        left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+    return left
+
+
 def test_ctrl_c_cancels_the_tasks(client, knot):
     def interrupt(done: int) -> None:
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
         imd.polygonize(knot[0], resolution=40, method="dense", client=client, tile=10, progress=interrupt)
-    left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
-    for _ in range(50):
-        if left == 0:
-            break
-        time.sleep(0.1)
-        left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
-    assert left == 0
+    assert tasks_left(client) == 0
+
+
+def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch):
+    """A Ctrl-C (SIGINT to the main thread) while the client welds the first tile that arrived
+    raises KeyboardInterrupt and cancels the tasks not done; the next run is whole."""
+    import _thread
+
+    from implicitmesh import _streamed_weld
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    add = _streamed_weld.StreamedWeld.add
+    welds = []
+
+    def interrupted_add(self, *tile):
+        welds.append(len(tile[0]))
+        _thread.interrupt_main()
+        add(self, *tile)
+        time.sleep(1.0)  # the signal is handled here at the latest
+
+    monkeypatch.setattr(_streamed_weld.StreamedWeld, "add", interrupted_add)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            imd.polygonize(blobs, bounds=BOX, resolution=96, method="dense", client=client, tile=8)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert len(welds) == 1
+    assert tasks_left(client) == 0
+    monkeypatch.setattr(_streamed_weld.StreamedWeld, "add", add)
+    whole = im.polygonize(blobs, bounds=BOX, resolution=24, method="sparse")
+    assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8), whole)
 
 
 def test_the_current_client_is_the_default(client, blobs):

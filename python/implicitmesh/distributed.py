@@ -22,6 +22,7 @@ import numpy as np
 from . import _core
 from ._core import weld_tiles
 from ._progress import reporter
+from ._streamed_weld import StreamedWeld
 from .mesh import Mesh
 from .polygonize import _check_common
 
@@ -326,7 +327,7 @@ def polygonize(
         if not output.is_dir():
             raise ValueError(f"output: {str(output)!r} is not a directory")
     client, own = _get_client(client)
-    futures = []
+    futures, shared = [], None
     report, end = reporter(progress, "tiles", None, "tiles")
     try:
         # Blob fields and partition fits are cut per tile; any other field is one task's result
@@ -342,21 +343,33 @@ def polygonize(
                     None if output is None else str(output), pure=False,
                 )
             )
-        entries = []
+        entries, stream = [], None
+        if output is None:
+            stream = StreamedWeld(len(futures), bool(options.get("normals", True)))
+        # Tiles arrive in any order; each is welded once those before it (in window order)
+        # are, and then freed.
+        place = {fut.key: i for i, fut in enumerate(futures)}
+        arrived: dict[int, dict] = {}
         for done, fut in enumerate(distributed.as_completed(futures), 1):
-            entries.append(fut.result())
+            arrived[place[fut.key]] = fut.result()
             # The worker need not keep a result the client holds (nor spill it to disk).
             fut.release()
+            while len(entries) in arrived:
+                entry = arrived.pop(len(entries))
+                if stream is not None:
+                    stream.add(*(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
+                entries.append(entry)
             if report is not None:
                 report(done)
     except BaseException:
-        client.cancel([f for f in futures if f.status != "finished"])
+        # Every task, done or not, and the shared field: a traceback that keeps this frame
+        # must not keep their results on the workers.
+        client.cancel(futures + [f for f in (shared,) if f is not None])
         raise
     finally:
         end()
         if own is not None:
             own.close()
-    entries.sort(key=lambda e: (e["window"][0][2], e["window"][0][1], e["window"][0][0]))
     info = {"cells": list(cells), "origin": origin.tolist(), "cell": cell.tolist(), "method": method}
     if output is not None:
         manifest = dict(info, bounds=bounds.tolist(), resolution=np.asarray(resolution).tolist(), tiles=entries)
@@ -364,7 +377,8 @@ def polygonize(
         tmp.write_text(json.dumps(manifest, indent=1))
         os.replace(tmp, output / MANIFEST)
         return output
-    mesh = _weld([(e, e["v"], e["f"], e["n"], e["b"], e["k"]) for e in entries], info)
+    v, f, n = stream.result()
+    mesh = Mesh(v, f, n, _stats(entries, info, len(v)))
     if not project:
         return mesh
     v, f, n, st = _core.project_mesh(
@@ -431,9 +445,19 @@ def _weld(parts: list, info: dict, progress: Any = False) -> Mesh:
         )
     finally:
         end()
-    stats: dict[str, Any] = {k: sum(int(p[0]["stats"][k]) for p in parts) for k in _SUMMED}
+    return Mesh(v, f, n, _stats([p[0] for p in parts], info, len(v)))
+
+
+def _stats(entries: list, info: dict, vertices: int) -> dict[str, Any]:
+    """The tiles' statistics summed (their manifest ``entries``), with the whole lattice's and
+    the welded mesh's ``vertices``."""
+    stats: dict[str, Any] = {k: sum(int(e["stats"][k]) for e in entries) for k in _SUMMED}
     stats["lattice_points"] = int(np.prod(np.asarray(info["cells"], dtype=np.int64) + 1))
     stats.update(
-        tiles=len(parts), triangles=len(f), vertices=len(v), method=info["method"], resolution=tuple(info["cells"])
+        tiles=len(entries),
+        triangles=sum(e["faces"] for e in entries),
+        vertices=vertices,
+        method=info["method"],
+        resolution=tuple(info["cells"]),
     )
-    return Mesh(v, f, n, stats)
+    return stats
