@@ -87,15 +87,27 @@ def make_field(name: str, size: int):
 
 
 class Phases:
-    """Wraps ``_tile_fields`` and ``weld_tiles`` (the core's weld) of :mod:`implicitmesh.distributed` to count the
-    client's seconds cutting the field for the tiles and welding, and the vertices the weld
-    joins (the tiles' fields are cut before the first is submitted)."""
+    """Wraps ``_tile_fields`` of :mod:`implicitmesh.distributed` and ``StreamedWeld.add`` (the
+    gathered run's weld, one tile at a time as the tiles arrive) to count the client's seconds
+    cutting the field for the tiles and welding, and the vertices the weld joins (the tiles'
+    fields are cut before the first is submitted)."""
 
     def __init__(self, imd):
-        self.cut, self.weld = imd._tile_fields, imd.weld_tiles
+        from implicitmesh import _streamed_weld
+
+        self.cut, self.add = imd._tile_fields, _streamed_weld.StreamedWeld.add
         self.reset()
         imd._tile_fields = self._cut
-        imd.weld_tiles = self._weld
+        phases = self
+
+        def add(weld, vertices, *rest):
+            t, before = time.perf_counter(), weld.vertices.n
+            phases.add(weld, vertices, *rest)
+            phases.weld_s += time.perf_counter() - t
+            phases.tile_vertices += len(vertices)
+            phases.welded_vertices += len(vertices) - (weld.vertices.n - before)
+
+        _streamed_weld.StreamedWeld.add = add
 
     def reset(self) -> None:
         self.cut_s = self.weld_s = 0.0
@@ -108,14 +120,6 @@ class Phases:
         parts = list(self.cut(field, shared, *a))
         self.cut_s += time.perf_counter() - t
         return parts
-
-    def _weld(self, tiles, *a, **kw):
-        t = time.perf_counter()
-        out = self.weld(tiles, *a, **kw)
-        self.weld_s += time.perf_counter() - t
-        self.tile_vertices = sum(len(x[1]) for x in tiles)
-        self.welded_vertices = self.tile_vertices - len(out[0])
-        return out
 
 
 def pickled_parts(field, resolution: int, tile: int) -> list[int]:
@@ -313,7 +317,8 @@ def render(raw: dict) -> str:
         "Speed-up: `dask-1`'s time over this row's; overhead: this row's time over `single`'s, minus 1. "
         "Per tile: the task's compute seconds (Dask's task stream) and the megabytes of its field (pickled) "
         "and of its result (Dask's size estimate), mean / max over tasks. Client: seconds cutting the "
-        "field per tile and welding. Welded: vertices joined by the weld, of the tiles' vertices. Peak "
+        "field per tile and welding (the sum of the tiles' welds, each as it arrives, while the workers "
+        "compute others). Welded: vertices joined by the weld, of the tiles' vertices. Peak "
         "memory: VmHWM of each worker process and of the client process (MiB).",
         "",
         run_markdown(run),

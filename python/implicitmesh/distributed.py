@@ -289,7 +289,7 @@ def polygonize(
     ImportError
         When Dask is not installed (the ``distributed`` extra).
     KeyboardInterrupt
-        On Ctrl-C: the tasks not yet finished are cancelled.
+        On Ctrl-C (also while the client welds the tiles): every task is cancelled.
     """
     distributed = _import_distributed()
     tile3 = _check_tile(tile)
