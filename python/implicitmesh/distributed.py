@@ -14,6 +14,7 @@ import functools
 import itertools
 import json
 import os
+from concurrent.futures import CancelledError
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
@@ -196,6 +197,18 @@ def _run_tile(field, bounds, resolution, window, method, options, output):
     return entry
 
 
+def _submit_tile(client, args: tuple, part: Any, window, scattered: dict | None, i: int):
+    """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field;
+    ``args``: ``(bounds, resolution, method, options, output)``. With ``scattered``, a
+    partition fit's cut is scattered straight to a worker (its future kept in
+    ``scattered[i]``) instead of travelling inside the task through the scheduler, which a
+    ``LocalCluster`` runs in the client's process."""
+    if scattered is not None and isinstance(part, _core.VariationalSurface):
+        part = scattered[i] = client.scatter(part, direct=True, hash=False)
+    bounds, resolution, method, options, output = args
+    return client.submit(_run_tile, part, bounds, resolution, window, method, options, output, pure=False)
+
+
 def _pickled(field: Any) -> Callable[[], Any]:
     """A function returning ``field``, for a task; a TypeError naming ``field`` when it does not
     pickle (Dask sends it with cloudpickle)."""
@@ -327,22 +340,21 @@ def polygonize(
         if not output.is_dir():
             raise ValueError(f"output: {str(output)!r} is not a directory")
     client, own = _get_client(client)
-    futures, shared = [], None
+    futures, shared, scattered = [], None, {}
     report, end = reporter(progress, "tiles", None, "tiles")
     try:
         # Blob fields and partition fits are cut per tile; any other field is one task's result
         # that the tiles share (a task, not scattered data, so that Dask recomputes it if its
         # worker dies).
         shared = None if _cut_per_tile(field) else client.submit(_pickled(field), pure=False)
+        submit = functools.partial(
+            _submit_tile, client, (bounds, resolution, method, options, None if output is None else str(output))
+        )
+        windows: list = []
         for (lo, hi), part in zip(tiles(cells, tile3), _tile_fields(field, shared, cells, origin, cell, tile3)):
-            if part is None:
-                continue
-            futures.append(
-                client.submit(
-                    _run_tile, part, bounds, resolution, (lo, hi), method, options,
-                    None if output is None else str(output), pure=False,
-                )
-            )
+            if part is not None:
+                futures.append(submit(part, (lo, hi), scattered, len(windows)))
+                windows.append((lo, hi))
         entries, stream = [], None
         if output is None:
             stream = StreamedWeld(len(futures), bool(options.get("normals", True)))
@@ -350,8 +362,22 @@ def polygonize(
         # are, and then freed.
         place = {fut.key: i for i, fut in enumerate(futures)}
         arrived: dict[int, dict] = {}
-        for done, fut in enumerate(distributed.as_completed(futures), 1):
-            arrived[place[fut.key]] = fut.result()
+        pending = distributed.as_completed(futures)
+        for fut in pending:
+            i = place[fut.key]
+            try:
+                arrived[i] = fut.result()
+            except CancelledError:
+                if scattered.pop(i, None) is None:
+                    raise
+                # The worker holding the tile's scattered cut died (Dask does not recompute
+                # scattered data): the cut goes again, inside the task this time.
+                again = submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
+                futures.append(again)
+                place[again.key] = i
+                pending.add(again)
+                continue
+            scattered.pop(i, None)
             # The worker need not keep a result the client holds (nor spill it to disk).
             fut.release()
             while len(entries) in arrived:
@@ -360,11 +386,11 @@ def polygonize(
                     stream.add(*(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
                 entries.append(entry)
             if report is not None:
-                report(done)
+                report(len(entries) + len(arrived))
     except BaseException:
         # Every task, done or not, and the shared field: a traceback that keeps this frame
         # must not keep their results on the workers.
-        client.cancel(futures + [f for f in (shared,) if f is not None])
+        client.cancel(futures + list(scattered.values()) + [f for f in (shared,) if f is not None])
         raise
     finally:
         end()
