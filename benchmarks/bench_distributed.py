@@ -10,7 +10,10 @@ Setups, each in a fresh process (its peak resident size its own):
   nannies), so that a worker uses one core: on 2 cores, ``dask-2`` uses the cores ``single``
   uses, and ``dask-2`` against ``dask-1`` measures how independent the tasks are (a worker whose
   polygonizer ran on both cores would leave nothing for a second worker to gain). The client
-  keeps all its rayon threads for the weld, which runs once the tiles are in.
+  welds each tile as it arrives;
+- ``dask-2-dir``: ``dask-2`` with ``output=DIR`` (each worker writes its tiles to a directory
+  on local disk, nothing is gathered), timed to the manifest; ``weld(DIR)`` afterwards is timed
+  on its own.
 
 Fields: ``blobs``, primitives with centres uniform in [-0.8, 0.8]³ (radius chosen so that the
 spheres of influence cover the cube about 1.6 times: a foam of merged blobs), method
@@ -32,6 +35,7 @@ import argparse
 import json
 import os
 import pickle
+import shutil
 import statistics
 import sys
 import tempfile
@@ -51,7 +55,9 @@ CASES = {
 }
 #: Blob radius at 200,000 primitives; it scales with the cube root of 1 / primitives.
 BLOB_RADIUS = 0.02
-SETUPS = ("single", "dask-1", "dask-2")
+SETUPS = ("single", "dask-1", "dask-2", "dask-2-dir")
+#: The setups the targets compare.
+COMPARED = ("single", "dask-1", "dask-2")
 METHOD = {"blobs": "sparse", "variational": "octree"}
 OPTIONS = {"blobs": {}, "variational": {"normals": False}}
 #: Many small tiles, for the scheduler's and the weld's cost per tile: the quick blob field over
@@ -160,13 +166,19 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
     from implicitmesh import distributed as imd
 
     workers = int(setup.split("-")[1])
+    to_dir = setup.endswith("-dir")
     cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                        dashboard_address=None, memory_limit=0, env=WORKER_ENV)
     with distributed.Client(cluster) as client:
         phases = Phases(imd)
-        run = lambda res, t: imd.polygonize(field, bounds=BOX, resolution=res, method=method,  # noqa: E731
-                                            client=client, tile=t, **options)
-        run(16, 8)  # warm-up: the workers import implicitmesh
+        def run(res: int, t: int):
+            out = tempfile.mkdtemp(prefix="bench_distributed_tiles_") if to_dir else None
+            return imd.polygonize(field, bounds=BOX, resolution=res, method=method, client=client, tile=t,
+                                  output=out, **options)
+
+        warm = run(16, 8)  # warm-up: the workers import implicitmesh
+        if to_dir:
+            shutil.rmtree(warm)
         times, stream = [], None
         for i in range(runs):
             phases.reset()
@@ -179,7 +191,18 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
             else:
                 mesh = run(resolution, tile)
             times.append(time.perf_counter() - t)
+            if to_dir and not last:
+                shutil.rmtree(mesh)
         cut_s, weld_s, welded = phases.cut_s, phases.weld_s, (phases.tile_vertices, phases.welded_vertices)
+        if to_dir:
+            directory = mesh
+            manifest = json.loads((Path(directory) / imd.MANIFEST).read_text())
+            t = time.perf_counter()
+            mesh = imd.weld(directory)
+            weld_s = time.perf_counter() - t
+            shutil.rmtree(directory)
+            in_tiles = sum(e["vertices"] for e in manifest["tiles"])
+            welded = (in_tiles, in_tiles - len(mesh.vertices))
         field_bytes = pickled_parts(field, resolution, tile)
         tasks = [r for r in stream if str(r["key"]).startswith("_run_tile")]
         compute = [sum(s["stop"] - s["start"] for s in r["startstops"] if s["action"] == "compute") for r in tasks]
@@ -272,9 +295,10 @@ def render(raw: dict) -> str:
     rows, checks = [], []
     by = {(c["field"], c["setup"]): c for c in raw["cases"]}
     for name in dict.fromkeys(c["field"] for c in raw["cases"] if c["field"] != "many"):
-        single, d1, d2 = (by.get((name, s), {}) for s in SETUPS)
-        t = {s: statistics.median(c["times"]) if "times" in c else None for s, c in zip(SETUPS, (single, d1, d2))}
-        for setup, c in zip(SETUPS, (single, d1, d2)):
+        cases = [by.get((name, s), {}) for s in SETUPS]
+        single, d1, d2 = cases[:3]
+        t = {s: statistics.median(c["times"]) if "times" in c else None for s, c in zip(SETUPS, cases)}
+        for setup, c in zip(SETUPS, cases):
             if "error" in c or not c:
                 rows.append([name, setup, f"failed: {c.get('error', 'not run')}"] + [""] * 10)
                 continue
@@ -294,13 +318,13 @@ def render(raw: dict) -> str:
                 else f"{c['peak_mib']:,.0f}",
                 str(len(c["times"])),
             ])
-        if all(t.values()) and single.get("triangles") == d1.get("triangles") == d2.get("triangles"):
+        if all(t[s] for s in COMPARED) and single.get("triangles") == d1.get("triangles") == d2.get("triangles"):
             speedup, overhead = t["dask-1"] / t["dask-2"], t["dask-2"] / t["single"] - 1
             checks.append(f"- {name}: 2 workers {speedup:.2f}× one (target ≥ {SPEEDUP_TARGET}×: "
                           f"{'met' if speedup >= SPEEDUP_TARGET else 'not met'}); overhead of 2 workers against one "
                           f"process {overhead:+.0%} (target ≤ {OVERHEAD_TARGET:.0%}: "
                           f"{'met' if overhead <= OVERHEAD_TARGET else 'not met'}).")
-        elif all(t.values()):
+        elif all(t[s] for s in COMPARED):
             checks.append(f"- {name}: the setups' triangle counts differ (see the table).")
     return "\n".join([
         "## Tiled polygonization on Dask" + (" (QUICK)" if run["quick"] else ""),
@@ -309,7 +333,7 @@ def render(raw: dict) -> str:
         "all its threads. `dask-1`, `dask-2`: `implicitmesh.distributed.polygonize` on a `LocalCluster` of 1 or 2 "
         "worker processes of one Dask thread and one rayon thread each (`RAYON_NUM_THREADS=1`), so a worker uses "
         "one core: on 2 cores `dask-2` has the cores `single` has, and `dask-2` against `dask-1` shows how "
-        "independent the tasks are; the client welds with all its threads. Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
+        "independent the tasks are; `dask-2-dir` is `dask-2` with `output=DIR` on local disk (nothing gathered); the client welds each tile as it arrives (`weld(DIR)` with all its threads). Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
         "200,000 primitives, scaled with the cube root of 1 / primitives), `method=\"sparse\"`. Variational: "
         "a partition fit of points sampled on `knot_hires` with their face normals (bench_scale's samples), "
         "`method=\"octree\"`, `normals=False`. Bounds [-1, 1]³. Each setup in a fresh process, after a warm-up "
@@ -318,7 +342,7 @@ def render(raw: dict) -> str:
         "Per tile: the task's compute seconds (Dask's task stream) and the megabytes of its field (pickled) "
         "and of its result (Dask's size estimate), mean / max over tasks. Client: seconds cutting the "
         "field per tile and welding (the sum of the tiles' welds, each as it arrives, while the workers "
-        "compute others). Welded: vertices joined by the weld, of the tiles' vertices. Peak "
+        "compute others; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. Peak "
         "memory: VmHWM of each worker process and of the client process (MiB).",
         "",
         run_markdown(run),
