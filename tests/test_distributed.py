@@ -313,18 +313,25 @@ def test_output_directory_and_weld(client, blobs, tmp_path):
 
 @pytest.mark.parametrize("case", ["blobs", "octahedron"])
 def test_gathered_tiles_weld_as_the_core_welds_them(client, blobs, tmp_path, case):
-    """The gathered run welds each tile as it arrives (implicitmesh._streamed_weld); its arrays
-    are those the core's weld makes of the same tiles written to a directory, bit for bit and
-    in the same order, also where several vertices share a position on tile faces."""
+    """The gathered run and weld(DIR) weld one tile at a time (implicitmesh._streamed_weld);
+    their arrays are those the core's weld makes of all the tiles at once, bit for bit and in
+    the same order, also where several vertices share a position on tile faces."""
     if case == "blobs":
         field, kw = blobs, {"bounds": BOX, "resolution": 40, "method": "sparse", "tile": 15}
     else:
         field, kw = (lambda p: np.abs(p).sum(axis=1) - 0.75), {"bounds": BOX, "resolution": 16, "method": "dense", "tile": 3}
     gathered = imd.polygonize(field, client=client, **kw)
-    welded = imd.weld(imd.polygonize(field, client=client, output=tmp_path / "run", **kw))
-    for name in ("vertices", "faces", "normals"):
-        a, b = getattr(gathered, name), getattr(welded, name)
-        assert a.dtype == b.dtype and np.array_equal(a.view(np.uint64 if a.dtype == np.float64 else a.dtype), b.view(np.uint64 if b.dtype == np.float64 else b.dtype))
+    out = imd.polygonize(field, client=client, output=tmp_path / "run", **kw)
+    welded = imd.weld(out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    tiles = []
+    for e in manifest["tiles"]:
+        with np.load(out / e["file"]) as z:
+            tiles.append((e["window"], *(z[a] for a in ("vertices", "faces", "normals", "boundary", "keys"))))
+    core = im._core.weld_tiles(tiles, manifest["cells"], manifest["origin"], manifest["cell"])
+    for mesh in (gathered, welded):
+        for a, b in zip((mesh.vertices, mesh.faces, mesh.normals), core):
+            assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
     assert gathered.stats == welded.stats
     assert_same_mesh(gathered, im.polygonize(field, **{k: v for k, v in kw.items() if k != "tile"}))
 
@@ -351,6 +358,13 @@ def test_the_streamed_weld_checks_its_tiles():
         weld.add(v + [shift, 0, 0] * (np.arange(3) > 0)[:, None], np.array([[0, 1, 2]], np.uint32), v, *one)
     out_v, out_f, out_n = weld.result()
     assert len(out_v) == len(out_n) == 5 and out_f.tolist() == [[0, 1, 2], [0, 3, 4]] and out_f.dtype == np.int64
+    # normals=None: as the first tile with vertices has them (an empty tile first).
+    empty = (np.zeros((0, 3)), np.zeros((0, 3), np.uint32), np.zeros((0, 3)), *none)
+    for normals, expected in ((v, 3), (np.zeros((0, 3)), 0)):
+        weld = StreamedWeld(2, None)
+        weld.add(*empty)
+        weld.add(v, np.array([[0, 1, 2]], np.uint32), normals, *none)
+        assert weld.result()[2].shape == (expected, 3)
 
 
 def test_the_weld_checks_its_tiles():

@@ -56,14 +56,15 @@ class StreamedWeld:
     ----------
     tiles : int
         The number of tiles that will be added (for the output's estimate).
-    normals : bool
-        Whether the tiles carry normals (one per vertex).
+    normals : bool or None
+        Whether the tiles carry normals (one per vertex); None: as the first tile with
+        vertices does.
     """
 
-    def __init__(self, tiles: int, normals: bool) -> None:
+    def __init__(self, tiles: int, normals: bool | None) -> None:
         self.tiles, self.added = tiles, 0
-        self.vertices, self.faces = _Rows(np.float64), _Rows(np.int64)
-        self.normals = _Rows(np.float64) if normals else None
+        self.vertices, self.faces, self.normals = _Rows(np.float64), _Rows(np.int64), _Rows(np.float64)
+        self.with_normals = normals
         #: Edge key -> welded vertex, for the boundary vertices of the tiles added.
         self.ids: dict[int, int] = {}
 
@@ -81,9 +82,11 @@ class StreamedWeld:
         outside the tile, normals not one per vertex, or a vertex joined to one at other
         coordinates (tiles of different fields or lattices)."""
         nv = len(vertices)
+        if self.with_normals is None and nv:
+            self.with_normals = len(normals) == nv
         if len(faces) and int(faces.max()) >= nv:
             raise ValueError(f"faces: tile {self.added} has vertex index {int(faces.max())}, outside its {nv} vertices")
-        if self.normals is not None and len(normals) != nv:
+        if self.with_normals and len(normals) != nv:
             raise ValueError(f"normals: tile {self.added} has {len(normals)} normals for {nv} vertices")
         found = np.fromiter((self.ids.get(k, -1) for k in keys.tolist()), dtype=np.int64, count=len(keys))
         hit = found >= 0
@@ -99,7 +102,7 @@ class StreamedWeld:
         index += first - 1
         index[joined] = to
         for rows, data in ((self.vertices, vertices), (self.normals, normals)):
-            if rows is not None:
+            if rows is self.vertices or self.with_normals:
                 np.compress(keep, data, axis=0, out=rows.room(kept, self._estimate(rows, kept)))
         np.take(index, faces, out=self.faces.room(len(faces), self._estimate(self.faces, len(faces))), mode="clip")
         new = ~hit
@@ -108,5 +111,5 @@ class StreamedWeld:
 
     def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3))``."""
-        normals = self.normals.array() if self.normals is not None else np.zeros((0, 3))
+        normals = self.normals.array() if self.with_normals else np.zeros((0, 3))
         return self.vertices.array(), self.faces.array(), normals

@@ -21,7 +21,6 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 
 from . import _core
-from ._core import weld_tiles
 from ._progress import reporter
 from ._streamed_weld import StreamedWeld
 from .mesh import Mesh
@@ -418,7 +417,8 @@ def polygonize(
 
 def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], object] = False) -> Mesh:
     """Joins the tiles that :func:`polygonize` wrote with ``output=directory`` into one mesh
-    (the mesh :func:`polygonize` returns without ``output``).
+    (the mesh :func:`polygonize` returns without ``output``, array for array). The tiles are
+    read and welded one at a time, so the memory needed is the welded mesh's and one tile's.
 
     Parameters
     ----------
@@ -437,41 +437,38 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
     ------
     ValueError
         When the directory has no manifest (the run did not finish), a tile is missing, or a
-        tile has no edge keys (written by an older implicitmesh).
+        tile has no edge keys (written by an older implicitmesh); naming ``tiles`` for tiles of
+        different fields or lattices.
+    KeyboardInterrupt
+        On Ctrl-C, between two steps of a tile.
     """
     directory = Path(directory)
     path = directory / MANIFEST
     if not path.is_file():
         raise ValueError(f"directory: no {MANIFEST} in {str(directory)!r} (a run that did not finish?)")
     manifest = json.loads(path.read_text())
-    parts = []
-    for e in manifest["tiles"]:
-        file = directory / e["file"]
-        if not file.is_file():
-            raise ValueError(f"directory: tile {e['file']} listed in the manifest is missing")
-        with np.load(file) as z:
-            if "keys" not in z.files:
-                raise ValueError(
-                    f"directory: tile {e['file']} has no edge keys (written by an older implicitmesh); run polygonize again"
-                )
-            parts.append((e, z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"]))
-    return _weld(parts, manifest, progress)
-
-
-def _weld(parts: list, info: dict, progress: Any = False) -> Mesh:
-    """The mesh of the tiles ``parts`` (``(manifest entry, vertices, faces, normals, boundary,
-    keys)`` each), welded by the core (``_core.weld_tiles``: by lattice edge, see
-    :mod:`implicitmesh.distributed`), with the tiles' statistics summed."""
-    total = sum(len(p[1]) for p in parts)
-    report, end = reporter(progress, "weld", total, "vertices")
+    report, end = reporter(progress, "weld", sum(e["vertices"] for e in manifest["tiles"]), "vertices")
+    stream, done = StreamedWeld(len(manifest["tiles"]), None), 0
     try:
-        v, f, n = weld_tiles(
-            [(p[0]["window"], *p[1:]) for p in parts],
-            info["cells"], info["origin"], info["cell"], progress=report,
-        )
+        # One tile in memory at a time besides the welded mesh.
+        for e in manifest["tiles"]:
+            file = directory / e["file"]
+            if not file.is_file():
+                raise ValueError(f"directory: tile {e['file']} listed in the manifest is missing")
+            with np.load(file) as z:
+                if "keys" not in z.files:
+                    raise ValueError(
+                        f"directory: tile {e['file']} has no edge keys (written by an older implicitmesh); "
+                        "run polygonize again"
+                    )
+                stream.add(z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"])
+            done += e["vertices"]
+            if report is not None:
+                report(done)
     finally:
         end()
-    return Mesh(v, f, n, _stats([p[0] for p in parts], info, len(v)))
+    v, f, n = stream.result()
+    return Mesh(v, f, n, _stats(manifest["tiles"], manifest, len(v)))
 
 
 def _stats(entries: list, info: dict, vertices: int) -> dict[str, Any]:
