@@ -208,6 +208,42 @@ def _submit_tile(client, args: tuple, part: Any, window, scattered: dict | None,
     return client.submit(_run_tile, part, bounds, resolution, window, method, options, output, pure=False)
 
 
+def _collect(distributed, futures: list, scattered: dict, resend: Callable, stream: Any, report: Any) -> list:
+    """The tiles' manifest entries in window order (the order of ``futures``), each tile's mesh
+    added to ``stream`` (when given) as soon as those before it are, then freed; ``report``
+    gets the tiles done. A tile whose scattered cut was lost with its worker (``scattered``
+    holds the scattered cuts' futures by tile) comes back cancelled and is sent again with
+    ``resend(tile)``; ``futures`` gets the new futures."""
+    place = {fut.key: i for i, fut in enumerate(futures)}
+    arrived: dict[int, dict] = {}
+    entries: list = []
+    pending = distributed.as_completed(futures)
+    for fut in pending:
+        i = place[fut.key]
+        try:
+            arrived[i] = fut.result()
+        except CancelledError:
+            if scattered.pop(i, None) is None:
+                raise
+            # Dask does not recompute scattered data: the cut goes again, inside the task.
+            again = resend(i)
+            futures.append(again)
+            place[again.key] = i
+            pending.add(again)
+            continue
+        scattered.pop(i, None)
+        # The worker need not keep a result the client holds (nor spill it to disk).
+        fut.release()
+        while len(entries) in arrived:
+            entry = arrived.pop(len(entries))
+            if stream is not None:
+                stream.add(*(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
+            entries.append(entry)
+        if report is not None:
+            report(len(entries) + len(arrived))
+    return entries
+
+
 def _pickled(field: Any) -> Callable[[], Any]:
     """A function returning ``field``, for a task; a TypeError naming ``field`` when it does not
     pickle (Dask sends it with cloudpickle)."""
@@ -354,38 +390,12 @@ def polygonize(
             if part is not None:
                 futures.append(submit(part, (lo, hi), scattered, len(windows)))
                 windows.append((lo, hi))
-        entries, stream = [], None
-        if output is None:
-            stream = StreamedWeld(len(futures), bool(options.get("normals", True)))
-        # Tiles arrive in any order; each is welded once those before it (in window order)
-        # are, and then freed.
-        place = {fut.key: i for i, fut in enumerate(futures)}
-        arrived: dict[int, dict] = {}
-        pending = distributed.as_completed(futures)
-        for fut in pending:
-            i = place[fut.key]
-            try:
-                arrived[i] = fut.result()
-            except CancelledError:
-                if scattered.pop(i, None) is None:
-                    raise
-                # The worker holding the tile's scattered cut died (Dask does not recompute
-                # scattered data): the cut goes again, inside the task this time.
-                again = submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
-                futures.append(again)
-                place[again.key] = i
-                pending.add(again)
-                continue
-            scattered.pop(i, None)
-            # The worker need not keep a result the client holds (nor spill it to disk).
-            fut.release()
-            while len(entries) in arrived:
-                entry = arrived.pop(len(entries))
-                if stream is not None:
-                    stream.add(*(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
-                entries.append(entry)
-            if report is not None:
-                report(len(entries) + len(arrived))
+        stream = StreamedWeld(len(futures), bool(options.get("normals", True))) if output is None else None
+
+        def resend(i: int):
+            return submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
+
+        entries = _collect(distributed, futures, scattered, resend, stream, report)
     except BaseException:
         # Every task, done or not, and the shared field: a traceback that keeps this frame
         # must not keep their results on the workers.
