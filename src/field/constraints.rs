@@ -620,4 +620,26 @@ mod tests {
             assert!((c.values[pts.len() + i] - 0.75 * c.offsets[i]).abs() < 1e-15);
         }
     }
+
+    #[test]
+    fn default_offset_is_capped_by_the_spacing() {
+        // A unit sphere and two far points: the largest side (40) puts 0.0075 × side far above
+        // 6 spacings of the sphere's points.
+        let spread = |n: usize| {
+            let mut p = crate::field::testing::fibonacci_sphere(n);
+            p.push(DVec3::new(20.0, 0.0, 0.0));
+            p.push(DVec3::new(-20.0, 0.0, 0.0));
+            p
+        };
+        let p = spread(20_000);
+        let spacing = duplicates::typical_spacing(&p, &Grid::new(&p, 0.0));
+        let d = default_offset(&p);
+        assert!(spacing > 0.0 && d < 0.0075 * 40.0);
+        assert_eq!(d, D_OVER_SPACING * spacing);
+        let c = place(&p, &p, &ConstraintSettings::default()).unwrap();
+        assert!(c.offsets.iter().all(|&o| o <= d));
+        // Below SPACING_CAP_POINTS the offset is the nominal one.
+        let few = spread(SPACING_CAP_POINTS - 3);
+        assert_eq!(default_offset(&few), 0.0075 * largest_side(&few));
+    }
 }
