@@ -9,7 +9,7 @@ its face normals. Accuracy is the symmetric Chamfer distance to that mesh as a f
 bounding-box diagonal (see :func:`distances`).
 
     python -m benchmarks.bench_scale [--quick] [--results DIR]
-    python -m benchmarks.bench_scale one METHOD POINTS      # one JSON line, in this process
+    python -m benchmarks.bench_scale one METHOD POINTS [MODEL]   # one JSON line, in this process
 """
 
 from __future__ import annotations
@@ -25,6 +25,9 @@ from benchmarks.timing import ROOT, RunRecord, run_case_process, fmt_ratio, fmt_
 
 MESH = ROOT / "tests" / "data" / "meshes"
 MODEL = "knot"
+#: Other models, ours only at the largest size and cells (full run): topology and distance.
+OTHER_MODELS = ("spot", "torus2", "fandisk")
+OTHER_CASE = ("ours-1024", 1_000_000)
 #: Points per case (full, quick) and the methods run at each size, ours beside its peer.
 SIZES = {False: (10_000, 100_000, 1_000_000), True: (10_000,)}
 OURS = {"ours-128": 128, "ours-256": 256, "ours-256-tol": 256, "ours-1024": 1024}
@@ -53,12 +56,12 @@ def vmhwm_mib() -> float:
     return float("nan")
 
 
-def samples(n: int):
+def samples(n: int, model: str = MODEL):
     """``n`` points on the model's ``_hires`` mesh with their face normals, and the mesh."""
     import numpy as np
     import trimesh
 
-    m = trimesh.load(MESH / f"{MODEL}_hires.ply", process=False)
+    m = trimesh.load(MESH / f"{model}_hires.ply", process=False)
     p, face = trimesh.sample.sample_surface(m, n, seed=7)
     return np.asarray(p), np.asarray(m.face_normals)[face], m
 
@@ -125,12 +128,13 @@ def ferreus(p, n, cells: int, out: dict) -> tuple[object, dict]:
     return trimesh.Trimesh(np.asarray(iso.vertices), np.asarray(iso.facets), process=False), out
 
 
-def one(method: str, n: int) -> dict:
-    p, normals, ref = samples(n)
+def one(method: str, n: int, model: str = MODEL) -> dict:
+    p, normals, ref = samples(n, model)
     tm, out = reconstruct(method, p, normals)
     out["total_s"] = out.get("fit_s", 0.0) + out.get("polygonize_s", 0.0)
     out["peak_mib"] = vmhwm_mib()
-    out.update(method=method, n=n, triangles=int(len(tm.faces)), watertight=bool(tm.is_watertight),
+    out.update(method=method, n=n, model=model, reference_euler=int(ref.euler_number),
+               triangles=int(len(tm.faces)), watertight=bool(tm.is_watertight),
                euler=int(tm.euler_number), bodies=int(len(tm.split(only_watertight=False))))
     out.update(distances(ref, tm))
     return out
@@ -162,9 +166,9 @@ def distances(ref, mesh, samples: int = 500_000) -> dict:
     }
 
 
-def run_one(method: str, n: int) -> dict:
+def run_one(method: str, n: int, model: str = MODEL) -> dict:
     """:func:`one` in a fresh process."""
-    return run_case_process("benchmarks.bench_scale", [method, str(n)], {"method": method, "n": n})
+    return run_case_process("benchmarks.bench_scale", [method, str(n), model], {"method": method, "n": n})
 
 
 def log(msg: str) -> None:
@@ -183,7 +187,13 @@ def measure(a: argparse.Namespace) -> dict:
             repeats = 1 if n >= ONCE else RUNS[a.quick]
             log(f"{method}, {n:,} points, {repeats} run(s)")
             cases.append({"method": method, "n": n, "runs": [run_one(method, n) for _ in range(repeats)]})
-    return {"model": MODEL, "cases": cases,
+    others = []
+    if not a.quick:
+        method, n = OTHER_CASE
+        for model in OTHER_MODELS:
+            log(f"{method}, {n:,} points of {model}, 1 run")
+            others.append({"method": method, "n": n, "model": model, "runs": [run_one(method, n, model)]})
+    return {"model": MODEL, "cases": cases, "others": others,
             "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "ferreus_rbf", "implicitmesh"))}
 
 
@@ -224,6 +234,26 @@ def render(raw: dict) -> str:
                 f"{'yes' if r0['watertight'] else 'no'}, χ = {r0['euler']}, {r0['bodies']} bod{'y' if r0['bodies'] == 1 else 'ies'}",
                 str(len(runs)),
             ])
+    other_rows = []
+    for c in raw.get("others", []):
+        r0 = c["runs"][0]
+        if "error" in r0:
+            other_rows.append([c["model"], f"{c['n']:,}", f"failed: {r0['error']}"] + [""] * 5)
+            continue
+        other_rows.append([
+            c["model"], f"{c['n']:,}", f"{fmt_s(r0['fit_s'])} + {fmt_s(r0['polygonize_s'])}", f"{r0['peak_mib']:,.0f}",
+            f"{r0['triangles']:,}", f"{r0['chamfer_over_diagonal']:.2e}", f"{r0['hausdorff_over_diagonal']:.1e}",
+            f"{'yes' if r0['watertight'] else 'no'}, χ = {r0['euler']} (reference {r0['reference_euler']}), "
+            f"{r0['bodies']} bod{'y' if r0['bodies'] == 1 else 'ies'}",
+        ])
+    others = [] if not other_rows else [
+        f"Other models, ours only (`{OTHER_CASE[0]}`, {OTHER_CASE[1]:,} points, one run each): the same fit and "
+        "polygonization on samples of other `_hires` meshes, for the topology and the distance to the reference.",
+        "",
+        md_table(["model", "points", "seconds (fit + mesh)", "peak MiB", "triangles", "Chamfer", "Hausdorff",
+                  "watertight, χ, bodies"], other_rows),
+        "",
+    ]
     return "\n".join([
         "## Reconstruction at scan scale: variational surface against screened Poisson" + (" (QUICK)" if run["quick"] else ""),
         "",
@@ -248,12 +278,13 @@ def render(raw: dict) -> str:
         md_table(["points", "method", "seconds (fit + mesh)", "total (s)", "peer / ours", "peak MiB", "triangles",
                   "Chamfer", "Hausdorff", "watertight, χ, bodies", "runs"], rows),
         "",
+        *others,
     ])
 
 
 def main() -> int:
-    if len(sys.argv) == 4 and sys.argv[1] == "one":
-        print(json.dumps(one(sys.argv[2], int(sys.argv[3]))))
+    if len(sys.argv) in (4, 5) and sys.argv[1] == "one":
+        print(json.dumps(one(sys.argv[2], int(sys.argv[3]), *sys.argv[4:])))
         return 0
     return run_section("scale", measure, render, __doc__.split("\n")[0], "10⁴ points, one run per case")
 

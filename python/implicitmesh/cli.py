@@ -194,7 +194,7 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
         default=True,
         help="move the vertices onto the fitted surface by one Newton step (default: yes)",
     )
-    p.add_argument("--d", type=float, default=None, help="normal constraint offset (default: 0.0075 x largest side)")
+    p.add_argument("--d", type=float, default=None, help="normal constraint offset (default: 0.0075 x largest side, at most 6 x the point spacing)")
     p.add_argument("--w", type=float, default=None, help="normal constraint value (default 0.75 d)")
     p.add_argument("--kernel", default="triharmonic", choices=["triharmonic", "biharmonic", "thin_plate"])
 

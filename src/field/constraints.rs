@@ -15,8 +15,9 @@ use rayon::prelude::*;
 /// How constraint points are placed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ConstraintSettings {
-    /// Offset of normal constraints along the normal. `None`: 0.015 for data whose bounding box has
-    /// largest side 2 (the papers' [-1, 1]³), scaled with the data (0.0075 × the largest side).
+    /// Offset of normal constraints along the normal. `None`: [`default_offset`], 0.015 for data
+    /// whose bounding box has largest side 2 (the papers' [-1, 1]³), scaled with the data (0.0075
+    /// × the largest side), at most [`D_OVER_SPACING`] × the data's typical spacing.
     pub d: Option<f64>,
     /// Value at normal constraints. `None`: `w_over_d × d`.
     pub w: Option<f64>,
@@ -191,6 +192,32 @@ pub fn unit_normals(name: &'static str, normals: &[DVec3]) -> Result<Vec<DVec3>>
         .collect()
 }
 
+/// The default offset `d` is at most this many times the data's typical spacing (median
+/// nearest-neighbour distance, [`duplicates::typical_spacing`]).
+pub const D_OVER_SPACING: f64 = 6.0;
+
+/// From this many points on, the default offset is capped by the spacing (fewer points lie
+/// further apart than 0.0075 × the largest side / [`D_OVER_SPACING`]).
+const SPACING_CAP_POINTS: usize = 10_000;
+
+/// The default offset of the normal constraints: 0.0075 × the largest side of the bounding box,
+/// at most [`D_OVER_SPACING`] × the typical spacing. A partition fit's patches hold a fixed
+/// number of constraints, so their support shrinks with the spacing, and an offset
+/// large against the support leaves the field on the inner side of the data free to change
+/// sign (small bubbles and handles at 10⁶ points).
+pub fn default_offset(points: &[DVec3]) -> f64 {
+    let nominal = 0.0075 * largest_side(points);
+    if points.len() < SPACING_CAP_POINTS {
+        return nominal;
+    }
+    let spacing = duplicates::typical_spacing(points, &Grid::new(points, 0.0));
+    if spacing > 0.0 {
+        nominal.min(D_OVER_SPACING * spacing)
+    } else {
+        nominal
+    }
+}
+
 /// Places boundary and normal constraints for `points` with `normals` (one per point, any
 /// non-zero length).
 pub fn place(
@@ -239,8 +266,7 @@ fn place_distinct(
     settings: &ConstraintSettings,
     caps: Option<&[f64]>,
 ) -> Result<Constraints> {
-    let extent = largest_side(points);
-    let d = settings.d.unwrap_or(0.0075 * extent);
+    let d = settings.d.unwrap_or_else(|| default_offset(points));
     if !(d.is_finite() && d > 0.0) {
         return Err(Error::invalid(
             "d",
@@ -593,5 +619,27 @@ mod tests {
             }
             assert!((c.values[pts.len() + i] - 0.75 * c.offsets[i]).abs() < 1e-15);
         }
+    }
+
+    #[test]
+    fn default_offset_is_capped_by_the_spacing() {
+        // A unit sphere and two far points: the largest side (40) puts 0.0075 × side far above
+        // 6 spacings of the sphere's points.
+        let spread = |n: usize| {
+            let mut p = crate::field::testing::fibonacci_sphere(n);
+            p.push(DVec3::new(20.0, 0.0, 0.0));
+            p.push(DVec3::new(-20.0, 0.0, 0.0));
+            p
+        };
+        let p = spread(20_000);
+        let spacing = duplicates::typical_spacing(&p, &Grid::new(&p, 0.0));
+        let d = default_offset(&p);
+        assert!(spacing > 0.0 && d < 0.0075 * 40.0);
+        assert_eq!(d, D_OVER_SPACING * spacing);
+        let c = place(&p, &p, &ConstraintSettings::default()).unwrap();
+        assert!(c.offsets.iter().all(|&o| o <= d));
+        // Below SPACING_CAP_POINTS the offset is the nominal one.
+        let few = spread(SPACING_CAP_POINTS - 3);
+        assert_eq!(default_offset(&few), 0.0075 * largest_side(&few));
     }
 }

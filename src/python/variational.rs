@@ -371,7 +371,8 @@ impl PyVariationalSurface {
     ///     Outward normals, any non-zero length (they are normalised).
     /// d : float, optional
     ///     Offset of the normal constraints. Default: 0.0075 × the largest side of the points'
-    ///     bounding box (0.015 for data spanning [-1, 1]³, as in the papers).
+    ///     bounding box (0.015 for data spanning [-1, 1]³, as in the papers), at most 6 × the
+    ///     median distance between nearest data points (from 10,000 points on).
     /// w : float, optional
     ///     Value at the normal constraints. Default: 0.75 × d (Cuno's w/d = 3/4).
     /// kernel : {"triharmonic", "biharmonic", "thin_plate"}

@@ -2,8 +2,10 @@
 //! of radius `overlap` × the leaf's half-diagonal, fitted to **every** constraint inside the
 //! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
 //! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], the
-//! system is completed with up to max(`max_patch` − inside, `max_patch` / 2) constraints outside
-//! it, spread over a larger ball (see [`super::coarse`]). A patch with no constraint in its ball
+//! system is completed with constraints outside it, spread over a larger ball (see
+//! [`super::coarse`]): up to max(`max_patch` − inside, `max_patch` / 2) for a patch that sees the
+//! data only near the edge of its support ([`FAR_DATA`]), up to `max_patch` /
+//! [`NEAR_BUDGET_DIVISOR`] for the others. A patch with no constraint in its ball
 //! only carries the field's sign away from the data: in fits with normal constraints it is a
 //! plane ([`super::empty`]), otherwise completed with up to `min_points` / 2.
 
@@ -61,6 +63,12 @@ impl Support {
 /// [`super::coarse`]).
 pub const SPARSE_LEAF: usize = 16;
 
+/// Patches that see data near their centre complete their system with at most
+/// `max_patch / NEAR_BUDGET_DIVISOR` constraints: their own constraints already carry the
+/// surface across most of the support, and the completion only has to keep the field's shape
+/// over the rest of it.
+pub const NEAR_BUDGET_DIVISOR: usize = 4;
+
 /// Patches whose nearest constraint lies further from their centre than this fraction of
 /// their radius see the data only near the edge of their support: they complete their system
 /// from any coarse level, the others from one in 8^k (see [`super::coarse`]).
@@ -96,13 +104,16 @@ pub fn supports(
             }
             // A ball reaching one support radius past the `want`-th nearest constraint.
             let reach = tree.kth_nearest_distance(points, n.centre, want).max(r) + r;
+            let far = tree.kth_nearest_distance(points, n.centre, 1) > FAR_DATA * r;
             let budget = if inside == 0 {
                 settings.min_points / 2
-            } else {
+            } else if far {
                 settings
                     .max_patch
                     .saturating_sub(inside)
                     .max(settings.max_patch / 2)
+            } else {
+                settings.max_patch / NEAR_BUDGET_DIVISOR
             };
             // The constraints between the two balls (the inner one's count is exact, so the
             // difference counts those beyond `r` and within `reach`).
@@ -111,7 +122,6 @@ pub fn supports(
             };
             let full = tree.count_within(points, n.centre, reach) - inside;
             // The levels this patch may take its completion from (see `coarse`).
-            let far = tree.kth_nearest_distance(points, n.centre, 1) > FAR_DATA * r;
             let step = if far { 1 } else { 3 };
             let candidates: Vec<usize> = (step - 1..levels.len()).step_by(step).collect();
             // The finest level whose share of the ball fits the budget; a finer one when that
