@@ -502,7 +502,7 @@ impl BlockTracking {
             blocks,
             mut stats,
             ..
-        } = start_blocks(field, lattice, &settings.common, false)?;
+        } = start_blocks::<F, I>(field, lattice, &settings.common, false)?;
         self.walk((field, &blocks), lattice, settings, cases, &mut stats)?;
         // The field's block data is not needed to assemble the mesh.
         drop(blocks);
