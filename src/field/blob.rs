@@ -1787,7 +1787,9 @@ mod tests {
         let b = random_blobs(300, 5);
         let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [45, 38, 100]).unwrap();
         let dims = crate::polygonize::sparse::block_grid(&l).dims;
-        let whole = b.blocks(&l, dims);
+        // On a clone (which keeps no lists): a second call on the same field and lattice would
+        // get the kept lists of every layer.
+        let whole = b.clone().blocks(&l, dims);
         assert!(whole.candidates.1.is_empty());
         let mut lists = b.blocks_by_layers(&l, dims);
         assert_eq!(lists.entries(), 0);

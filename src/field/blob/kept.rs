@@ -27,8 +27,8 @@ const SLACK: f64 = 0.125;
 /// Fields of more primitives keep no lists (their lists take hundreds of megabytes).
 pub(super) const KEEP_PRIMITIVES: usize = 1 << 20;
 
-/// The kept lists of a field, behind a lock (the polygonizers see the field by reference).
-/// A clone of a field keeps nothing.
+/// The kept lists of a field, behind a lock (the polygonizers see the field by reference;
+/// a call that finds it taken makes its own lists). A clone of a field keeps nothing.
 #[derive(Default)]
 pub(super) struct Kept(Mutex<KeptLists>);
 
@@ -66,7 +66,8 @@ impl BlobField {
         if n == 0 || n > KEEP_PRIMITIVES {
             return None;
         }
-        let mut guard = self.kept.0.lock().ok()?;
+        // Busy (another call on this field holds them): that call makes its lists as usual.
+        let mut guard = self.kept.0.try_lock().ok()?;
         let k = &mut *guard;
         if k.on != Some((*lattice, dims)) {
             *k = KeptLists {
