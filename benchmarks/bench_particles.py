@@ -19,6 +19,13 @@ markdown) are written again as each case finishes, so a run stopped early keeps 
 (``--sizes 10000000 --cases slab/triquet``, the issue's 10⁷ at cells of s/4: ours only is
 enough) each case runs once.
 
+The animation (``--cases anim``, or ``anim/METHOD`` for one case, e.g. ``anim/sparse-f32@s/2``):
+the ``slab`` layout moving over 64 frames (:func:`frame`), each frame ``BlobField.update`` and a
+mesh, ``sparse`` or ``tessellator``, f64 or ``-f32``, normals off or ``+normals``, at cells of
+s/4, s/2 and s (``@s/4``, ``@s/2``, ``@s``), beside splashsurf f32 per frame at the same cells;
+10⁵ particles (``--sizes`` sets them too; 2·10⁴ with ``--quick``), one process per case (the
+frames are the repetitions).
+
     python -m benchmarks.bench_particles [--quick] [--results DIR] [--sizes N,...] [--cases NAME,...]
     python -m benchmarks.bench_particles one LAYOUT METHOD PARTICLES   # one JSON line
 """
@@ -51,6 +58,19 @@ ONE_RUN_ABOVE = 4_500_000
 ISO = 0.6
 #: The results' name: NAME.json and NAME.md in the results directory.
 NAME = "particles"
+#: The animation's cases (``--cases anim`` or ``anim/METHOD``): the ``slab`` layout moving over
+#: :data:`FRAMES` frames, each frame meshed again (see :func:`animate`).
+ANIM = "anim"
+#: Particles of the animation (full, quick) when ``--sizes`` does not say.
+ANIM_SIZES = {False: (100_000,), True: (20_000,)}
+#: Frames timed per animation case, after one untimed frame.
+FRAMES = 64
+#: Cell sizes of the animation, as fractions of the spacing s.
+CELLS = {"s/4": 0.25, "s/2": 0.5, "s": 1.0}
+ANIM_PEERS = tuple(f"splashsurf-f32@{c}" for c in CELLS)
+ANIM_OURS = tuple(f"{engine}{precision}{normals}@{c}" for c in CELLS for engine in ("sparse", "tessellator")
+                  for precision in ("", "-f32") for normals in ("", "+normals"))
+ANIM_METHODS = ANIM_PEERS + ANIM_OURS
 
 
 def lattice_ball(radius: float, center, rng):
@@ -73,18 +93,27 @@ def lattice_box(lo, counts, rng):
     return g + rng.uniform(-0.1 * S, 0.1 * S, g.shape)
 
 
+def slab_and_sphere(n: int):
+    """The ``slab`` layout of about ``n`` particles in its two parts: (slab (P, 3), sphere
+    (Q, 3), the slab's side L). A slab L × L × L/4 and a sphere of radius L/5 two radii above
+    it: volume 0.2835 L³."""
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    side = (n * S**3 / (0.25 + 4 / 3 * np.pi / 125)) ** (1 / 3)
+    c = int(round(side / S))
+    slab = lattice_box((0.0, 0.0, 0.0), (c, c, max(1, c // 4)), rng)
+    ball = lattice_ball(side / 5, (side / 2, side / 2, side / 4 + 2 * side / 5 + 4 * S), rng)
+    return slab, ball, side
+
+
 def particles(layout: str, n: int):
     """About ``n`` particles of ``layout`` (deterministic), float64 (P, 3)."""
     import numpy as np
 
-    rng = np.random.default_rng(7)
     if layout == "slab":
-        # A slab L × L × L/4 and a sphere of radius L/5 two radii above it: volume 0.2835 L³.
-        side = (n * S**3 / (0.25 + 4 / 3 * np.pi / 125)) ** (1 / 3)
-        c = int(round(side / S))
-        slab = lattice_box((0.0, 0.0, 0.0), (c, c, max(1, c // 4)), rng)
-        ball = lattice_ball(side / 5, (side / 2, side / 2, side / 4 + 2 * side / 5 + 4 * S), rng)
-        return np.vstack([slab, ball])
+        return np.vstack(slab_and_sphere(n)[:2])
+    rng = np.random.default_rng(7)
     # A pool of a quarter of the particles, 6 layers deep, and droplets of radius 2–6 s above it.
     c = int(round(np.sqrt(n / 4 / 6)))
     side = c * S
@@ -176,8 +205,12 @@ def cpu_seconds() -> float:
 
 def check_case(layout: str, method: str) -> None:
     """Refuses a layout or method this benchmark does not know (ValueError naming the choices)."""
+    if layout == ANIM:
+        if method not in ANIM_METHODS:
+            raise ValueError(f"unknown animation method {method!r}; choose from {', '.join(ANIM_METHODS)}")
+        return
     if layout not in LAYOUTS:
-        raise ValueError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS)}")
+        raise ValueError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS + (ANIM,))}")
     if method not in PEERS + OURS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(PEERS + OURS)}")
 
@@ -186,6 +219,8 @@ def one(layout: str, method: str, n: int) -> dict:
     import numpy as np
 
     check_case(layout, method)
+    if layout == ANIM:
+        return animate(method, n, FRAMES)
 
     p = particles(layout, n)
     if method.startswith("triquet"):
@@ -197,6 +232,82 @@ def one(layout: str, method: str, n: int) -> dict:
                area=float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()),
                volume=float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0))
     return out
+
+
+def frame(slab, ball, side: float, k: int, frames: int):
+    """Frame ``k`` of ``frames`` of the animation, float64 (P, 3): the sphere fallen by
+    (k / frames)² of 9/10 of its gap above the slab, and every particle moved by a smooth
+    displacement of amplitude s/10 (a wave of wavelength 16 s per axis, one period over the
+    animation), as a fluid's frames move."""
+    import numpy as np
+
+    t = k / frames
+    fall = 0.9 * (side / 5 + 4 * S) * t * t
+    p = np.vstack([slab, ball - np.array([0.0, 0.0, fall])])
+    p += 0.1 * S * np.sin(2 * np.pi * (p[:, [1, 2, 0]] / (16 * S) + t))
+    return p
+
+
+def animate(method: str, n: int, frames: int) -> dict:
+    """One animation case: the ``slab`` layout of about ``n`` particles over ``frames`` timed
+    frames (after an untimed first one that makes the field), each frame ``BlobField.update``
+    and a mesh (``polygonize(method="sparse")`` or one ``Tessellator``'s ``polygonize``) over
+    one lattice that holds every frame, cells of the size after ``@``; splashsurf
+    reconstructs each frame from float32 particles with cells of the same size. Seconds per
+    frame (particles to mesh, the frame's positions made outside the timed span), CPU seconds
+    over the timed frames, triangles per frame."""
+    import numpy as np
+
+    engine, cells_name = method.split("@")
+    h = S * CELLS[cells_name]
+    slab, ball, side = slab_and_sphere(n)
+    p = np.vstack([slab, ball])
+    margin = 0.1 * S + 2 * S + 2 * h
+    lo = p.min(axis=0) - margin
+    cells = np.ceil((p.max(axis=0) + margin - lo) / h).astype(int)
+    bounds = np.stack([lo, lo + cells * h])
+    resolution = [int(c) for c in cells]
+    normals = engine.endswith("+normals")
+    precision = "single" if "-f32" in engine else "double"
+    threshold = None if engine.startswith("splashsurf") else triquet_threshold()
+    tess, field = None, None
+    if engine.startswith("tessellator"):
+        import implicitmesh as im
+
+        tess = im.Tessellator()
+
+    def mesh_of(q):
+        nonlocal field
+        if engine.startswith("splashsurf"):
+            import pysplashsurf
+
+            r = pysplashsurf.reconstruct_surface(q.astype(np.float32), particle_radius=S / 2,
+                                                 smoothing_length=2.0, cube_size=2 * CELLS[cells_name],
+                                                 iso_surface_threshold=ISO)
+            m = r.mesh if hasattr(r, "mesh") else r
+            return len(m.triangles if hasattr(m, "triangles") else m[1])
+        import implicitmesh as im
+
+        if field is None:
+            field = im.BlobField(q, 2 * S, 1.0, threshold, precision=precision)
+        else:
+            field.update(q)
+        if tess is not None:
+            return len(tess.polygonize(field, bounds=bounds, resolution=resolution, normals=normals).faces)
+        return len(im.polygonize(field, bounds=bounds, resolution=resolution, method="sparse",
+                                 normals=normals).faces)
+
+    mesh_of(frame(slab, ball, side, 0, frames))
+    times, triangles, cpu = [], [], 0.0
+    for k in range(1, frames + 1):
+        q = frame(slab, ball, side, k, frames)
+        t, c = time.perf_counter(), cpu_seconds()
+        triangles.append(mesh_of(q))
+        times.append(time.perf_counter() - t)
+        cpu += cpu_seconds() - c
+    return {"layout": ANIM, "method": method, "n": int(len(p)), "frames": frames, "frame_s": times,
+            "cells": resolution, "cpu_s": cpu, "wall_s": float(sum(times)), "triangles": triangles,
+            "peak_mib": vmhwm_mib(), **({} if threshold is None else {"threshold": threshold})}
 
 
 def run_one(layout: str, method: str, n: int) -> dict:
@@ -213,19 +324,23 @@ def selected(a: argparse.Namespace) -> list[tuple[str, str, int]]:
     """The (layout, method, particles) cases ``a`` asks for, in the order they run."""
     sizes = a.sizes or SIZES[a.quick]
     names = a.cases or []
-    unknown = [c for c in names if c not in LAYOUTS + PEERS + OURS
-               and not (c.count("/") == 1 and c.split("/")[0] in LAYOUTS and c.split("/")[1] in PEERS + OURS)]
+    unknown = [c for c in names if c not in LAYOUTS + PEERS + OURS + (ANIM,)
+               and not (c.count("/") == 1 and c.split("/")[0] in LAYOUTS and c.split("/")[1] in PEERS + OURS)
+               and not (c.startswith(ANIM + "/") and c[len(ANIM) + 1:] in ANIM_METHODS)]
     if unknown:
-        raise ValueError(f"unknown case {unknown[0]!r}: give layouts ({', '.join(LAYOUTS)}), methods "
-                         f"({', '.join(PEERS + OURS)}) or LAYOUT/METHOD")
+        raise ValueError(f"unknown case {unknown[0]!r}: give layouts ({', '.join(LAYOUTS + (ANIM,))}), methods "
+                         f"({', '.join(PEERS + OURS)}), LAYOUT/METHOD or {ANIM}/METHOD ({', '.join(ANIM_METHODS)})")
     wanted = lambda layout, method: not names or bool({layout, method, f"{layout}/{method}"} & set(names))
+    anim = [(ANIM, method, n) for n in a.sizes or ANIM_SIZES[a.quick] for method in ANIM_METHODS
+            if not names or ANIM in names or f"{ANIM}/{method}" in names]
     return [(layout, method, n) for layout in LAYOUTS for n in sizes for method in PEERS + OURS
-            if wanted(layout, method)]
+            if wanted(layout, method)] + anim
 
 
 def case_order(case: dict) -> tuple:
     """Sort key of a result: layout, particles asked for, method, in the order they run."""
-    return (LAYOUTS.index(case["layout"]), case["n"], (PEERS + OURS).index(case["method"]))
+    return ((LAYOUTS + (ANIM,)).index(case["layout"]), case["n"],
+            (PEERS + OURS + ANIM_METHODS).index(case["method"]))
 
 
 def measure(a: argparse.Namespace, save) -> dict:
@@ -245,7 +360,7 @@ def measure(a: argparse.Namespace, save) -> dict:
                 "earlier_runs": earlier if kept else []}
 
     for layout, method, n in todo:
-        runs = 1 if n > ONE_RUN_ABOVE else RUNS[a.quick]
+        runs = 1 if n > ONE_RUN_ABOVE or layout == ANIM else RUNS[a.quick]
         log(f"{layout}, {method}, {n:,} particles, {runs} run(s)")
         cases.append({"layout": layout, "method": method, "n": n,
                       "runs": [run_one(layout, method, n) for _ in range(runs)]})
@@ -258,6 +373,8 @@ def render(raw: dict) -> str:
     rows = []
     by = {(c["layout"], c["method"], c["n"]): c["runs"] for c in raw["cases"]}
     for c in raw["cases"]:
+        if c["layout"] == ANIM:
+            continue
         runs = c["runs"]
         head = [c["layout"], f"{runs[0].get('n', c['n']):,}", c["method"]]
         if "error" in runs[0]:
@@ -293,7 +410,52 @@ def render(raw: dict) -> str:
         md_table(["layout", "particles", "method", "seconds", "CPU s", "splashsurf f32 / ours", "peak MiB",
                   "triangles", "area", "volume"], rows, "llrrrrrrrr"),
         "",
+        *render_animation(raw),
     ])
+
+
+def render_animation(raw: dict) -> list[str]:
+    """The animation's paragraph and table (no lines when the results hold no animation case)."""
+    import numpy as np
+
+    cases = [c for c in raw["cases"] if c["layout"] == ANIM]
+    if not cases:
+        return []
+    by = {(c["method"], c["n"]): c["runs"][0] for c in cases}
+    rows = []
+    for c in cases:
+        r = c["runs"][0]
+        engine, cells = c["method"].split("@")
+        head = [f"{r.get('n', c['n']):,}", cells, engine]
+        if "error" in r:
+            rows.append(head + [f"failed: {r['error']}"] + [""] * 7)
+            continue
+        t = np.asarray(r["frame_s"])
+        peer = by.get((f"splashsurf-f32@{cells}", c["n"]))
+        ratio = fmt_ratio(float(np.median(peer["frame_s"])), float(np.median(t))) if peer and "error" not in peer else "—"
+        rows.append(head + [f"{1 / np.median(t):.1f}", f"{1e3 * np.median(t):.1f}", f"{1e3 * np.percentile(t, 90):.1f}",
+                            f"{1e3 * r['cpu_s'] / len(t):.1f}", f"{r['cpu_s'] / r['wall_s']:.2f}", ratio, f"{np.median(r['triangles']):,.0f}",
+                            f"{r['peak_mib']:,.0f}"])
+    frames = cases[0]["runs"][0].get("frames", "—")
+    return [
+        "### Animation: a mesh per frame",
+        "",
+        f"The `slab` layout in motion over {frames} timed frames (after an untimed first frame that makes the field): "
+        "frame k of K has the sphere fallen by (k/K)² of 9/10 of its gap above the slab and every particle moved by "
+        "a smooth displacement of amplitude s/10 (a wave of wavelength 16 s per axis, one period over the "
+        "animation). Each frame, ours: `field.update(P)` on `BlobField(P, 2s, 1.0, T)` (T as above), then "
+        "`polygonize(field, method=\"sparse\")` (`sparse`) or one `Tessellator`'s `polygonize` (`tessellator`), "
+        "over one lattice holding every frame with cells of s/4, s/2 or s; splashsurf f32: "
+        "`reconstruct_surface` of the frame's float32 particles with `cube_size` 0.5, 1 or 2 (the same cells). "
+        "Frames/s is 1 / the median seconds per frame (particles to mesh; the frame's positions are made outside "
+        "the timed span); p90 the 90th percentile; CPU ms per frame and CPU / wall over the timed frames (user and "
+        "system time of all threads; 2 cores: at most 2); splashsurf f32 / ours from the medians; each case in one "
+        "fresh process.",
+        "",
+        md_table(["particles", "cells", "method", "frames/s", "ms per frame", "p90 ms", "CPU ms per frame", "CPU / wall",
+                  "splashsurf f32 / ours", "triangles", "peak MiB"], rows, "llrrrrrrrrr"),
+        "",
+    ]
 
 
 def count_list(text: str) -> list[int]:
@@ -320,8 +482,8 @@ def main() -> int:
     p.add_argument("--sizes", type=count_list, metavar="N,...",
                    help="particle counts to run (default 10⁵, 10⁶ and 4·10⁶; with --quick 2·10⁴)")
     p.add_argument("--cases", type=lambda t: [c.strip() for c in t.split(",") if c.strip()], metavar="NAME,...",
-                   help=f"only these layouts ({', '.join(LAYOUTS)}), methods ({', '.join(PEERS + OURS)}) or "
-                        "LAYOUT/METHOD pairs")
+                   help=f"only these layouts ({', '.join(LAYOUTS)}), methods ({', '.join(PEERS + OURS)}), "
+                        f"LAYOUT/METHOD pairs, {ANIM} (the animation) or {ANIM}/METHOD")
     a = p.parse_args()
     try:
         selected(a)

@@ -111,6 +111,39 @@ def test_tessellator_output_does_not_depend_on_earlier_calls():
         assert kept.stats["evaluations"] == fresh.stats["evaluations"] == sp.stats["evaluations"]
 
 
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_frames_of_a_field_updated_in_place_are_those_of_a_new_field(precision):
+    # From its second polygonization on one lattice, a field keeps its lists of primitives per
+    # block and remakes, after an update, only the layers of blocks that primitives moved far
+    # reach: a slab of jittered particles swaying a little (kept lists) and a ball of them
+    # falling through several layers of blocks (remade ones), then fewer particles (all
+    # remade). Every frame, sparse and a Tessellator on the field updated in place give the
+    # arrays sparse gives on a new field of the frame's particles, bit for bit.
+    rng = np.random.default_rng(3)
+    g = np.stack(np.meshgrid(*[np.arange(14) * 0.1] * 2, np.arange(4) * 0.1, indexing="ij"), -1).reshape(-1, 3)
+    b = np.stack(np.meshgrid(*[np.arange(-3, 4) * 0.1] * 3, indexing="ij"), -1).reshape(-1, 3)
+    b = b[np.linalg.norm(b, axis=1) <= 0.3] + [0.65, 0.65, 1.0]
+    p0 = np.vstack([g, b]) + rng.uniform(-0.01, 0.01, (len(g) + len(b), 3))
+    ball = np.arange(len(p0)) >= len(g)
+    kw = dict(bounds=[[-0.3, -0.3, -0.3], [1.6, 1.6, 1.5]], resolution=[64, 64, 60])
+    field = im.BlobField(p0, 0.2, 1.0, 0.9, precision=precision)
+    tess = im.Tessellator()
+    for k in range(7):
+        p = p0 + 0.004 * np.sin(7 * p0[:, [1, 2, 0]] + 0.4 * k)
+        p[ball, 2] -= 0.03 * k * k
+        if k >= 5:
+            p = p[:-4]
+            field.update(p, radii=0.2, strengths=1.0)
+        else:
+            field.update(p)
+        want = im.polygonize(im.BlobField(p, 0.2, 1.0, 0.9, precision=precision), method="sparse", **kw)
+        assert len(want.faces) > 0
+        for got in (im.polygonize(field, method="sparse", **kw), tess.polygonize(field, **kw)):
+            assert np.array_equal(got.faces, want.faces), k
+            assert np.array_equal(got.vertices, want.vertices), k
+            assert np.array_equal(got.normals, want.normals), k
+
+
 def test_animation_memory_stays_flat():
     rng = np.random.default_rng(7)
     c0 = rng.uniform(-0.7, 0.7, (200, 3))

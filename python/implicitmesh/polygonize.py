@@ -247,8 +247,9 @@ class Tessellator:
     the seeds reach everything, that costs the bounds of the blocks not entered and the few of
     them the bounds cannot rule out. It evaluates the points ``method="sparse"`` evaluates and is
     several times faster than the walk cell by cell; the blocks the previous call used are
-    evaluated first, as an animation's surface moves little between frames. Its output is
-    ordered block by block and does not depend on earlier calls. With ``blocks=False``, and for
+    evaluated first, as an animation's surface moves little between frames (and then, as they
+    and the bounds reach every component, no seed walks are made). Its output is ordered block
+    by block and does not depend on earlier calls. With ``blocks=False``, and for
     other fields, the walk goes cell by cell with time-stamped caches of corner values and edge
     vertices (Triquet et al. §4.1, §4.4): nothing is cleared between calls, and for other fields
     that walk evaluates the fewest points, which pays for costly fields (a Python callable, a

@@ -10,6 +10,7 @@
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
 mod interior;
+mod kept;
 mod single;
 
 pub use single::Precision;
@@ -27,6 +28,7 @@ use crate::simd::Isa;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::ops::Range;
+use std::sync::Arc;
 
 /// Settings of a blob field.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,6 +71,9 @@ pub struct BlobField {
     /// The voxel lists, built by [`BlobField::grid`] on first use and rebuilt in place by
     /// [`BlobField::update`] once built.
     grid: std::sync::OnceLock<VoxelGrid>,
+    /// Block lists kept from one polygonization to the next on the same lattice (an
+    /// animation's frames): see the `kept` module.
+    kept: kept::Kept,
 }
 
 /// One primitive as point queries read it.
@@ -1101,8 +1106,11 @@ pub struct BlockLists {
     dims: [u32; 3],
     /// The z-layer of `layers[0]`.
     first: u32,
-    /// Per z-layer from `first`: `start` (one more than the layer's blocks) and `items`.
-    layers: Vec<(Vec<u32>, Vec<u32>)>,
+    /// Per z-layer from `first`: `start` (one more than the layer's blocks) and `items`
+    /// (shared with the lists the `kept` module keeps between calls, when they are those).
+    layers: Arc<Vec<Layer>>,
+    /// Whether `layers` holds every z-layer ([`BlockField::keep_layers`] then keeps them all).
+    whole: bool,
     /// The primitives that may reach each z-layer (`layer_candidates`), kept while layers are
     /// still to be listed (empty once every layer is).
     candidates: (Vec<u32>, Vec<u32>),
@@ -1128,6 +1136,9 @@ impl BlockLists {
         4 * (words.sum::<usize>() + self.candidates.0.capacity() + self.candidates.1.capacity())
     }
 }
+
+/// The lists of one z-layer of blocks: `start` (one more than the layer's blocks) and `items`.
+type Layer = (Vec<u32>, Vec<u32>);
 
 /// The lattice coordinates of a block's points per axis, and its points per axis.
 struct BlockCoords {
@@ -1164,8 +1175,8 @@ impl BlockCoords {
     #[inline(always)]
     fn planes(&self, cz: f64, r: f64) -> std::ops::Range<usize> {
         let (first, inv_h, n) = (self.zs[0], self.inv_h[2], self.n[2] as usize);
-        let lo = ((cz - r - first) * inv_h).floor() - 1.0;
-        let hi = ((cz + r - first) * inv_h).ceil() + 1.0;
+        let lo = floor((cz - r - first) * inv_h) - 1.0;
+        let hi = ceil((cz + r - first) * inv_h) + 1.0;
         if hi < 0.0 || lo > (n - 1) as f64 {
             return 0..0;
         }
@@ -1248,6 +1259,29 @@ fn layer_candidates(
     (start, items)
 }
 
+/// `x.floor()`, inlined (the baseline x86-64 target has no rounding instruction, and `floor`
+/// is then a call into the C library): the truncation of `x`, less one below a negative
+/// non-integer. Values of 2⁵² and more in magnitude (integers), and NaN, go to `f64::floor`.
+#[inline(always)]
+fn floor(x: f64) -> f64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let t = x as i64 as f64;
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x.floor()
+    }
+}
+
+/// `x.ceil()`, inlined as [`floor`] is: −floor(−x).
+#[inline(always)]
+fn ceil(x: f64) -> f64 {
+    -floor(-x)
+}
+
 /// A primitive's radius with the relative margin every block-list test uses.
 #[inline(always)]
 fn margin(r: f64) -> f64 {
@@ -1258,8 +1292,8 @@ fn margin(r: f64) -> f64 {
 /// for rounding), for the exact sphere-box test; `dims` blocks per axis.
 fn block_range(lattice: &Lattice, dims: [u32; 3], c: DVec3, rm: f64, a: usize) -> Range<u32> {
     let span = lattice.cell[a] * (BLOCK_POINTS - 1) as f64;
-    let lo = ((c[a] - rm - lattice.origin[a]) / span).floor() - 1.0;
-    let hi = ((c[a] + rm - lattice.origin[a]) / span).floor() + 1.0;
+    let lo = floor((c[a] - rm - lattice.origin[a]) / span) - 1.0;
+    let hi = floor((c[a] + rm - lattice.origin[a]) / span) + 1.0;
     let hi = hi.min((dims[a] - 1) as f64);
     if hi < 0.0 || lo > hi {
         return 0..0;
@@ -1269,8 +1303,10 @@ fn block_range(lattice: &Lattice, dims: [u32; 3], c: DVec3, rm: f64, a: usize) -
 
 impl BlobField {
     /// The lists of z-layer `bz` of blocks (`start`, one more than the layer's blocks, and
-    /// `items`) from the primitives `here` that may reach it; `sides` are the blocks' box
-    /// coordinates per axis.
+    /// `items`) from the primitives `here` that may reach it, each at its position in
+    /// `centers` with its radius grown by `slack`; `sides` are the blocks' box coordinates per
+    /// axis.
+    #[allow(clippy::too_many_arguments)]
     fn layer_lists(
         &self,
         lattice: &Lattice,
@@ -1278,12 +1314,13 @@ impl BlobField {
         sides: &[Vec<(f64, f64)>; 3],
         bz: u32,
         here: &[u32],
-    ) -> (Vec<u32>, Vec<u32>) {
+        (centers, slack): (&[DVec3], f64),
+    ) -> Layer {
         let per_layer = (dims[0] * dims[1]) as usize;
         let mut pairs: Vec<(u32, u32)> = Vec::new();
         let (zlo, zhi) = sides[2][bz as usize];
         for &i in here {
-            let (c, rm) = (self.centers[i as usize], margin(self.radii[i as usize]));
+            let (c, rm) = (centers[i as usize], margin(self.radii[i as usize] + slack));
             if c.z + rm < zlo || c.z - rm > zhi {
                 continue;
             }
@@ -1325,6 +1362,18 @@ impl BlobField {
     }
 }
 
+/// The lowest and highest coordinate of the blocks' boxes per axis ([`block_box`]).
+fn block_sides(lattice: &Lattice, dims: [u32; 3]) -> [Vec<(f64, f64)>; 3] {
+    std::array::from_fn(|a| {
+        (0..dims[a])
+            .map(|k| {
+                let (lo, hi) = block_box(lattice, [k; 3]);
+                (lo[a], hi[a])
+            })
+            .collect()
+    })
+}
+
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
@@ -1359,6 +1408,9 @@ impl BlockField for BlobField {
     /// layer from the primitives whose candidate layers hold it (`layer_candidates`).
     fn blocks(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
         let mut lists = self.blocks_by_layers(lattice, dims);
+        if lists.whole {
+            return lists;
+        }
         self.keep_layers(&mut lists, lattice, 0..dims[2]);
         lists.candidates = Default::default();
         lists
@@ -1366,42 +1418,53 @@ impl BlockField for BlobField {
 
     /// The candidates of each z-layer (4 bytes for each layer a primitive's sphere may reach),
     /// no lists yet.
+    ///
+    /// From the second call on one lattice on, the lists of every layer, kept for the next
+    /// call and remade only where primitives moved far (the `kept` module).
     fn blocks_by_layers(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
+        if let Some(layers) = self.kept_lists(lattice, dims) {
+            return BlockLists {
+                dims,
+                first: 0,
+                layers,
+                whole: true,
+                candidates: Default::default(),
+            };
+        }
         let candidates = layer_candidates(dims[2], self.centers.len(), |i| {
             block_range(lattice, dims, self.centers[i], margin(self.radii[i]), 2)
         });
         BlockLists {
             dims,
             first: 0,
-            layers: Vec::new(),
+            layers: Default::default(),
+            whole: false,
             candidates,
         }
     }
 
     /// Lists the blocks of `layers`, in parallel over the layers, after releasing the lists
-    /// held.
+    /// held (nothing to do when the lists hold every layer).
     fn keep_layers(&self, blocks: &mut BlockLists, lattice: &Lattice, layers: Range<u32>) {
-        blocks.layers = Vec::new();
+        if blocks.whole {
+            return;
+        }
+        blocks.layers = Default::default();
         blocks.first = layers.start;
         let dims = blocks.dims;
-        // The lowest and highest coordinate of the blocks' boxes per axis ([`block_box`]).
-        let sides: [Vec<(f64, f64)>; 3] = std::array::from_fn(|a| {
-            (0..dims[a])
-                .map(|k| {
-                    let (lo, hi) = block_box(lattice, [k; 3]);
-                    (lo[a], hi[a])
-                })
-                .collect()
-        });
+        let sides = block_sides(lattice, dims);
         let (start, candidates) = &blocks.candidates;
-        blocks.layers = layers
-            .into_par_iter()
-            .map(|bz| {
-                let here =
-                    &candidates[start[bz as usize] as usize..start[bz as usize + 1] as usize];
-                self.layer_lists(lattice, dims, &sides, bz, here)
-            })
-            .collect();
+        let at = (&self.centers[..], 0.0);
+        blocks.layers = Arc::new(
+            layers
+                .into_par_iter()
+                .map(|bz| {
+                    let here =
+                        &candidates[start[bz as usize] as usize..start[bz as usize + 1] as usize];
+                    self.layer_lists(lattice, dims, &sides, bz, here, at)
+                })
+                .collect(),
+        );
     }
 
     /// Bounds F over the block from each listed primitive's nearest and farthest distance to
@@ -1501,6 +1564,25 @@ impl BlockField for BlobField {
 mod tests {
     use super::super::testing::*;
     use super::*;
+
+    #[test]
+    fn inlined_floor_and_ceil_are_the_library_ones() {
+        let mut xs = vec![
+            0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, 1e300, -1e300, 4.5e15,
+        ];
+        xs.extend([
+            f64::MAX,
+            f64::MIN,
+            4_503_599_627_370_495.5,
+            -4_503_599_627_370_495.5,
+        ]);
+        xs.extend((0..2000).map(|k| (k as f64 - 1000.0) * 0.37 + 1e-9 * k as f64));
+        for x in xs {
+            assert_eq!(floor(x), x.floor(), "{x}");
+            assert_eq!(ceil(x), x.ceil(), "{x}");
+        }
+        assert!(floor(f64::NAN).is_nan());
+    }
 
     #[test]
     fn every_vector_path_gives_the_same_bits() {
@@ -1705,7 +1787,9 @@ mod tests {
         let b = random_blobs(300, 5);
         let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [45, 38, 100]).unwrap();
         let dims = crate::polygonize::sparse::block_grid(&l).dims;
-        let whole = b.blocks(&l, dims);
+        // On a clone (which keeps no lists): a second call on the same field and lattice would
+        // get the kept lists of every layer.
+        let whole = b.clone().blocks(&l, dims);
         assert!(whole.candidates.1.is_empty());
         let mut lists = b.blocks_by_layers(&l, dims);
         assert_eq!(lists.entries(), 0);

@@ -65,7 +65,7 @@ use super::bits::{
 use super::bricks::Grid;
 use super::{
     check_memory, estimate_triangles, fill_vanishing_normals, finish_mesh, normalize, CaseTable,
-    Settings, Stats, BYTES_PER_TRIANGLE,
+    Settings, Stats,
 };
 use crate::error::{Error, Result};
 use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
@@ -440,7 +440,7 @@ fn polygonize_with_keys<F: BlockField + ?Sized, I: TriangleIndex>(
         normals: settings.normals && !settings.project,
         ..*settings
     };
-    let start = start_blocks(field, lattice, &inner, true)?;
+    let start = start_blocks::<F, I>(field, lattice, &inner, true)?;
     let mut ws = WORKSPACES
         .lock()
         .ok()
@@ -467,6 +467,14 @@ fn polygonize_with_keys<F: BlockField + ?Sized, I: TriangleIndex>(
     Ok((mesh, triangles, keys, stats))
 }
 
+/// Bytes per output triangle with indices `I`: its three indices, and half a vertex (a
+/// position, and a normal when `normals`), as the caller receives them (`i64` indices for
+/// numpy: 48 bytes with normals, 36 without).
+pub(crate) fn triangle_bytes<I: TriangleIndex>(normals: bool) -> u64 {
+    let vertex = std::mem::size_of::<DVec3>() as u64 * if normals { 2 } else { 1 };
+    std::mem::size_of::<[I; 3]>() as u64 + vertex / 2
+}
+
 /// What a polygonization over the blocks of a lattice starts from ([`start_blocks`]).
 pub(crate) struct BlockStart<B> {
     pub(crate) grid: BlockGrid,
@@ -478,10 +486,10 @@ pub(crate) struct BlockStart<B> {
 }
 
 /// Starts a polygonization of `field` over the blocks of `lattice`: refuses a lattice whose
-/// output could exceed `settings.memory_limit`, then makes the field's data for its blocks (for
-/// all of them, or with `by_layers` to be filled a few z-layers at a time:
-/// [`BlockField::blocks_by_layers`]).
-pub(crate) fn start_blocks<F: BlockField + ?Sized>(
+/// output (triangles of indices `I`) could exceed `settings.memory_limit`, then makes the
+/// field's data for its blocks (for all of them, or with `by_layers` to be filled a few
+/// z-layers at a time: [`BlockField::blocks_by_layers`]).
+pub(crate) fn start_blocks<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
@@ -489,7 +497,7 @@ pub(crate) fn start_blocks<F: BlockField + ?Sized>(
 ) -> Result<BlockStart<F::Blocks>> {
     let grid = block_grid(lattice);
     check_memory(
-        grid.len() as u64 * 4 + estimate_triangles(lattice) * BYTES_PER_TRIANGLE,
+        grid.len() as u64 * 4 + estimate_triangles(lattice) * triangle_bytes::<I>(settings.normals),
         settings.memory_limit,
     )?;
     let cases = BlockCases::get(CaseTable::get(settings.ambiguity));
@@ -1186,6 +1194,36 @@ mod tests {
             matches!(e, Error::InvalidArgument { name: "field", .. }),
             "{e}"
         );
+    }
+
+    #[test]
+    fn the_memory_estimate_counts_the_indices_and_normals_returned() {
+        assert_eq!(triangle_bytes::<u32>(true), 12 + 24);
+        assert_eq!(triangle_bytes::<i64>(true), 24 + 24);
+        assert_eq!(triangle_bytes::<i64>(false), 24 + 12);
+        // A limit between the two estimates refuses the int64 triangles with normals only.
+        let field = BlobField::new(
+            &[DVec3::ZERO],
+            crate::field::blob::PerPrimitive::All(0.5),
+            crate::field::blob::PerPrimitive::All(1.0),
+            0.5,
+            crate::field::blob::BlobSettings::default(),
+        )
+        .unwrap();
+        let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 64).unwrap();
+        let grid = block_grid(&lattice).len() as u64 * 4;
+        let limit = grid + estimate_triangles(&lattice) * 42;
+        let settings = Settings {
+            memory_limit: limit,
+            ..Default::default()
+        };
+        assert!(polygonize_as::<_, u32>(&field, &lattice, &settings).is_ok());
+        assert!(polygonize_as::<_, i64>(&field, &lattice, &settings).is_err());
+        let no_normals = Settings {
+            normals: false,
+            ..settings
+        };
+        assert!(polygonize_as::<_, i64>(&field, &lattice, &no_normals).is_ok());
     }
 
     #[test]

@@ -176,6 +176,12 @@ impl PyBlobField {
     /// centers changes). Rebuilds the voxel lists in place, without reallocating when the
     /// number of primitives stays the same.
     ///
+    /// For animation: from the second polygonization over the same lattice on (``"sparse"``,
+    /// ``"tracking"`` or a :class:`Tessellator`), a field of up to 2²⁰ primitives keeps the
+    /// lists of primitives per block of the lattice, made with radii grown by an eighth of the
+    /// largest, and after ``update`` remakes only the z-layers of blocks that primitives moved
+    /// beyond that reach; the meshes are those of a new field, bit for bit.
+    ///
     /// Parameters
     /// ----------
     /// centers : (N, 3) float64

@@ -502,7 +502,7 @@ impl BlockTracking {
             blocks,
             mut stats,
             ..
-        } = start_blocks(field, lattice, &settings.common, false)?;
+        } = start_blocks::<F, I>(field, lattice, &settings.common, false)?;
         self.walk((field, &blocks), lattice, settings, cases, &mut stats)?;
         // The field's block data is not needed to assemble the mesh.
         drop(blocks);
@@ -514,8 +514,8 @@ impl BlockTracking {
 
     /// Starts a call: no block entered, and the blocks the last call used on the same lattice
     /// queued for the first wave (an animation's surface moves little from call to call, so
-    /// the walk then rarely waits for a wave).
-    fn begin(&mut self, lattice: &Lattice, grid: &BlockGrid) {
+    /// the walk then rarely waits for a wave). Returns whether any was queued.
+    fn begin(&mut self, lattice: &Lattice, grid: &BlockGrid) -> bool {
         self.map.clear();
         self.map.resize(grid.len(), NONE);
         self.states.clear();
@@ -528,6 +528,7 @@ impl BlockTracking {
                 self.queue(self.last[k], &[0; 8], false, grid);
             }
         }
+        !self.wave.is_empty()
     }
 
     /// Enters seed cell `c` (ignored outside the lattice): its bit in its block.
@@ -543,6 +544,12 @@ impl BlockTracking {
     /// The walk: the seeds and the seed walks, then the flood through crossed faces, wave by
     /// wave of evaluation; with [`Components::All`], on from the cells it did not reach until
     /// none is left. Adds the phases' times and the points evaluated to `stats`.
+    ///
+    /// With [`Components::All`] and the last call's blocks queued (an animation on one
+    /// lattice), there are no seed walks: they only choose where the walk starts, every
+    /// component is entered from the last call's blocks and the blocks the bounds cannot rule
+    /// out, and a walk from each of many starts (a particle's centre) crosses the inside of the
+    /// surface cell by cell.
     fn walk<F: BlockField + ?Sized>(
         &mut self,
         (field, blocks): (&F, &F::Blocks),
@@ -553,14 +560,18 @@ impl BlockTracking {
     ) -> Result<()> {
         let t = Instant::now();
         let grid = block_grid(lattice);
-        self.begin(lattice, &grid);
+        let again = self.begin(lattice, &grid);
         for &c in &settings.seed_cells {
             self.seed(c, lattice, &grid);
         }
         // The seed walks read the signs of the blocks they enter; they and the flood share the
         // waves of evaluation (the cells reached from a set of seeds do not depend on the order
         // in which the seeds are found).
-        let mut walkers = start_walkers(&settings.starts, lattice);
+        let starts: &[DVec3] = match settings.components {
+            Components::All if again => &[],
+            _ => &settings.starts,
+        };
+        let mut walkers = start_walkers(starts, lattice);
         for w in &walkers {
             self.enter(grid.locate(w.cell).0 as u32, &[0; 8], &grid);
         }
