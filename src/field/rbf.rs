@@ -94,6 +94,11 @@ fn dispatch_values_gradients(
 /// Points per rayon task when evaluating (a multiple of LANES).
 const EVAL_CHUNK: usize = 256;
 
+/// Whether a solution (weights and polynomial) is finite.
+fn all_finite(lam: &[f64], a: &[f64; 4]) -> bool {
+    lam.iter().chain(a.iter()).all(|x| x.is_finite())
+}
+
 impl VariationalSurface {
     /// Fits a surface to `points` with outward `normals` (Cuno §4.1): boundary constraints at the
     /// points, normal constraints at `q + d n`.
@@ -160,7 +165,7 @@ impl VariationalSurface {
         let smoothing = settings.smoothing * scale.powi(kernel.degree());
         let sign = kernel.cpd_sign();
         // One instance per kernel, so that the assembly's inner loop has no branch on it.
-        let solver = match kernel {
+        let mut solver = match kernel {
             Kernel::Triharmonic => {
                 SaddleSolver::with_parallelism(&np, Triharmonic::phi_r2, smoothing, sign, par)
             }
@@ -171,7 +176,17 @@ impl VariationalSurface {
                 SaddleSolver::with_parallelism(&np, ThinPlate::phi_r2, smoothing, sign, par)
             }
         }?;
-        let (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
+        let (mut lam0, mut a0) = solver.solve(&c.values, [0.0; 4]);
+        // A null-space factor of a nearly degenerate system can pass its pivot checks and
+        // still give a solution that is not finite: solve the whole system instead.
+        if !all_finite(&lam0, &a0) && solver.method() == "cholesky" {
+            solver = match kernel {
+                Kernel::Triharmonic => SaddleSolver::full(&np, Triharmonic::phi_r2, smoothing, par),
+                Kernel::Biharmonic => SaddleSolver::full(&np, Biharmonic::phi_r2, smoothing, par),
+                Kernel::ThinPlate => SaddleSolver::full(&np, ThinPlate::phi_r2, smoothing, par),
+            }?;
+            (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
+        }
         let mut x = (lam0, a0);
 
         let mut s = VariationalSurface {
@@ -207,7 +222,14 @@ impl VariationalSurface {
             let rf: Vec<f64> = (0..n)
                 .map(|i| s.constraints.values[i] - fvals[i] - smoothing * s.soa.w[i])
                 .collect();
-            let worst = rf.iter().fold(0.0, |a: f64, r| a.max(r.abs()));
+            // NaN is the worst residual (`f64::max` would drop it).
+            let worst = rf.iter().fold(0.0, |a: f64, r| {
+                if r.is_nan() || a.is_nan() {
+                    f64::NAN
+                } else {
+                    a.max(r.abs())
+                }
+            });
             let mut rg = [0.0; 4];
             for i in 0..n {
                 let w = s.soa.w[i];
@@ -527,6 +549,44 @@ impl Field for VariationalSurface {
 mod tests {
     use super::super::testing::*;
     use super::*;
+
+    /// A patch whose own constraints lie in one plane with value 0, completed by a few points
+    /// off it (a near patch on a flat face): the fit is finite everywhere or refused, never a
+    /// solution that is not finite.
+    #[test]
+    fn coplanar_patch_with_few_completions_is_finite_or_refused() {
+        let mut pts: Vec<DVec3> = (0..81)
+            .map(|k| DVec3::new((k % 9) as f64 * 0.01, (k / 9) as f64 * 0.01, 0.0))
+            .collect();
+        let mut vals = vec![0.0; pts.len()];
+        for (i, q) in [
+            DVec3::new(0.2, 0.1, 0.15),
+            DVec3::new(-0.1, 0.3, 0.12),
+            DVec3::new(0.05, -0.2, -0.1),
+            DVec3::new(0.3, 0.3, 0.2),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            pts.push(q);
+            vals.push(0.01 * (i as f64 + 1.0) * q.z.signum());
+        }
+        match VariationalSurface::fit_patch(
+            pts.clone(),
+            vals.clone(),
+            &FitSettings::default(),
+            Par::Seq,
+        ) {
+            Ok(f) => {
+                assert!(f.residual().is_finite());
+                for (p, v) in pts.iter().zip(&vals) {
+                    assert!((f.value(*p) - v).abs() <= 1e-6, "{p} {v}");
+                }
+                assert!(f.value(DVec3::new(0.04, 0.04, 0.05)).is_finite());
+            }
+            Err(e) => assert!(matches!(e, Error::SingularSystem { .. }), "{e}"),
+        }
+    }
 
     fn sphere_data(n: usize) -> (Vec<DVec3>, Vec<DVec3>) {
         let normals = fibonacci_sphere(n);

@@ -273,7 +273,19 @@ impl SaddleSolver {
         if let Some(f) = Self::null_space(points, a, sign, par)? {
             return Ok(SaddleSolver { n, factor: f });
         }
-        // Fallback: the whole (n + 4) × (n + 4) saddle-point matrix with LBLᵀ.
+        Self::full(points, phi_r2, smoothing, par)
+    }
+
+    /// Bunch–Kaufman LBLᵀ of the whole (n + 4) × (n + 4) saddle-point matrix: the fallback of
+    /// [`SaddleSolver::with_parallelism`], and for systems whose null-space solution is not
+    /// finite.
+    pub fn full(
+        points: &[DVec3],
+        phi_r2: impl Fn(f64) -> f64 + Sync,
+        smoothing: f64,
+        par: Par,
+    ) -> Result<Self> {
+        let n = points.len();
         let a = assemble(points, &phi_r2, smoothing, par)?;
         let m = n + 4;
         let mut full = vec![0.0f64; m * m];

@@ -10,7 +10,8 @@
 //! its normal constraint) whose hash is divisible by 2^L: about one in 2^L, wherever it is, and
 //! each level is a subset of the one before. Patches that see the data only near the edge of their
 //! support, whose completion must carry the surface over the rest of it, choose among all
-//! levels; the others among the levels 3, 6, 9, … (one in 8^k).
+//! levels, as do patches with constraints inside their support; the others among the levels
+//! 3, 6, 9, … (one in 8^k).
 
 use super::octree::Octree;
 use glam::DVec3;

@@ -71,7 +71,8 @@ pub const NEAR_BUDGET_DIVISOR: usize = 4;
 
 /// Patches whose nearest constraint lies further from their centre than this fraction of
 /// their radius see the data only near the edge of their support: they complete their system
-/// from any coarse level, the others from one in 8^k (see [`super::coarse`]).
+/// from any coarse level, as do patches with constraints inside; the others from one in 8^k
+/// (see [`super::coarse`]).
 pub const FAR_DATA: f64 = 0.95;
 
 /// The support of each leaf's patch; with `planes`, supports holding no constraint get no
@@ -121,8 +122,12 @@ pub fn supports(
                 t.count_within(pts, n.centre, reach) - t.count_within(pts, n.centre, r)
             };
             let full = tree.count_within(points, n.centre, reach) - inside;
-            // The levels this patch may take its completion from (see `coarse`).
-            let step = if far { 1 } else { 3 };
+            // The levels this patch may take its completion from (see `coarse`): every level
+            // for a far patch or one with constraints inside, so that a near patch's completion
+            // holds between half its budget and its budget (a level of one in 8^k can leave it
+            // a handful of constraints, too few to fit when its own lie in one plane); one in
+            // 8^k for the others.
+            let step = if far || inside > 0 { 1 } else { 3 };
             let candidates: Vec<usize> = (step - 1..levels.len()).step_by(step).collect();
             // The finest level whose share of the ball fits the budget; a finer one when that
             // leaves too few constraints for a fit.
