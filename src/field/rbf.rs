@@ -94,6 +94,38 @@ fn dispatch_values_gradients(
 /// Points per rayon task when evaluating (a multiple of LANES).
 const EVAL_CHUNK: usize = 256;
 
+/// The factorized system for `points` (normalised) with `kernel`: null-space Cholesky with the
+/// LBLᵀ fallback, or LBLᵀ of the whole system when `whole`. One instance per kernel, so that
+/// the assembly's inner loop has no branch on it.
+fn saddle_solver(
+    kernel: Kernel,
+    points: &[DVec3],
+    smoothing: f64,
+    par: Par,
+    whole: bool,
+) -> Result<SaddleSolver> {
+    fn make(
+        points: &[DVec3],
+        phi_r2: impl Fn(f64) -> f64 + Sync,
+        smoothing: f64,
+        sign: f64,
+        par: Par,
+        whole: bool,
+    ) -> Result<SaddleSolver> {
+        if whole {
+            SaddleSolver::full(points, phi_r2, smoothing, par)
+        } else {
+            SaddleSolver::with_parallelism(points, phi_r2, smoothing, sign, par)
+        }
+    }
+    let sign = kernel.cpd_sign();
+    match kernel {
+        Kernel::Triharmonic => make(points, Triharmonic::phi_r2, smoothing, sign, par, whole),
+        Kernel::Biharmonic => make(points, Biharmonic::phi_r2, smoothing, sign, par, whole),
+        Kernel::ThinPlate => make(points, ThinPlate::phi_r2, smoothing, sign, par, whole),
+    }
+}
+
 /// Whether a solution (weights and polynomial) is finite.
 fn all_finite(lam: &[f64], a: &[f64; 4]) -> bool {
     lam.iter().chain(a.iter()).all(|x| x.is_finite())
@@ -163,28 +195,12 @@ impl VariationalSurface {
         // Symmetric indefinite saddle-point system: see `saddle.rs` for the factorization
         // (null-space Cholesky, falling back to Bunch–Kaufman LBLᵀ) and why.
         let smoothing = settings.smoothing * scale.powi(kernel.degree());
-        let sign = kernel.cpd_sign();
-        // One instance per kernel, so that the assembly's inner loop has no branch on it.
-        let mut solver = match kernel {
-            Kernel::Triharmonic => {
-                SaddleSolver::with_parallelism(&np, Triharmonic::phi_r2, smoothing, sign, par)
-            }
-            Kernel::Biharmonic => {
-                SaddleSolver::with_parallelism(&np, Biharmonic::phi_r2, smoothing, sign, par)
-            }
-            Kernel::ThinPlate => {
-                SaddleSolver::with_parallelism(&np, ThinPlate::phi_r2, smoothing, sign, par)
-            }
-        }?;
+        let mut solver = saddle_solver(kernel, &np, smoothing, par, false)?;
         let (mut lam0, mut a0) = solver.solve(&c.values, [0.0; 4]);
         // A null-space factor of a nearly degenerate system can pass its pivot checks and
         // still give a solution that is not finite: solve the whole system instead.
         if !all_finite(&lam0, &a0) && solver.method() == "cholesky" {
-            solver = match kernel {
-                Kernel::Triharmonic => SaddleSolver::full(&np, Triharmonic::phi_r2, smoothing, par),
-                Kernel::Biharmonic => SaddleSolver::full(&np, Biharmonic::phi_r2, smoothing, par),
-                Kernel::ThinPlate => SaddleSolver::full(&np, ThinPlate::phi_r2, smoothing, par),
-            }?;
+            solver = saddle_solver(kernel, &np, smoothing, par, true)?;
             (lam0, a0) = solver.solve(&c.values, [0.0; 4]);
         }
         let mut x = (lam0, a0);
