@@ -93,27 +93,25 @@ def make_field(name: str, size: int):
 
 
 class Phases:
-    """Wraps ``_tile_fields`` of :mod:`implicitmesh.distributed` and ``StreamedWeld.add`` (the
+    """Wraps ``_tile_fields`` and ``_add_tile`` of :mod:`implicitmesh.distributed` (the
     gathered run's weld, one tile at a time as the tiles arrive) to count the client's seconds
     cutting the field for the tiles and welding, and the vertices the weld joins (the tiles'
     fields are cut before the first is submitted)."""
 
     def __init__(self, imd):
-        from implicitmesh import _streamed_weld
-
-        self.cut, self.add = imd._tile_fields, _streamed_weld.StreamedWeld.add
+        self.cut, self.add = imd._tile_fields, imd._add_tile
         self.reset()
         imd._tile_fields = self._cut
         phases = self
 
-        def add(weld, vertices, *rest):
-            t, before = time.perf_counter(), weld.vertices.n
-            phases.add(weld, vertices, *rest)
+        def add(weld, window, vertices, *rest):
+            t, before = time.perf_counter(), weld.vertices
+            phases.add(weld, window, vertices, *rest)
             phases.weld_s += time.perf_counter() - t
             phases.tile_vertices += len(vertices)
-            phases.welded_vertices += len(vertices) - (weld.vertices.n - before)
+            phases.welded_vertices += len(vertices) - (weld.vertices - before)
 
-        _streamed_weld.StreamedWeld.add = add
+        imd._add_tile = add
 
     def reset(self) -> None:
         self.cut_s = self.weld_s = 0.0

@@ -313,9 +313,10 @@ def test_output_directory_and_weld(client, blobs, tmp_path):
 
 @pytest.mark.parametrize("case", ["blobs", "octahedron"])
 def test_gathered_tiles_weld_as_the_core_welds_them(client, blobs, tmp_path, case):
-    """The gathered run and weld(DIR) weld one tile at a time (implicitmesh._streamed_weld);
-    their arrays are those the core's weld makes of all the tiles at once, bit for bit and in
-    the same order, also where several vertices share a position on tile faces."""
+    """The gathered run (tiles welded in window order as they arrive, whatever order they
+    finish in) and weld(DIR) (tiles read one at a time) give the arrays the core's weld makes
+    of all the tiles at once, bit for bit and in the same order, also where several vertices
+    share a position on tile faces."""
     if case == "blobs":
         field, kw = blobs, {"bounds": BOX, "resolution": 40, "method": "sparse", "tile": 15}
     else:
@@ -337,34 +338,48 @@ def test_gathered_tiles_weld_as_the_core_welds_them(client, blobs, tmp_path, cas
 
 
 def test_the_streamed_weld_checks_its_tiles():
-    from implicitmesh._streamed_weld import StreamedWeld
+    from implicitmesh._core import StreamedWeld
 
+    lattice = ([4, 4, 4], [0.0, 0.0, 0.0], [0.25, 0.25, 0.25])
+    w = [[0, 0, 0], [4, 4, 4]]
     v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     none = (np.zeros(0, np.uint32), np.zeros(0, np.uint64))
     with pytest.raises(ValueError, match="faces"):
-        StreamedWeld(1, False).add(v, np.array([[0, 1, 3]], np.uint32), np.zeros((0, 3)), *none)
+        StreamedWeld(1, *lattice, False).add(w, v, np.array([[0, 1, 3]], np.uint32), np.zeros((0, 3)), *none)
     with pytest.raises(ValueError, match="normals"):
-        StreamedWeld(1, True).add(v, np.array([[0, 1, 2]], np.uint32), v[:1], *none)
-    # One edge at two positions in two tiles.
-    weld = StreamedWeld(2, False)
-    one = (np.array([0], np.uint32), np.array([7], np.uint64))
-    weld.add(v, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *one)
+        StreamedWeld(1, *lattice, True).add(w, v, np.array([[0, 1, 2]], np.uint32), v[:1], *none)
+    with pytest.raises(ValueError, match="window"):
+        StreamedWeld(1, *lattice).add([[0, 0, 0], [5, 4, 4]], v, np.array([[0, 1, 2]], np.uint32), v, *none)
+    with pytest.raises(ValueError, match="cells"):
+        StreamedWeld(1, [0, 4, 4], *lattice[1:])
+    # One edge at two positions in two tiles; the refused tile leaves the weld as it was.
+    weld = StreamedWeld(2, *lattice, False)
+    one = (np.array([0], np.uint32), np.array([0], np.uint64))
+    weld.add(w, v, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *one)
     with pytest.raises(ValueError, match="tiles"):
-        weld.add(v + 0.5, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *one)
+        weld.add(w, v + 0.5, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *one)
+    assert (weld.added, weld.vertices) == (1, 3)
     # Joined by key, the second tile's first vertex is the first tile's; more rows than the
     # estimate grow the arrays.
-    weld = StreamedWeld(1, True)
+    weld = StreamedWeld(1, *lattice, True)
     for shift in (0.0, 1.0):
-        weld.add(v + [shift, 0, 0] * (np.arange(3) > 0)[:, None], np.array([[0, 1, 2]], np.uint32), v, *one)
+        weld.add(w, v + [shift, 0, 0] * (np.arange(3) > 0)[:, None], np.array([[0, 1, 2]], np.uint32), v, *one)
     out_v, out_f, out_n = weld.result()
     assert len(out_v) == len(out_n) == 5 and out_f.tolist() == [[0, 1, 2], [0, 3, 4]] and out_f.dtype == np.int64
-    # normals=None: as the first tile with vertices has them (an empty tile first).
+    with pytest.raises(RuntimeError, match="result"):
+        weld.result()
+    # normals=None: as the first tile with vertices has them (an empty tile first); a later
+    # tile without them is refused.
     empty = (np.zeros((0, 3)), np.zeros((0, 3), np.uint32), np.zeros((0, 3)), *none)
     for normals, expected in ((v, 3), (np.zeros((0, 3)), 0)):
-        weld = StreamedWeld(2, None)
-        weld.add(*empty)
-        weld.add(v, np.array([[0, 1, 2]], np.uint32), normals, *none)
+        weld = StreamedWeld(2, *lattice)
+        weld.add(w, *empty)
+        weld.add(w, v, np.array([[0, 1, 2]], np.uint32), normals, *none)
         assert weld.result()[2].shape == (expected, 3)
+    weld = StreamedWeld(2, *lattice)
+    weld.add(w, v, np.array([[0, 1, 2]], np.uint32), v, *none)
+    with pytest.raises(ValueError, match="normals"):
+        weld.add(w, v, np.array([[0, 1, 2]], np.uint32), np.zeros((0, 3)), *none)
 
 
 def test_the_weld_checks_its_tiles():
@@ -469,19 +484,17 @@ def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch):
     raises KeyboardInterrupt and cancels the tasks not done; the next run is whole."""
     import _thread
 
-    from implicitmesh import _streamed_weld
-
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    add = _streamed_weld.StreamedWeld.add
+    add = imd._add_tile
     welds = []
 
-    def interrupted_add(self, *tile):
-        welds.append(len(tile[0]))
+    def interrupted_add(stream, *tile):
+        welds.append(len(tile[1]))
         _thread.interrupt_main()
-        add(self, *tile)
+        add(stream, *tile)
         time.sleep(1.0)  # the signal is handled here at the latest
 
-    monkeypatch.setattr(_streamed_weld.StreamedWeld, "add", interrupted_add)
+    monkeypatch.setattr(imd, "_add_tile", interrupted_add)
     try:
         with pytest.raises(KeyboardInterrupt):
             imd.polygonize(blobs, bounds=BOX, resolution=96, method="dense", client=client, tile=8)
@@ -489,7 +502,7 @@ def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch):
         signal.signal(signal.SIGINT, previous)
     assert len(welds) == 1
     assert tasks_left(client) == 0
-    monkeypatch.setattr(_streamed_weld.StreamedWeld, "add", add)
+    monkeypatch.setattr(imd, "_add_tile", add)
     whole = im.polygonize(blobs, bounds=BOX, resolution=24, method="sparse")
     assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8), whole)
 

@@ -22,7 +22,6 @@ import numpy as np
 
 from . import _core
 from ._progress import reporter
-from ._streamed_weld import StreamedWeld
 from .mesh import Mesh
 from .polygonize import _check_common
 
@@ -237,11 +236,17 @@ def _collect(distributed, futures: list, scattered: dict, resend: Callable, stre
         while len(entries) in arrived:
             entry = arrived.pop(len(entries))
             if stream is not None:
-                stream.add(*(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
+                _add_tile(stream, entry["window"], *(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
             entries.append(entry)
         if report is not None:
             report(len(entries) + len(arrived))
     return entries
+
+
+def _add_tile(stream: "_core.StreamedWeld", window, *arrays: np.ndarray) -> None:
+    """Welds the next tile (``window`` and its ``vertices, faces, normals, boundary, keys``)
+    into ``stream``."""
+    stream.add(window, *arrays)
 
 
 def _pickled(field: Any) -> Callable[[], Any]:
@@ -390,7 +395,11 @@ def polygonize(
             if part is not None:
                 futures.append(submit(part, (lo, hi), scattered, len(windows)))
                 windows.append((lo, hi))
-        stream = StreamedWeld(len(futures), bool(options.get("normals", True))) if output is None else None
+        stream = (
+            _core.StreamedWeld(len(futures), cells, origin, cell, bool(options.get("normals", True)))
+            if output is None
+            else None
+        )
 
         def resend(i: int):
             return submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
@@ -458,7 +467,8 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
         raise ValueError(f"directory: no {MANIFEST} in {str(directory)!r} (a run that did not finish?)")
     manifest = json.loads(path.read_text())
     report, end = reporter(progress, "weld", sum(e["vertices"] for e in manifest["tiles"]), "vertices")
-    stream, done = StreamedWeld(len(manifest["tiles"]), None), 0
+    stream = _core.StreamedWeld(len(manifest["tiles"]), manifest["cells"], manifest["origin"], manifest["cell"])
+    done = 0
     try:
         # One tile in memory at a time besides the welded mesh.
         for e in manifest["tiles"]:
@@ -471,7 +481,7 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
                         f"directory: tile {e['file']} has no edge keys (written by an older implicitmesh); "
                         "run polygonize again"
                     )
-                stream.add(z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"])
+                _add_tile(stream, e["window"], z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"])
             done += e["vertices"]
             if report is not None:
                 report(done)

@@ -70,70 +70,281 @@ pub fn boundary_edges(keys: &[u64], window: [[u32; 3]; 2]) -> (Vec<u32>, Vec<u64
         .unzip()
 }
 
-/// Joins the tiles of `lattice` (the whole lattice their windows cut) into one mesh.
+/// Joins the tiles of `lattice` (the whole lattice their windows cut) into one mesh: a
+/// [`StreamedWeld`] given every tile in turn.
 ///
-/// Errors (naming the argument of `_core.weld_tiles`) for a window outside the lattice, a
-/// triangle index outside its tile's vertices, normals not one per vertex, boundary indices
-/// and keys that do not match (an index outside the tile, a key outside its window, a key
-/// twice in a tile), vertices of one edge at different positions in two tiles, or more than
-/// 2³² vertices in all. Checks [`cancel::check`] between steps and reports the tiles' vertices
-/// done.
+/// Errors as [`StreamedWeld::add`].
 pub fn weld(tiles: &[Tile], lattice: &Lattice) -> Result<Welded> {
-    let starts = check(tiles, lattice)?;
-    let total = starts[tiles.len()] as u64;
-    let joined = joined_by_edge(tiles, &starts)?;
-    cancel::advance(total / 2)?;
-    let (index, kept) = renumbered(tiles, &joined);
-    cancel::check()?;
-    let welded = Welded {
-        vertices: kept_rows(tiles, &index, &kept, |t| t.vertices),
-        normals: if tiles.iter().all(|t| t.normals.len() == t.vertices.len()) {
-            kept_rows(tiles, &index, &kept, |t| t.normals)
-        } else {
-            Vec::new()
-        },
-        faces: renumbered_faces(tiles, &index),
-    };
-    cancel::advance(total - total / 2)?;
-    Ok(welded)
+    let mut stream = StreamedWeld::new(tiles.len(), None);
+    for tile in tiles {
+        stream.add(tile, lattice)?;
+    }
+    Ok(stream.finish())
 }
 
-/// Checks the tiles; returns where each tile's vertices start among all (and their total last).
-fn check(tiles: &[Tile], lattice: &Lattice) -> Result<Vec<usize>> {
-    let mut starts = Vec::with_capacity(tiles.len() + 1);
-    let mut total = 0usize;
-    for (t, tile) in tiles.iter().enumerate() {
-        lattice.window(tile.window[0], tile.window[1])?;
-        if !tile.normals.is_empty() && tile.normals.len() != tile.vertices.len() {
+/// Slack on the estimate of the welded mesh's rows (see [`StreamedWeld`]).
+const SLACK: f64 = 1.25;
+
+/// A tile's vertices' welded indices and its boundary keys new to the weld with theirs (see
+/// [`StreamedWeld::renumbered`]).
+type Renumbered = (Vec<Id>, Vec<(u64, Id)>);
+
+/// Marker of a joined vertex in [`StreamedWeld::renumbered`]'s first pass.
+const JOINED: Id = Id::MAX;
+
+/// The weld of tiles given one at a time, in the order their vertices and triangles take in
+/// the welded mesh (a tiled run gives them in window order): each tile's boundary vertices are
+/// looked up among those of the tiles added before it, by edge key; a vertex whose edge an
+/// earlier tile has is joined to that tile's vertex, the others are kept, in the tile's order;
+/// its triangles follow the earlier tiles', renumbered. A tile can be freed once added, so the
+/// caller holds the welded mesh and the tiles not yet added.
+///
+/// The welded rows are written from the front of vectors reserved for an estimate of the
+/// whole (the rows so far per tile, times the tiles, plus a quarter) and not touched beyond
+/// the rows written ([`crate::memory::reserve_huge`]); a vector short of room grows to a new
+/// estimate.
+#[derive(Debug, Default)]
+pub struct StreamedWeld {
+    /// The mesh of the tiles added so far.
+    welded: Welded,
+    /// The welded vertex of each boundary edge key of the tiles added.
+    ids: std::collections::HashMap<u64, Id>,
+    /// Tiles that will be added in all (for the estimate).
+    tiles: usize,
+    /// Tiles added.
+    added: usize,
+    /// Whether the tiles carry normals: given, or as the first tile with vertices does.
+    normals: Option<bool>,
+}
+
+impl StreamedWeld {
+    /// A weld of `tiles` tiles (for the estimate of its rows: more or fewer may be added), with
+    /// normals if `normals` says so (`None`: if the first tile with vertices has them).
+    pub fn new(tiles: usize, normals: Option<bool>) -> Self {
+        StreamedWeld {
+            tiles,
+            normals,
+            ..Default::default()
+        }
+    }
+
+    /// Tiles added so far.
+    pub fn added(&self) -> usize {
+        self.added
+    }
+
+    /// Vertices welded so far.
+    pub fn vertices(&self) -> usize {
+        self.welded.vertices.len()
+    }
+
+    /// Adds the next tile, a window of `lattice`.
+    ///
+    /// Errors (naming the argument of `_core.weld_tiles`) for a window outside the lattice, a
+    /// triangle index outside the tile's vertices, normals not one per vertex (also none where
+    /// the weld has normals), boundary indices and keys that do not match (an index outside
+    /// the tile, a key outside its window, a key twice in the tile), a vertex at other
+    /// coordinates than the earlier tile's vertex of its edge, or more than 2³² vertices in
+    /// all; the weld is then as it was before the call. Checks [`cancel::check`] between steps
+    /// and reports the tile's vertices done.
+    pub fn add(&mut self, tile: &Tile, lattice: &Lattice) -> Result<()> {
+        let t = self.added;
+        check(t, tile, lattice)?;
+        let nv = tile.vertices.len();
+        if self.normals.is_none() && nv > 0 {
+            self.normals = Some(!tile.normals.is_empty());
+        }
+        let normals = self.normals == Some(true);
+        if normals && tile.normals.len() != nv {
             return Err(Error::invalid(
                 "normals",
                 format!(
-                    "tile {t} has {} normals for {} vertices",
-                    tile.normals.len(),
-                    tile.vertices.len()
+                    "tile {t} has {} normals for {nv} vertices (the tiles before it have normals)",
+                    tile.normals.len()
                 ),
             ));
         }
-        let n = tile.vertices.len() as u32;
-        let outside = |c: &[[u32; 3]]| c.iter().flatten().find(|&&i| i >= n).copied();
-        if let Some(bad) = tile.faces.par_chunks(CHUNK).find_map_any(outside) {
+        let first = self.welded.vertices.len();
+        if first + nv > Id::MAX as usize {
             return Err(Error::invalid(
-                "faces",
-                format!("tile {t} has vertex index {bad}, outside its {n} vertices"),
+                "vertices",
+                format!(
+                    "{} vertices in all, over the weld's limit of 2³²",
+                    first + nv
+                ),
             ));
         }
-        check_boundary(t, tile)?;
-        starts.push(total);
-        total += tile.vertices.len();
+        let (index, new) = self.renumbered(t, tile)?;
+        cancel::check()?;
+        let kept = kept_per_chunk(&index, first);
+        let (tiles, added) = (self.tiles.max(t + 1) as f64, (t + 1) as f64);
+        let estimate =
+            |now: usize, more: usize| ((now + more) as f64 / added * tiles * SLACK) as usize;
+        let rows = estimate(first, kept.iter().sum());
+        append_kept(
+            &mut self.welded.vertices,
+            tile.vertices,
+            &index,
+            &kept,
+            rows,
+        );
+        if normals {
+            append_kept(&mut self.welded.normals, tile.normals, &index, &kept, rows);
+        }
+        let faces = estimate(self.welded.faces.len(), tile.faces.len());
+        append_faces(&mut self.welded.faces, tile.faces, &index, faces);
+        self.ids.extend(new);
+        self.added += 1;
+        cancel::advance(nv as u64)
     }
-    if total > Id::MAX as usize {
+
+    /// The welded mesh of the tiles added.
+    pub fn finish(self) -> Welded {
+        self.welded
+    }
+
+    /// Every vertex of tile `t`'s welded index (the vertices the weld keeps take the next
+    /// indices, in order; a joined vertex the index of the earlier tile's vertex of its edge),
+    /// and the tile's boundary keys no earlier tile has, with their welded indices. Errors for
+    /// a key twice in the tile or a joined vertex at other coordinates.
+    fn renumbered(&self, t: usize, tile: &Tile) -> Result<Renumbered> {
+        let mut keys = tile.keys.to_vec();
+        keys.sort_unstable();
+        if let Some(k) = keys.windows(2).find(|w| w[0] == w[1]) {
+            return Err(Error::invalid(
+                "keys",
+                format!("tile {t} has edge key {} for two vertices", k[0]),
+            ));
+        }
+        let mut index = vec![0 as Id; tile.vertices.len()];
+        let mut joined = Vec::new();
+        for (&k, &i) in tile.keys.iter().zip(tile.boundary) {
+            let Some(&to) = self.ids.get(&k) else {
+                continue;
+            };
+            let (p, q) = (self.welded.vertices[to as usize], tile.vertices[i as usize]);
+            if q.to_array().map(f64::to_bits) != p.to_array().map(f64::to_bits) {
+                return Err(Error::invalid(
+                    "tiles",
+                    format!(
+                        "the vertex of edge key {k} is at {p} in an earlier tile and at {q} in tile {t} (tiles of different fields or lattices?)"
+                    ),
+                ));
+            }
+            index[i as usize] = JOINED;
+            joined.push((i, to));
+        }
+        let kept = index.iter_mut().filter(|i| **i != JOINED);
+        for (next, i) in (self.welded.vertices.len() as Id..).zip(kept) {
+            *i = next;
+        }
+        for &(i, to) in &joined {
+            index[i as usize] = to;
+        }
+        let first = self.welded.vertices.len() as Id;
+        let new = tile
+            .keys
+            .iter()
+            .zip(tile.boundary)
+            .map(|(&k, &i)| (k, index[i as usize]))
+            .filter(|&(_, w)| w >= first)
+            .collect();
+        Ok((index, new))
+    }
+}
+
+/// Room for `more` rows after those of `v`, at least `estimate` rows in all when it grows.
+fn make_room<T>(v: &mut Vec<T>, more: usize, estimate: usize) {
+    let need = v.len() + more;
+    if need <= v.capacity() {
+        return;
+    }
+    let size = need.max(estimate);
+    if v.is_empty() {
+        *v = crate::memory::reserve_huge(size);
+    }
+    v.reserve_exact(size - v.len());
+}
+
+/// How many vertices of each chunk of [`CHUNK`] vertices of a tile the weld keeps: those whose
+/// welded `index` is `first` (the tile's first welded vertex) or after.
+fn kept_per_chunk(index: &[Id], first: usize) -> Vec<usize> {
+    index
+        .par_chunks(CHUNK)
+        .map(|c| c.iter().filter(|&&i| i as usize >= first).count())
+        .collect()
+}
+
+/// Appends the `rows` (vertices or normals) of a tile's vertices the weld keeps (`kept` per
+/// chunk, as [`kept_per_chunk`] counts them), in order; chunks written in parallel.
+fn append_kept(
+    out: &mut Vec<DVec3>,
+    rows: &[DVec3],
+    index: &[Id],
+    kept: &[usize],
+    estimate: usize,
+) {
+    let (len, total) = (out.len(), kept.iter().sum::<usize>());
+    let first = len as Id;
+    make_room(out, total, estimate);
+    let slices = split_by(&mut out.spare_capacity_mut()[..total], kept.iter().copied());
+    slices
+        .into_par_iter()
+        .zip(rows.par_chunks(CHUNK).zip(index.par_chunks(CHUNK)))
+        .for_each(|(o, (rows, index))| {
+            let mut at = 0;
+            for (&p, &i) in rows.iter().zip(index) {
+                if i >= first {
+                    o[at].write(p);
+                    at += 1;
+                }
+            }
+        });
+    // SAFETY: each chunk writes exactly its count of kept rows (those with an index at or
+    // after `first`, as `kept_per_chunk` counted them) into its slice, and the slices cover
+    // the `total` rows after `len`.
+    unsafe { out.set_len(len + total) };
+}
+
+/// Appends a tile's triangles with every index mapped through `index`, chunks in parallel.
+fn append_faces(out: &mut Vec<[i64; 3]>, faces: &[[u32; 3]], index: &[Id], estimate: usize) {
+    let len = out.len();
+    make_room(out, faces.len(), estimate);
+    out.spare_capacity_mut()[..faces.len()]
+        .par_chunks_mut(CHUNK)
+        .zip(faces.par_chunks(CHUNK))
+        .for_each(|(o, f)| {
+            for (o, f) in o.iter_mut().zip(f) {
+                o.write(f.map(|i| index[i as usize] as i64));
+            }
+        });
+    // SAFETY: the chunks cover the faces.len() rows after `len`, each written above.
+    unsafe { out.set_len(len + faces.len()) };
+}
+
+/// Checks tile `t`: its window in `lattice`, normals (none, or one per vertex), triangle
+/// indices and boundary vertices.
+fn check(t: usize, tile: &Tile, lattice: &Lattice) -> Result<()> {
+    lattice.window(tile.window[0], tile.window[1])?;
+    if !tile.normals.is_empty() && tile.normals.len() != tile.vertices.len() {
         return Err(Error::invalid(
-            "vertices",
-            format!("{total} vertices in all, over the weld's limit of 2³²"),
+            "normals",
+            format!(
+                "tile {t} has {} normals for {} vertices",
+                tile.normals.len(),
+                tile.vertices.len()
+            ),
         ));
     }
-    starts.push(total);
-    Ok(starts)
+    let n = tile.vertices.len() as u32;
+    let outside = |c: &[[u32; 3]]| c.iter().flatten().find(|&&i| i >= n).copied();
+    if let Some(bad) = tile.faces.par_chunks(CHUNK).find_map_any(outside) {
+        return Err(Error::invalid(
+            "faces",
+            format!("tile {t} has vertex index {bad}, outside its {n} vertices"),
+        ));
+    }
+    check_boundary(t, tile)
 }
 
 /// Checks tile `t`'s boundary indices (below its vertex count, one per key) and keys (edges in
@@ -172,98 +383,6 @@ fn check_boundary(t: usize, tile: &Tile) -> Result<()> {
     Ok(())
 }
 
-/// `(vertex, the vertex it joins)`: the vertices of one edge key are one, the first (the
-/// lowest id, of the first tile that has it) kept. Errors for a key twice in one tile or
-/// joined vertices at different positions.
-fn joined_by_edge(tiles: &[Tile], starts: &[usize]) -> Result<Vec<(Id, Id)>> {
-    let mut all: Vec<(u64, Id)> = tiles
-        .par_iter()
-        .zip(starts)
-        .flat_map_iter(|(tile, &start)| {
-            tile.keys
-                .iter()
-                .zip(tile.boundary)
-                .map(move |(&k, &i)| (k, (start + i as usize) as Id))
-        })
-        .collect();
-    cancel::check()?;
-    all.par_sort_unstable();
-    cancel::check()?;
-    let tile_of = |id: Id| starts.partition_point(|&s| s <= id as usize) - 1;
-    let position = |id: Id| {
-        let t = tile_of(id);
-        (t, tiles[t].vertices[id as usize - starts[t]])
-    };
-    let mut joined = Vec::new();
-    for run in all.chunk_by(|a, b| a.0 == b.0) {
-        let (key, first) = run[0];
-        let (mut last, p) = position(first);
-        for &(_, id) in &run[1..] {
-            let (t, q) = position(id);
-            if t == last {
-                return Err(Error::invalid(
-                    "keys",
-                    format!("tile {t} has edge key {key} for two vertices"),
-                ));
-            }
-            if q.to_array().map(f64::to_bits) != p.to_array().map(f64::to_bits) {
-                return Err(Error::invalid(
-                    "tiles",
-                    format!(
-                        "the vertex of edge key {key} is at {p} in tile {} and at {q} in tile {t} (tiles of different fields or lattices?)",
-                        tile_of(first)
-                    ),
-                ));
-            }
-            last = t;
-            joined.push((id, first));
-        }
-    }
-    Ok(joined)
-}
-
-/// Marker of a vertex joined to another in [`renumbered`]'s first pass.
-const JOINED: u32 = u32::MAX;
-
-/// Every tile vertex's index in the welded mesh, and the vertices each tile keeps: their
-/// number and the welded index of the tile's first.
-fn renumbered(tiles: &[Tile], joined: &[(Id, Id)]) -> (Vec<u32>, Vec<(usize, usize)>) {
-    let total: usize = tiles.iter().map(|t| t.vertices.len()).sum();
-    let mut index = vec![0u32; total];
-    for &(id, _) in joined {
-        index[id as usize] = JOINED;
-    }
-    let mut slices = split_by(&mut index, tiles.iter().map(|t| t.vertices.len()));
-    let counts: Vec<usize> = slices
-        .par_iter()
-        .map(|s| s.iter().filter(|&&i| i != JOINED).count())
-        .collect();
-    let mut next = 0usize;
-    let kept: Vec<(usize, usize)> = counts
-        .into_iter()
-        .map(|n| {
-            next += n;
-            (n, next - n)
-        })
-        .collect();
-    slices
-        .par_iter_mut()
-        .zip(&kept)
-        .for_each(|(s, &(_, mut next))| {
-            for i in s.iter_mut() {
-                if *i != JOINED {
-                    *i = next as u32;
-                    next += 1;
-                }
-            }
-        });
-    // A vertex joins one before it, whose index is final by now.
-    for &(id, first) in joined {
-        index[id as usize] = index[first as usize];
-    }
-    (index, kept)
-}
-
 /// `data` cut into consecutive slices of `lengths`.
 fn split_by<T>(mut data: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
     let mut out = Vec::new();
@@ -272,83 +391,6 @@ fn split_by<T>(mut data: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<
         out.push(a);
         data = b;
     }
-    out
-}
-
-/// The rows of `rows(tile)` (vertices or normals) of the vertices the weld keeps, tile after
-/// tile; `index` and `kept` as [`renumbered`] gives them. Written in parallel into fresh
-/// memory, so that all threads fault its pages in.
-fn kept_rows<'a>(
-    tiles: &[Tile<'a>],
-    index: &[u32],
-    kept: &[(usize, usize)],
-    rows: impl Fn(&Tile<'a>) -> &'a [DVec3] + Sync,
-) -> Vec<DVec3> {
-    let total: usize = kept.iter().map(|k| k.0).sum();
-    let mut out: Vec<DVec3> = crate::memory::with_capacity_huge(total);
-    let slices = split_by(
-        &mut out.spare_capacity_mut()[..total],
-        kept.iter().map(|k| k.0),
-    );
-    let own = split_index(index, tiles);
-    slices
-        .into_par_iter()
-        .zip(tiles.par_iter().zip(own).zip(kept))
-        .for_each(|(o, ((tile, own), &(_, first)))| {
-            let mut at = 0;
-            for (&p, &i) in rows(tile).iter().zip(own) {
-                // A kept vertex has the next index; a joined one the index of an earlier one.
-                if i as usize == first + at {
-                    o[at].write(p);
-                    at += 1;
-                }
-            }
-        });
-    // SAFETY: tile t writes exactly kept[t].0 rows (its vertices with the next index, as
-    // `renumbered` counted them) into its slice, and the slices cover out[..total].
-    unsafe { out.set_len(total) };
-    out
-}
-
-/// `index` cut into the tiles' slices.
-fn split_index<'a>(index: &'a [u32], tiles: &[Tile]) -> Vec<&'a [u32]> {
-    let mut rest = index;
-    tiles
-        .iter()
-        .map(|t| {
-            let (a, b) = rest.split_at(t.vertices.len());
-            rest = b;
-            a
-        })
-        .collect()
-}
-
-/// The tiles' triangles, tile after tile, with every index mapped through `index` (written in
-/// parallel into fresh memory, as in [`kept_rows`]).
-fn renumbered_faces(tiles: &[Tile], index: &[u32]) -> Vec<[i64; 3]> {
-    let total: usize = tiles.iter().map(|t| t.faces.len()).sum();
-    let mut out: Vec<[i64; 3]> = crate::memory::with_capacity_huge(total);
-    let slices = split_by(
-        &mut out.spare_capacity_mut()[..total],
-        tiles.iter().map(|t| t.faces.len()),
-    );
-    let work: Vec<_> = slices
-        .into_iter()
-        .zip(tiles)
-        .zip(split_index(index, tiles))
-        .flat_map(|((o, tile), own)| {
-            o.chunks_mut(CHUNK)
-                .zip(tile.faces.chunks(CHUNK))
-                .map(move |(o, f)| (o, f, own))
-        })
-        .collect();
-    work.into_par_iter().for_each(|(o, f, own)| {
-        for (o, f) in o.iter_mut().zip(f) {
-            o.write(f.map(|i| own[i as usize] as i64));
-        }
-    });
-    // SAFETY: the chunks cover out[..total] and each of their elements is written above.
-    unsafe { out.set_len(total) };
     out
 }
 
@@ -535,6 +577,44 @@ mod tests {
             });
             assert_whole(&weld(&as_tiles(&meshes), &lattice).unwrap(), &whole_octree);
         }
+    }
+
+    /// A streamed weld told of one tile and given them all (its rows grow past every
+    /// estimate) makes the arrays of a weld told of all; a tile refused leaves it unchanged.
+    #[test]
+    fn a_streamed_weld_grows_past_its_estimate_and_survives_a_refused_tile() {
+        let sphere = Sphere {
+            center: DVec3::new(0.03, -0.05, 0.02),
+            radius: 0.7,
+        };
+        let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 18).unwrap();
+        let settings = Settings::default();
+        let meshes = tile_meshes(&lattice, 4, |l| {
+            let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
+            (m, k)
+        });
+        let tiles = as_tiles(&meshes);
+        let mut stream = StreamedWeld::new(1, None);
+        let mut seen = std::collections::HashSet::new();
+        let mut refused = 0;
+        for tile in &tiles {
+            let moved: Vec<DVec3> = tile.vertices.iter().map(|&p| p + DVec3::X).collect();
+            let bad = Tile {
+                vertices: &moved,
+                ..*tile
+            };
+            // Moved, a vertex of an edge an earlier tile has is at other coordinates.
+            if tile.keys.iter().any(|k| seen.contains(k)) {
+                let before = (stream.added(), stream.vertices());
+                assert!(stream.add(&bad, &lattice).is_err());
+                assert_eq!((stream.added(), stream.vertices()), before);
+                refused += 1;
+            }
+            stream.add(tile, &lattice).unwrap();
+            seen.extend(tile.keys.iter().copied());
+        }
+        assert!(refused > 10);
+        assert_eq!(stream.finish(), weld(&tiles, &lattice).unwrap());
     }
 
     /// Bad tiles are refused naming the argument at fault.

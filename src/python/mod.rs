@@ -47,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(polygonize::lattice, m)?)?;
     m.add_function(wrap_pyfunction!(polygonize::project_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(weld::weld_tiles, m)?)?;
+    m.add_class::<weld::PyStreamedWeld>()?;
     subdivision::register(m)?;
     Ok(())
 }

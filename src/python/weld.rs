@@ -4,7 +4,7 @@ use super::convert::{check_rows_of_three, flat_faces, flatten_points, MeshBuffer
 use super::errors::value_error;
 use super::interrupt::run;
 use crate::lattice::{Lattice, MAX_CELLS_PER_AXIS};
-use crate::polygonize::weld::{weld, Tile};
+use crate::polygonize::weld::{weld, StreamedWeld, Tile, Welded};
 use glam::DVec3;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -116,6 +116,57 @@ fn whole_lattice(cells: [u32; 3], origin: [f64; 3], cell: [f64; 3]) -> PyResult<
     })
 }
 
+/// One tile's arrays as the weld reads them (numpy arrays borrowed in place, converted only
+/// where their type or layout is not the weld's).
+type TileArrays<'py> = (
+    [[u32; 3]; 2],
+    PyReadonlyArray2<'py, f64>,
+    Faces<'py>,
+    PyReadonlyArray2<'py, f64>,
+    PyReadonlyArray1<'py, u32>,
+    PyReadonlyArray1<'py, u64>,
+);
+
+/// Reads a tile's `[window, vertices, faces, normals, boundary, keys]`.
+fn tile_arrays<'py>(parts: [&Bound<'py, PyAny>; 6]) -> PyResult<TileArrays<'py>> {
+    let [window, vertices, faces, normals, boundary, keys] = parts;
+    let window: [[u32; 3]; 2] = window
+        .extract()
+        .map_err(|_| value_error("window", "expected [[i0, j0, k0], [i1, j1, k1]] of cells"))?;
+    Ok((
+        window,
+        rows::<f64>(vertices, "float64", "vertices")?,
+        Faces::new(faces)?,
+        rows::<f64>(normals, "float64", "normals")?,
+        column::<u32>(boundary, "uint32", "boundary")?,
+        column::<u64>(keys, "uint64", "keys")?,
+    ))
+}
+
+/// The core's view of [`TileArrays`].
+fn as_tile<'a>(a: &'a TileArrays<'_>) -> PyResult<Tile<'a>> {
+    let (window, v, f, n, b, k) = a;
+    Ok(Tile {
+        window: *window,
+        vertices: bytemuck::cast_slice(v.as_slice()?),
+        faces: f.rows()?,
+        normals: bytemuck::cast_slice(n.as_slice()?),
+        boundary: b.as_slice()?,
+        keys: k.as_slice()?,
+    })
+}
+
+/// The welded arrays as numpy arrays (the buffers moved, not copied).
+fn welded_tuple<'py>(py: Python<'py>, welded: Welded) -> PyResult<Bound<'py, PyTuple>> {
+    let [v, f, n] = MeshBuffers {
+        vertices: flatten_points(welded.vertices),
+        faces: flat_faces(welded.faces),
+        normals: flatten_points(welded.normals),
+    }
+    .to_py(py)?;
+    PyTuple::new(py, [v, f, n])
+}
+
 /// Joins tile meshes made on windows of one lattice; see ``implicitmesh.distributed``.
 ///
 /// ``tiles`` is a sequence of ``(window, vertices (V, 3) float64, faces (F, 3) uint32 (read in
@@ -124,7 +175,7 @@ fn whole_lattice(cells: [u32; 3], origin: [f64; 3], cell: [f64; 3]) -> PyResult<
 /// k0], [i1, j1, k1]]`` the tile's cells, ``boundary`` and ``keys`` as
 /// ``polygonize(..., window=window, boundary=True)`` returns them; ``cells``, ``origin``,
 /// ``cell`` the whole lattice (as :func:`lattice` returns them). Vertices with one edge key
-/// are joined.
+/// are joined. The mesh is :class:`StreamedWeld`'s of the tiles added in turn.
 /// ``progress`` is called with the tile vertices done.
 ///
 /// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3))``.
@@ -141,41 +192,96 @@ pub fn weld_tiles<'py>(
     let lattice = whole_lattice(cells, origin, cell)?;
     let mut arrays = Vec::with_capacity(tiles.len());
     for t in &tiles {
-        let (window, v, f, n, b, k): ([[u32; 3]; 2], _, _, _, _, _) =
-            t.extract().map_err(|_| {
-                value_error(
-                    "tiles",
-                    "expected (window [[i0, j0, k0], [i1, j1, k1]], vertices, faces, normals, boundary, keys) per tile",
-                )
-            })?;
-        arrays.push((
-            window,
-            rows::<f64>(&v, "float64", "vertices")?,
-            Faces::new(&f)?,
-            rows::<f64>(&n, "float64", "normals")?,
-            column::<u32>(&b, "uint32", "boundary")?,
-            column::<u64>(&k, "uint64", "keys")?,
-        ));
+        let parts: [Bound<'py, PyAny>; 6] = t.extract().map_err(|_| {
+            value_error(
+                "tiles",
+                "expected (window [[i0, j0, k0], [i1, j1, k1]], vertices, faces, normals, boundary, keys) per tile",
+            )
+        })?;
+        arrays.push(tile_arrays(parts.each_ref())?);
     }
-    let parts: Vec<Tile> = arrays
-        .iter()
-        .map(|(window, v, f, n, b, k)| -> PyResult<Tile> {
-            Ok(Tile {
-                window: *window,
-                vertices: bytemuck::cast_slice(v.as_slice()?),
-                faces: f.rows()?,
-                normals: bytemuck::cast_slice(n.as_slice()?),
-                boundary: b.as_slice()?,
-                keys: k.as_slice()?,
-            })
-        })
-        .collect::<PyResult<_>>()?;
+    let parts: Vec<Tile> = arrays.iter().map(as_tile).collect::<PyResult<_>>()?;
     let welded = run(py, progress, false, || weld(&parts, &lattice))?;
-    let [v, f, n] = MeshBuffers {
-        vertices: flatten_points(welded.vertices),
-        faces: flat_faces(welded.faces),
-        normals: flatten_points(welded.normals),
+    welded_tuple(py, welded)
+}
+
+/// The weld of tile meshes added one at a time, in window order, as a tiled run's tiles arrive
+/// (each tile can be freed once added); ``result()`` is the mesh :func:`weld_tiles` makes of
+/// the tiles added, array for array.
+///
+/// ``StreamedWeld(tiles, cells, origin, cell, normals=None)``: ``tiles`` the number of tiles
+/// that will be added (for the estimate of the output's size), ``cells``, ``origin``,
+/// ``cell`` the whole lattice (as :func:`lattice` returns them), ``normals`` whether the tiles
+/// carry normals (None: as the first tile with vertices does).
+#[pyclass(name = "StreamedWeld", module = "implicitmesh._core")]
+pub struct PyStreamedWeld {
+    lattice: Lattice,
+    /// None once the result is taken.
+    weld: Option<StreamedWeld>,
+}
+
+#[pymethods]
+impl PyStreamedWeld {
+    #[new]
+    #[pyo3(signature = (tiles, cells, origin, cell, normals=None))]
+    fn new(
+        tiles: usize,
+        cells: [u32; 3],
+        origin: [f64; 3],
+        cell: [f64; 3],
+        normals: Option<bool>,
+    ) -> PyResult<Self> {
+        Ok(PyStreamedWeld {
+            lattice: whole_lattice(cells, origin, cell)?,
+            weld: Some(StreamedWeld::new(tiles, normals)),
+        })
     }
-    .to_py(py)?;
-    PyTuple::new(py, [v, f, n])
+
+    /// Adds the next tile: ``window`` its cells ``[[i0, j0, k0], [i1, j1, k1]]``, ``vertices``
+    /// (V, 3) float64, ``faces`` (F, 3) uint32, ``normals`` (V, 3) or (0, 3) float64,
+    /// ``boundary`` (B,) uint32 and ``keys`` (B,) uint64 as ``polygonize(..., window=window,
+    /// boundary=True)`` returns them. The arrays are read in place (the GIL released).
+    ///
+    /// Raises ValueError naming the argument at fault (the weld is then unchanged), and
+    /// KeyboardInterrupt on Ctrl-C.
+    #[allow(clippy::too_many_arguments)]
+    fn add(
+        &mut self,
+        py: Python<'_>,
+        window: &Bound<'_, PyAny>,
+        vertices: &Bound<'_, PyAny>,
+        faces: &Bound<'_, PyAny>,
+        normals: &Bound<'_, PyAny>,
+        boundary: &Bound<'_, PyAny>,
+        keys: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let arrays = tile_arrays([window, vertices, faces, normals, boundary, keys])?;
+        let tile = as_tile(&arrays)?;
+        let lattice = &self.lattice;
+        let weld = self.weld.as_mut().ok_or_else(|| {
+            pyo3::exceptions::PyRuntimeError::new_err("StreamedWeld: result() was taken")
+        })?;
+        run(py, None, false, || weld.add(&tile, lattice))
+    }
+
+    /// Tiles added so far.
+    #[getter]
+    fn added(&self) -> usize {
+        self.weld.as_ref().map_or(0, StreamedWeld::added)
+    }
+
+    /// Vertices welded so far.
+    #[getter]
+    fn vertices(&self) -> usize {
+        self.weld.as_ref().map_or(0, StreamedWeld::vertices)
+    }
+
+    /// ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3))``,
+    /// the welded mesh (taken: the weld is empty afterwards).
+    fn result<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        let weld = self.weld.take().ok_or_else(|| {
+            pyo3::exceptions::PyRuntimeError::new_err("StreamedWeld: result() was taken")
+        })?;
+        welded_tuple(py, weld.finish())
+    }
 }
