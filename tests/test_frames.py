@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import builtins
+import importlib.util
 import sys
 
 import numpy as np
@@ -103,31 +104,65 @@ def test_binary_ply_of_xyz_only_is_a_view(tmp_path):
     assert q.base is not None  # a view of the file's records, not a stacked copy
 
 
+def _without(monkeypatch, *modules):
+    """Makes importing ``modules`` fail, as when they are not installed."""
+    real_import = builtins.__import__
+
+    def blocked(name, *args, **kwargs):
+        if name in modules:
+            raise ImportError(name)
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", blocked)
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name in modules else real_find_spec(name, *a))
+
+
+@pytest.mark.parametrize("reader", ["meshio", "pyvista"])
 @pytest.mark.parametrize("suffix", [".vtk", ".vtu", ".vtp"])
-def test_vtk_formats_read_back_exactly(tmp_path, suffix):
+def test_vtk_formats_read_back_exactly(tmp_path, monkeypatch, suffix, reader):
+    """Files pyvista writes read back bit for bit through meshio (used when installed) and
+    through pyvista (without meshio)."""
     pv = pytest.importorskip("pyvista")
+    pytest.importorskip("meshio")
     p = frame(70)
     rho = np.linspace(1.0, 2.0, 70)
     cloud = pv.PolyData(p)
     cloud.point_data["density"] = rho
     mesh = cloud.cast_to_unstructured_grid() if suffix == ".vtu" else cloud
     mesh.save(tmp_path / f"f{suffix}")
+    if reader == "pyvista":
+        _without(monkeypatch, "meshio")
     q, attrs = im.read_particles(tmp_path / f"f{suffix}", attributes=["density"])
     np.testing.assert_array_equal(q, p)
     np.testing.assert_array_equal(attrs["density"], rho)
 
 
+@pytest.mark.parametrize("suffix", [".vtu", ".vtk"])
+def test_files_meshio_writes_read_back_exactly(tmp_path, suffix):
+    meshio = pytest.importorskip("meshio")
+    p = frame(50)
+    ids = np.arange(50, dtype=np.int64)
+    meshio.write_points_cells(tmp_path / f"f{suffix}", p, [("vertex", np.arange(50).reshape(-1, 1))],
+                              point_data={"id": ids})
+    q, attrs = im.read_particles(tmp_path / f"f{suffix}", attributes=["id"])
+    np.testing.assert_array_equal(q, p)
+    np.testing.assert_array_equal(attrs["id"], ids)
+
+
+def test_a_file_no_installed_reader_reads_is_refused_naming_the_path(tmp_path, monkeypatch):
+    pv = pytest.importorskip("pyvista")
+    pytest.importorskip("meshio")
+    pv.PolyData(frame(20)).save(tmp_path / "f.vtp")
+    _without(monkeypatch, "pyvista")  # meshio has no .vtp reader
+    with pytest.raises(ValueError, match=r"^path: cannot read .*f\.vtp.*meshio"):
+        im.read_particles(tmp_path / "f.vtp")
+
+
 def test_meshio_format_without_meshio_or_pyvista_names_the_install(tmp_path, monkeypatch):
     path = tmp_path / "f.vtu"
     path.write_text("<VTKFile/>")
-    real_import = builtins.__import__
-
-    def no_readers(name, *args, **kwargs):
-        if name in ("meshio", "pyvista"):
-            raise ImportError(name)
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_readers)
+    _without(monkeypatch, "meshio", "pyvista")
     with pytest.raises(ImportError, match="pip install meshio"):
         im.read_particles(path)
 

@@ -9,8 +9,9 @@ Formats, by suffix:
 - ``.ply``: the ``vertex`` element's ``x``, ``y``, ``z`` (ASCII, binary little- or big-endian);
   the other vertex properties are its attributes.
 - ``.vtk``, ``.vtu``, ``.vtp``, ``.xdmf`` and the other formats of meshio: the points, and the
-  point data as attributes; through meshio (``pip install meshio``), else pyvista when it is
-  installed.
+  point data as attributes; VTK's own formats (``.vtk``, ``.vtu``, ``.vtp``, ...) through
+  pyvista when it is installed, else meshio (``pip install meshio``); the others through meshio,
+  else pyvista. When the first reader fails on a file, the other is tried.
 
 Positions come back as stored (float32 or float64), without a copy where the file's layout
 allows one; :class:`~implicitmesh.BlobField` reads either dtype as it is.
@@ -18,6 +19,7 @@ allows one; :class:`~implicitmesh.BlobField` reads either dtype as it is.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from typing import Any, Sequence
 
@@ -210,25 +212,43 @@ def _read_ply(name: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return positions, {p: table[p] for p, _ in props if p not in "xyz"}
 
 
+#: Suffixes of VTK's own formats, which pyvista (VTK) reads first.
+_VTK_SUFFIXES = (".vtk", ".vtu", ".vtp", ".pvtu")
+
+
+def _meshio_points(name: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    import meshio
+
+    m = meshio.read(name)
+    return np.asarray(m.points), dict(m.point_data)
+
+
+def _pyvista_points(name: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    import pyvista
+
+    m = pyvista.read(name)
+    return np.asarray(m.points), {k: np.asarray(m.point_data[k]) for k in m.point_data.keys()}
+
+
 def _read_meshio(name: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Points and point data through meshio, else pyvista."""
-    try:
-        import meshio
-    except ImportError:
-        meshio = None
-    if meshio is not None:
-        m = meshio.read(name)
-        points, data = np.asarray(m.points), dict(m.point_data)
-    else:
+    """Points and point data through pyvista or meshio (see the module), the other tried when
+    the first is not installed or fails on the file."""
+    readers = [("meshio", _meshio_points), ("pyvista", _pyvista_points)]
+    if os.path.splitext(name)[1].lower() in _VTK_SUFFIXES:
+        readers.reverse()
+    installed = [(m, read) for m, read in readers if importlib.util.find_spec(m) is not None]
+    if not installed:
+        raise ImportError(f"reading {os.path.splitext(name)[1]} particle files needs meshio: pip install meshio")
+    failures = []
+    for module, read in installed:
         try:
-            import pyvista
-        except ImportError:
-            raise ImportError(
-                f"reading {os.path.splitext(name)[1]} particle files needs meshio: pip install meshio"
-            ) from None
-        m = pyvista.read(name)
-        points = np.asarray(m.points)
-        data = {k: np.asarray(m.point_data[k]) for k in m.point_data.keys()}
+            points, data = read(name)
+            break
+        # meshio exits (SystemExit) on some files it cannot parse.
+        except (Exception, SystemExit) as e:
+            failures.append(f"{module}: {type(e).__name__}: {e}")
+    else:
+        raise ValueError(f"path: cannot read {name!r} ({'; '.join(failures)})")
     if points.ndim != 2 or len(points) == 0:
         raise ValueError(f"path: {name!r} holds no points")
     return _positions(points, name), data
