@@ -530,3 +530,53 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot):
     tiled = imd.polygonize(surface, resolution=40, method="dense", client=client, tile=8, progress=kill_one)
     assert killed
     assert_same_mesh(tiled, whole)
+
+
+@pytest.mark.parametrize("transport", ["files", "comms", "files-unseen"])
+def test_tiles_reach_the_client_through_files_or_dask(client, blobs, monkeypatch, transport):
+    """Workers on the client's machine pass their tiles through files in the run's directory
+    (removed afterwards); without one ("comms"), or where the workers do not see it
+    ("files-unseen"), the tiles come through Dask: the same mesh each way."""
+    from implicitmesh import _tile_files
+
+    made, original = [], _tile_files.make_directory
+
+    def make_directory():
+        d = {"files": original, "comms": lambda: None,
+             "files-unseen": lambda: "/nonexistent/implicitmesh-tiles"}[transport]()
+        made.append(d)
+        return d
+
+    monkeypatch.setattr(_tile_files, "make_directory", make_directory)
+    read = _tile_files.read
+    files_read = []
+
+    def counted_read(directory, name):
+        files_read.append(name)
+        return read(directory, name)
+
+    monkeypatch.setattr(_tile_files, "read", counted_read)
+    whole = im.polygonize(blobs, bounds=BOX, resolution=40, method="sparse")
+    tiled = imd.polygonize(blobs, bounds=BOX, resolution=40, method="sparse", client=client, tile=15)
+    assert_same_mesh(tiled, whole)
+    assert len(files_read) == (tiled.stats["tiles"] if transport == "files" else 0)
+    if made[0] is not None:
+        assert not os.path.exists(made[0])
+
+
+def test_tile_files_read_back_exactly_and_are_removed(tmp_path):
+    from implicitmesh import _tile_files
+
+    rng = np.random.default_rng(3)
+    arrays = dict(v=rng.random((7, 3)), n=rng.random((7, 3)), k=rng.integers(0, 2**60, 5, dtype=np.uint64),
+                  f=rng.integers(0, 7, (9, 3), dtype=np.uint32), b=np.arange(5, dtype=np.uint32))
+    empty = {k: a[:0] for k, a in arrays.items()}
+    for name, tile in (("full", arrays), ("empty", empty)):
+        assert _tile_files.write(str(tmp_path), name, tile)
+        with _tile_files.read(str(tmp_path), name) as back:
+            for k, a in tile.items():
+                assert back[k].dtype == a.dtype and back[k].shape == a.shape and np.array_equal(back[k], a)
+                assert a.size == 0 or (not back[k].flags.writeable and back[k].ctypes.data % a.itemsize == 0)
+        assert not (tmp_path / name).exists()
+    assert not _tile_files.write(str(tmp_path / "missing"), "x", arrays)
+    assert list(tmp_path.iterdir()) == []

@@ -20,7 +20,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from . import _core
+from . import _core, _tile_files
 from ._progress import reporter
 from .mesh import Mesh
 from .polygonize import _check_common
@@ -175,18 +175,25 @@ def _tile_fields(field: Any, shared: Any, cells, origin: np.ndarray, cell: np.nd
     return (cut_field(field, *tile_box(origin, cell, lo, hi)) for lo, hi in tiles(cells, tile))
 
 
-def _run_tile(field, bounds, resolution, window, method, options, output):
-    """One task: polygonizes the cells ``window`` of the lattice; returns the tile's mesh, or
-    with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the manifest."""
+def _run_tile(field, bounds, resolution, window, method, options, output, local=None):
+    """One task: polygonizes the cells ``window`` of the lattice; returns the tile's mesh (in the
+    gathered run's directory ``local`` when this worker can write there, see
+    :mod:`implicitmesh._tile_files`), or with ``output`` writes it to ``output/tile-….npz`` and
+    returns its entry of the manifest."""
     v, f, n, stats, b, k = _core.polygonize(
         field, bounds, resolution, method=method, window=window, boundary=True, **options
     )
     stats = {k: stats[k] for k in _SUMMED}
     entry = {"window": [list(window[0]), list(window[1])], "vertices": len(v), "faces": len(f), "stats": stats}
+    name = "tile-{}-{}-{}".format(*window[0])
     if output is None:
-        entry.update(v=v, f=f, n=n, b=b, k=k)
+        arrays = dict(v=v, f=f, n=n, b=b, k=k)
+        if local is not None and _tile_files.write(local, name, arrays):
+            entry["local"] = name
+        else:
+            entry.update(arrays)
         return entry
-    name = "tile-{}-{}-{}.npz".format(*window[0])
+    name += ".npz"
     tmp = os.path.join(output, name + ".part")
     with open(tmp, "wb") as fh:
         np.savez(fh, vertices=v, faces=f, normals=n, boundary=b, keys=k)
@@ -197,22 +204,24 @@ def _run_tile(field, bounds, resolution, window, method, options, output):
 
 def _submit_tile(client, args: tuple, part: Any, window, scattered: dict | None, i: int):
     """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field;
-    ``args``: ``(bounds, resolution, method, options, output)``. With ``scattered``, a
+    ``args``: ``(bounds, resolution, method, options, output, local)``. With ``scattered``, a
     partition fit's cut is scattered straight to a worker (its future kept in
     ``scattered[i]``) instead of travelling inside the task through the scheduler, which a
     ``LocalCluster`` runs in the client's process."""
     if scattered is not None and isinstance(part, _core.VariationalSurface):
         part = scattered[i] = client.scatter(part, direct=True, hash=False)
-    bounds, resolution, method, options, output = args
-    return client.submit(_run_tile, part, bounds, resolution, window, method, options, output, pure=False)
+    return client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False)
 
 
-def _collect(distributed, futures: list, scattered: dict, resend: Callable, stream: Any, report: Any) -> list:
+def _collect(
+    distributed, futures: list, scattered: dict, resend: Callable, stream: Any, local: str | None, report: Any
+) -> list:
     """The tiles' manifest entries in window order (the order of ``futures``), each tile's mesh
     added to ``stream`` (when given) as soon as those before it are, then freed; ``report``
     gets the tiles done. A tile whose scattered cut was lost with its worker (``scattered``
     holds the scattered cuts' futures by tile) comes back cancelled and is sent again with
-    ``resend(tile)``; ``futures`` gets the new futures."""
+    ``resend(tile)``; ``futures`` gets the new futures. ``local``: the run's directory of tile
+    files (:mod:`implicitmesh._tile_files`)."""
     place = {fut.key: i for i, fut in enumerate(futures)}
     arrived: dict[int, dict] = {}
     entries: list = []
@@ -236,11 +245,21 @@ def _collect(distributed, futures: list, scattered: dict, resend: Callable, stre
         while len(entries) in arrived:
             entry = arrived.pop(len(entries))
             if stream is not None:
-                _add_tile(stream, entry["window"], *(entry.pop(a) for a in ("v", "f", "n", "b", "k")))
+                _weld_entry(stream, entry, local)
             entries.append(entry)
         if report is not None:
             report(len(entries) + len(arrived))
     return entries
+
+
+def _weld_entry(stream: "_core.StreamedWeld", entry: dict, local: str | None) -> None:
+    """Welds the tile of a task's ``entry`` into ``stream``: its arrays, or the file it wrote in
+    the run's directory ``local`` (then deleted); the entry keeps its counts."""
+    if "local" in entry:
+        with _tile_files.read(local, entry.pop("local")) as a:
+            _add_tile(stream, entry["window"], *(a[k] for k in ("v", "f", "n", "b", "k")))
+    else:
+        _add_tile(stream, entry["window"], *(entry.pop(k) for k in ("v", "f", "n", "b", "k")))
 
 
 def _add_tile(stream: "_core.StreamedWeld", window, *arrays: np.ndarray) -> None:
@@ -381,6 +400,7 @@ def polygonize(
             raise ValueError(f"output: {str(output)!r} is not a directory")
     client, own = _get_client(client)
     futures, shared, scattered = [], None, {}
+    local = _tile_files.make_directory() if output is None else None
     report, end = reporter(progress, "tiles", None, "tiles")
     try:
         # Blob fields and partition fits are cut per tile; any other field is one task's result
@@ -388,7 +408,9 @@ def polygonize(
         # worker dies).
         shared = None if _cut_per_tile(field) else client.submit(_pickled(field), pure=False)
         submit = functools.partial(
-            _submit_tile, client, (bounds, resolution, method, options, None if output is None else str(output))
+            _submit_tile,
+            client,
+            (bounds, resolution, method, options, None if output is None else str(output), local),
         )
         windows: list = []
         for (lo, hi), part in zip(tiles(cells, tile3), _tile_fields(field, shared, cells, origin, cell, tile3)):
@@ -404,7 +426,7 @@ def polygonize(
         def resend(i: int):
             return submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
 
-        entries = _collect(distributed, futures, scattered, resend, stream, report)
+        entries = _collect(distributed, futures, scattered, resend, stream, local, report)
     except BaseException:
         # Every task, done or not, and the shared field: a traceback that keeps this frame
         # must not keep their results on the workers.
@@ -412,6 +434,7 @@ def polygonize(
         raise
     finally:
         end()
+        _tile_files.remove_directory(local)
         if own is not None:
             own.close()
     info = {"cells": list(cells), "origin": origin.tolist(), "cell": cell.tolist(), "method": method}

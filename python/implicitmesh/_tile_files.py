@@ -1,0 +1,99 @@
+"""A gathered run's tiles passed through files on the client's machine instead of Dask's comms.
+
+A task whose worker runs on the client's machine (it sees the run's directory, made by the client
+in shared memory, ``/dev/shm``, where there is one) writes its tile's arrays into one file there
+and returns only the file's name; the client maps the file (the pages the worker wrote, not a
+copy), welds the tile from it and deletes it. Dask's comms would copy the tile through a socket
+into fresh memory the client must first touch, which on one machine costs more than the tile's
+polygonization. A worker that does not see the directory (another machine), or cannot write the
+file (shared memory full), returns the arrays as usual.
+
+The file holds the arrays in ``.npy`` format one after another, the 8-byte ones first so that
+every array's data is aligned.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import shutil
+import tempfile
+from contextlib import contextmanager
+from typing import Iterator
+
+import numpy as np
+
+#: The arrays of a tile's file, in their order in it (8-byte elements first).
+ORDER = ("v", "n", "k", "f", "b")
+
+#: Where the run's directory goes when the machine has shared memory.
+SHARED_MEMORY = "/dev/shm"
+
+
+def make_directory() -> str | None:
+    """A new directory for one run's tile files (in shared memory where there is one), or None
+    when none can be made."""
+    base = SHARED_MEMORY if os.access(SHARED_MEMORY, os.W_OK) else None
+    try:
+        return tempfile.mkdtemp(prefix="implicitmesh-tiles-", dir=base)
+    except OSError:
+        return None
+
+
+def remove_directory(directory: str | None) -> None:
+    """Removes a run's directory and the tile files left in it."""
+    if directory is not None:
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+def write(directory: str, name: str, arrays: dict[str, np.ndarray]) -> bool:
+    """Writes the tile ``arrays`` (``ORDER``) to ``directory/name``; False when the directory is
+    not on this machine or the file cannot be written (nothing is left behind)."""
+    if not os.path.isdir(directory):
+        return False
+    path = os.path.join(directory, name)
+    tmp = path + ".part"
+    try:
+        with open(tmp, "wb") as fh:
+            for key in ORDER:
+                np.lib.format.write_array(fh, np.ascontiguousarray(arrays[key]), allow_pickle=False)
+        os.replace(tmp, path)
+    except OSError:
+        try:
+            os.remove(tmp)
+        except OSError:
+            pass
+        return False
+    return True
+
+
+@contextmanager
+def read(directory: str, name: str) -> Iterator[dict[str, np.ndarray]]:
+    """The tile arrays of ``directory/name``, read-only views of the file mapped in memory, valid
+    inside the ``with`` block; the file is deleted afterwards."""
+    path = os.path.join(directory, name)
+    with open(path, "rb") as fh:
+        size = os.fstat(fh.fileno()).st_size
+        populate = getattr(mmap, "MAP_POPULATE", 0)
+        mapped = mmap.mmap(fh.fileno(), size, flags=mmap.MAP_SHARED | populate, prot=mmap.PROT_READ) if size else None
+        arrays = {}
+        for key in ORDER:
+            version = np.lib.format.read_magic(fh)
+            header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = header(fh)
+            count = int(np.prod(shape, dtype=np.int64))
+            start = fh.tell()
+            data = np.frombuffer(mapped, dtype=dtype, count=count, offset=start) if count else np.empty(0, dtype)
+            arrays[key] = data.reshape(shape, order="F" if fortran else "C")
+            fh.seek(start + count * dtype.itemsize)
+    try:
+        yield arrays
+    finally:
+        arrays.clear()
+        del data
+        if mapped is not None:
+            try:
+                mapped.close()
+            except BufferError:  # a caller kept a view: the mapping goes with it
+                pass
+        os.remove(path)
