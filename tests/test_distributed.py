@@ -580,3 +580,15 @@ def test_tile_files_read_back_exactly_and_are_removed(tmp_path):
         assert not (tmp_path / name).exists()
     assert not _tile_files.write(str(tmp_path / "missing"), "x", arrays)
     assert list(tmp_path.iterdir()) == []
+    # A run directory whose client has ended is removed; a running client's is kept.
+    import subprocess
+    import sys
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    orphan = tmp_path / f"{_tile_files.PREFIX}{int(ended.stdout)}-abc"
+    alive = tmp_path / f"{_tile_files.PREFIX}{os.getpid()}-abc"
+    for d in (orphan, alive):
+        d.mkdir()
+        (d / "tile-0-0-0").write_bytes(b"x")
+    _tile_files.remove_orphans(str(tmp_path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == [alive.name]

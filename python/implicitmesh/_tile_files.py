@@ -30,14 +30,38 @@ ORDER = ("v", "n", "k", "f", "b")
 SHARED_MEMORY = "/dev/shm"
 
 
+#: The run directories' names: this prefix, the client's process id, a dash.
+PREFIX = "implicitmesh-tiles-"
+
+
 def make_directory() -> str | None:
     """A new directory for one run's tile files (in shared memory where there is one), or None
-    when none can be made."""
-    base = SHARED_MEMORY if os.access(SHARED_MEMORY, os.W_OK) else None
+    when none can be made. Directories that clients no longer running left behind (a client
+    killed during a run) are removed first."""
+    base = SHARED_MEMORY if os.access(SHARED_MEMORY, os.W_OK) else tempfile.gettempdir()
+    remove_orphans(base)
     try:
-        return tempfile.mkdtemp(prefix="implicitmesh-tiles-", dir=base)
+        return tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-", dir=base)
     except OSError:
         return None
+
+
+def remove_orphans(base: str) -> None:
+    """Removes the run directories in ``base`` whose client process has ended."""
+    try:
+        names = os.listdir(base)
+    except OSError:
+        return
+    for name in names:
+        pid = name[len(PREFIX):].split("-", 1)[0]
+        if not (name.startswith(PREFIX) and pid.isdigit()):
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            remove_directory(os.path.join(base, name))
+        except OSError:  # alive, another user's
+            pass
 
 
 def remove_directory(directory: str | None) -> None:
