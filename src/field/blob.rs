@@ -338,22 +338,6 @@ impl BlobField {
         f
     }
 
-    /// `threshold − F` at each of `points`, from `grid`: voxel lists of this field's primitives
-    /// with any voxel side, in f64 whatever the field's precision (the same terms in the same
-    /// order as [`Field::values`] in double precision, so the same bits). Reads the
-    /// per-primitive arrays: neither the field's voxel lists nor its packed primitives are
-    /// built.
-    pub(crate) fn values_over_grid(&self, grid: &VoxelGrid, points: &[DVec3], out: &mut [f64]) {
-        with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
-            let mut f = 0.0;
-            for &i in grid.candidates(p) {
-                let i = i as usize;
-                f += self.strengths[i] * K::value(unit_t(p - self.centers[i], self.inv_r2[i]));
-            }
-            self.threshold - f
-        }));
-    }
-
     /// Fills one z-plane of lattice values (`xs`, `ys`: the lattice's coordinates; `z`: the
     /// plane's) by splatting every primitive that reaches the plane, row by row over the
     /// x-range its sphere covers.

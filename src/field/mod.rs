@@ -10,6 +10,7 @@ pub mod blob;
 pub mod blob_kernel;
 pub mod cholesky;
 pub mod constraints;
+pub mod densities;
 pub mod differences;
 pub mod duplicates;
 pub mod grid;

@@ -10,7 +10,7 @@
 
 use super::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
 use super::blob_kernel::BlobKernel;
-use super::voxels::VoxelGrid;
+use super::densities::kernel_sums;
 use crate::error::{check_finite_points, Error, Result};
 use glam::DVec3;
 
@@ -44,12 +44,9 @@ impl Default for ParticleSettings {
     }
 }
 
-/// Particles per step of the density pass (the call stops between steps when told to).
-const DENSITY_CHUNK: usize = 1 << 16;
-
 /// The colour field of `particles` of radius `particle_radius` (see the module docs). The
-/// densities are computed in parallel from the field's own voxel lists; the call stops between
-/// chunks of particles when its [`crate::cancel`] token is set, and reports particles done.
+/// densities are computed in parallel over a cell list ([`kernel_sums`]); the call stops between
+/// steps when its [`crate::cancel`] token is set, and reports particles done.
 pub fn colour_field(
     particles: &[DVec3],
     particle_radius: f64,
@@ -69,7 +66,7 @@ pub fn colour_field(
         settings.iso_surface_threshold,
         blob,
     )?;
-    let sums = kernel_sums(&field, support)?;
+    let sums = kernel_sums(particles, support, settings.kernel)?;
     let strengths: Vec<f64> = sums.iter().map(|s| 1.0 / s).collect();
     field.set_strengths(PerPrimitive::Each(&strengths))?;
     field.set_precision(settings.precision);
@@ -94,30 +91,6 @@ fn compact_support(particle_radius: f64, settings: &ParticleSettings) -> Result<
         }
     }
     Ok(2.0 * smoothing_length * particle_radius)
-}
-
-/// Σⱼ w(|xᵢ − xⱼ|/H) at every particle: the potential of the unit-strength field at its own
-/// centres (each at least 1, its own term), from voxel lists of side H made for this pass and
-/// dropped after it (about a quarter of the entries of the field's default voxels of H/2; the
-/// longer lists hold the same terms, so the sums have the same bits).
-fn kernel_sums(field: &BlobField, support: f64) -> Result<Vec<f64>> {
-    let centers = field.centers();
-    let mut grid = VoxelGrid::default();
-    grid.rebuild(centers, field.radii(), support);
-    let mut sums = vec![0.0; centers.len()];
-    for (c, s) in centers
-        .chunks(DENSITY_CHUNK)
-        .zip(sums.chunks_mut(DENSITY_CHUNK))
-    {
-        crate::cancel::check()?;
-        field.values_over_grid(&grid, c, s);
-        crate::cancel::advance(c.len() as u64)?;
-    }
-    let threshold = field.threshold();
-    for s in &mut sums {
-        *s = threshold - *s;
-    }
-    Ok(sums)
 }
 
 #[cfg(test)]
