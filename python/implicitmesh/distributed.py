@@ -362,6 +362,12 @@ def polygonize(
         When Dask is not installed (the ``distributed`` extra).
     KeyboardInterrupt
         On Ctrl-C (also while the client welds the tiles): every task is cancelled.
+
+    Notes
+    -----
+    Without ``output``, workers on the client's machine hand their tiles over through files in a
+    directory the client makes for the run in ``/dev/shm`` (else the temporary directory) and
+    removes at its end; workers elsewhere, or that cannot write there, send them through Dask.
     """
     distributed = _import_distributed()
     tile3 = _check_tile(tile)
