@@ -110,12 +110,14 @@ class Phases:
             phases.weld_s += time.perf_counter() - t
             phases.tile_vertices += len(vertices)
             phases.welded_vertices += len(vertices) - (weld.vertices - before)
+            phases.tile_bytes.append(sum(int(a.nbytes) for a in (vertices, *rest)))
 
         imd._add_tile = add
 
     def reset(self) -> None:
         self.cut_s = self.weld_s = 0.0
         self.tile_vertices = self.welded_vertices = 0
+        self.tile_bytes: list[int] = []
 
     def _cut(self, field, shared, *a):
         if shared is not None:
@@ -206,7 +208,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
         field_bytes = pickled_parts(field, resolution, tile)
         tasks = [r for r in stream if str(r["key"]).startswith("_run_tile")]
         compute = [sum(s["stop"] - s["start"] for s in r["startstops"] if s["action"] == "compute") for r in tasks]
-        result_bytes = [int(r.get("nbytes", 0)) for r in tasks]
+        result_bytes = phases.tile_bytes
         peaks = client.run(vmhwm_mib)
         out.update(
             times=times, triangles=len(mesh.faces), vertices=len(mesh.vertices), tiles=mesh.stats["tiles"],
@@ -340,7 +342,8 @@ def render(raw: dict) -> str:
         "at 16³; times are wall-clock medians of the runs column, cluster start-up excluded. "
         "Speed-up: `dask-1`'s time over this row's; overhead: this row's time over `single`'s, minus 1. "
         "Per tile: the task's compute seconds (Dask's task stream) and the megabytes of its field (pickled) "
-        "and of its result (Dask's size estimate), mean / max over tasks. Client: seconds cutting the "
+        "and of its mesh (the arrays the client welds), mean / max over tasks. The workers share the client's machine, so "
+        "gathered tiles pass through files in `/dev/shm` (`implicitmesh._tile_files`), not Dask's comms. Client: seconds cutting the "
         "field per tile and welding (the sum of the tiles' welds, each as it arrives, while the workers "
         "compute others; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. Peak "
         "memory: VmHWM of each worker process and of the client process (MiB).",
