@@ -325,7 +325,8 @@ mod avx512 {
         }
     }
 
-    /// Σ w φ for φ = r³ (`cube = true`) or φ = r; two blocks per pass over the centres.
+    /// Σ w φ for φ = r³ (`cube = true`) or φ = r; two blocks per pass over the centres (a last,
+    /// odd block alone).
     #[target_feature(enable = "avx512f")]
     pub unsafe fn values(c: &Centres, blocks: &[Block], out: &mut [[f64; LANES]], cube: bool) {
         let n = c.w.len();
@@ -346,20 +347,29 @@ mod avx512 {
             );
             let mut a0 = _mm512_setzero_pd();
             let mut a1 = _mm512_setzero_pd();
-            for j in 0..n {
-                let (cx, cy, cz) = (
+            let centre = |j: usize| {
+                (
                     _mm512_set1_pd(c.x[j]),
                     _mm512_set1_pd(c.y[j]),
                     _mm512_set1_pd(c.z[j]),
-                );
-                let w = _mm512_set1_pd(c.w[j]);
-                a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
-                a1 = _mm512_fmadd_pd(w, phi_block(p1x, p1y, p1z, cx, cy, cz, cube), a1);
+                    _mm512_set1_pd(c.w[j]),
+                )
+            };
+            if two {
+                for j in 0..n {
+                    let (cx, cy, cz, w) = centre(j);
+                    a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
+                    a1 = _mm512_fmadd_pd(w, phi_block(p1x, p1y, p1z, cx, cy, cz, cube), a1);
+                }
+                _mm512_storeu_pd(out[k + 1].as_mut_ptr(), a1);
+            } else {
+                // A last, odd block alone: the same sums in the same order, half the work.
+                for j in 0..n {
+                    let (cx, cy, cz, w) = centre(j);
+                    a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
+                }
             }
             _mm512_storeu_pd(out[k].as_mut_ptr(), a0);
-            if two {
-                _mm512_storeu_pd(out[k + 1].as_mut_ptr(), a1);
-            }
             k += 2;
         }
     }
@@ -398,7 +408,8 @@ mod avx512 {
         }
     }
 
-    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass. Without
+    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass (a last, odd
+    /// block alone). Without
     /// `VALUES`, the values are left at 0 and not computed (the gradients are the same bits).
     #[target_feature(enable = "avx512f")]
     pub unsafe fn values_gradients<const VALUES: bool>(
@@ -432,7 +443,8 @@ mod avx512 {
                     _mm512_set1_pd(c.z[j]),
                 );
                 let w = _mm512_set1_pd(c.w[j]);
-                for (a, p) in acc.iter_mut().zip([p0, p1]) {
+                // A last, odd block alone: the same sums in the same order, half the work.
+                for (a, p) in acc.iter_mut().zip([p0, p1]).take(if two { 2 } else { 1 }) {
                     let (phi, s, dx, dy, dz) = phi_grad_block(p.0, p.1, p.2, cx, cy, cz, cube);
                     if VALUES {
                         a[0] = _mm512_fmadd_pd(w, phi, a[0]);
