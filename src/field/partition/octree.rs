@@ -52,6 +52,9 @@ pub struct Octree {
     /// Point indices, grouped by node (each node's run splits into its children's runs, in
     /// child order); increasing within a leaf.
     pub order: Vec<u32>,
+    /// The points in the order of `order` (`sorted[k]` = `points[order[k]]`), so that the
+    /// queries read each leaf's points from one run of memory.
+    sorted: Vec<DVec3>,
     /// The leaves' node indices, in node order.
     pub leaves: Vec<u32>,
     /// For each node, its position in `leaves` (`u32::MAX` for inner nodes).
@@ -139,8 +142,10 @@ impl Octree {
             }
             level = next..nodes.len();
         }
+        let sorted = order.iter().map(|&i| points[i as usize]).collect();
         Octree {
             order,
+            sorted,
             ..Octree::from_nodes(nodes)
         }
     }
@@ -159,6 +164,7 @@ impl Octree {
         Octree {
             nodes,
             order: Vec::new(),
+            sorted: Vec::new(),
             leaves,
             leaf_slot,
         }
@@ -281,10 +287,10 @@ impl Octree {
             if n.farthest_squared(c) <= r2 {
                 count += (n.end - n.start) as usize;
             } else if n.is_leaf() {
-                let run = &self.order[n.start as usize..n.end as usize];
-                count += run
+                count += self
+                    .run(points, n)
                     .iter()
-                    .filter(|&&i| (points[i as usize] - c).length_squared() <= r2)
+                    .filter(|&&p| (p - c).length_squared() <= r2)
                     .count();
             } else {
                 stack.extend((0..8).map(|o| n.children + o));
@@ -312,8 +318,8 @@ impl Octree {
             }
             let n = &self.nodes[node as usize];
             if n.is_leaf() {
-                for &i in &self.order[n.start as usize..n.end as usize] {
-                    let e = (points[i as usize] - c).length_squared().to_bits();
+                for &p in self.run(points, n) {
+                    let e = (p - c).length_squared().to_bits();
                     if best.len() < k {
                         best.push(e);
                     } else if e < *best.peek().unwrap() {
@@ -338,12 +344,20 @@ impl Octree {
         let r2 = r * r;
         self.for_each_leaf_meeting(c, r, |k| {
             let n = &self.nodes[k as usize];
-            for &i in &self.order[n.start as usize..n.end as usize] {
-                if (points[i as usize] - c).length_squared() <= r2 {
+            let run = self.run(points, n);
+            for (&i, p) in self.order[n.start as usize..n.end as usize].iter().zip(run) {
+                if (*p - c).length_squared() <= r2 {
                     visit(i);
                 }
             }
         });
+    }
+
+    /// The points of node `n`, in the order of its run of `order` (`points` are those the tree
+    /// was built from).
+    fn run<'a>(&'a self, points: &[DVec3], n: &Node) -> &'a [DVec3] {
+        debug_assert_eq!(points.len(), self.sorted.len());
+        &self.sorted[n.start as usize..n.end as usize]
     }
 }
 
