@@ -527,11 +527,7 @@ mod avx512 {
     pub unsafe fn values_by_point(c: &Centres, pts: &[[f64; 3]], out: &mut [f64], cube: bool) {
         let n = c.w.len();
         for (p, o) in pts.iter().zip(out.iter_mut()) {
-            let (px, py, pz) = (
-                _mm512_set1_pd(p[0]),
-                _mm512_set1_pd(p[1]),
-                _mm512_set1_pd(p[2]),
-            );
+            let [px, py, pz] = p.map(|x| _mm512_set1_pd(x));
             let mut acc = _mm512_setzero_pd();
             let mut j = 0;
             while j < n {
@@ -556,11 +552,7 @@ mod avx512 {
     ) {
         let n = c.w.len();
         for (p, o) in pts.iter().zip(out.iter_mut()) {
-            let (px, py, pz) = (
-                _mm512_set1_pd(p[0]),
-                _mm512_set1_pd(p[1]),
-                _mm512_set1_pd(p[2]),
-            );
+            let [px, py, pz] = p.map(|x| _mm512_set1_pd(x));
             let mut acc = [_mm512_setzero_pd(); 4];
             let mut j = 0;
             while j < n {
@@ -601,6 +593,11 @@ fn avx512_kernel<K: 'static>() -> Option<bool> {
     } else {
         None
     }
+}
+
+/// [`avx512_kernel`] where the CPU has AVX-512.
+fn avx512_cube<K: 'static>() -> Option<bool> {
+    avx512_kernel::<K>().filter(|_| has_avx512())
 }
 
 /// AVX2 and FMA: present whenever [`crate::simd::Isa::detect`] is not generic.
@@ -660,12 +657,10 @@ pub fn block_values_gradients<K: RadialFn>(
 /// blocks of [`LANES`] points. Either way a point's sum does not depend on the other points.
 pub fn values_by_point<K: RadialFn>(c: &Centres, pts: &[[f64; 3]], out: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
-    if let Some(cube) = avx512_kernel::<K>() {
-        if has_avx512() {
-            // SAFETY: the CPU supports AVX-512F, checked just above.
-            unsafe { avx512::values_by_point(c, pts, out, cube) };
-            return;
-        }
+    if let Some(cube) = avx512_cube::<K>() {
+        // SAFETY: `avx512_cube` checked that the CPU supports AVX-512F.
+        unsafe { avx512::values_by_point(c, pts, out, cube) };
+        return;
     }
     for (p, o) in pts.chunks(LANES).zip(out.chunks_mut(LANES)) {
         let mut s = [[0.0; LANES]];
@@ -677,12 +672,10 @@ pub fn values_by_point<K: RadialFn>(c: &Centres, pts: &[[f64; 3]], out: &mut [f6
 /// [Σ_j w_j φ, Σ_j w_j ∇φ] at a few points, as [`values_by_point`].
 pub fn values_gradients_by_point<K: RadialFn>(c: &Centres, pts: &[[f64; 3]], out: &mut [[f64; 4]]) {
     #[cfg(target_arch = "x86_64")]
-    if let Some(cube) = avx512_kernel::<K>() {
-        if has_avx512() {
-            // SAFETY: the CPU supports AVX-512F, checked just above.
-            unsafe { avx512::values_gradients_by_point(c, pts, out, cube) };
-            return;
-        }
+    if let Some(cube) = avx512_cube::<K>() {
+        // SAFETY: `avx512_cube` checked that the CPU supports AVX-512F.
+        unsafe { avx512::values_gradients_by_point(c, pts, out, cube) };
+        return;
     }
     for (p, o) in pts.chunks(LANES).zip(out.chunks_mut(LANES)) {
         let mut s = [[[0.0; LANES]; 4]];
@@ -707,12 +700,10 @@ impl<K> Default for Arithmetic<K> {
 impl<K: RadialFn> crate::field::saddle::Entries for Arithmetic<K> {
     fn column(&self, xs: &[f64], ys: &[f64], zs: &[f64], c: glam::DVec3, out: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
-        if let Some(cube) = avx512_kernel::<K>() {
-            if has_avx512() {
-                // SAFETY: the CPU supports AVX-512F, checked just above.
-                unsafe { avx512::column(xs, ys, zs, c.to_array(), out, cube) };
-                return;
-            }
+        if let Some(cube) = avx512_cube::<K>() {
+            // SAFETY: `avx512_cube` checked that the CPU supports AVX-512F.
+            unsafe { avx512::column(xs, ys, zs, c.to_array(), out, cube) };
+            return;
         }
         K::phi_r2.column(xs, ys, zs, c, out);
     }
@@ -754,8 +745,8 @@ pub fn block_gradients<K: RadialFn>(c: &Centres, blocks: &[Block], out: &mut [[[
 mod tests {
     use super::*;
 
-    #[test]
-    fn vector_paths_agree_with_scalar_sums() {
+    /// 203 random centres in [-1, 1]³ with weights sin(0.37 k).
+    fn centres() -> Centres {
         let pts = crate::field::testing::random_points(203, -1.0, 1.0, 9);
         let mut c = Centres::default();
         for (k, p) in pts.iter().enumerate() {
@@ -764,6 +755,12 @@ mod tests {
             c.z.push(p.z);
             c.w.push(((k as f64) * 0.37).sin());
         }
+        c
+    }
+
+    #[test]
+    fn vector_paths_agree_with_scalar_sums() {
+        let c = centres();
         let q = crate::field::testing::random_points(64, -1.2, 1.2, 4);
         let mut blocks = vec![Block::default(); 8];
         for (i, p) in q.iter().enumerate() {
@@ -837,14 +834,7 @@ mod tests {
     #[test]
     fn sums_by_point_agree_and_do_not_depend_on_the_batch() {
         use crate::field::saddle::Entries;
-        let pts = crate::field::testing::random_points(203, -1.0, 1.0, 9);
-        let mut c = Centres::default();
-        for (k, p) in pts.iter().enumerate() {
-            c.x.push(p.x);
-            c.y.push(p.y);
-            c.z.push(p.z);
-            c.w.push(((k as f64) * 0.37).sin());
-        }
+        let c = centres();
         let mut q: Vec<[f64; 3]> = crate::field::testing::random_points(21, -1.2, 1.2, 4)
             .iter()
             .map(|p| p.to_array())

@@ -13,10 +13,10 @@ pub use parts::SurfaceParts;
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::{
     block_gradients, block_values, block_values_gradients, values_by_point,
-    values_gradients_by_point, Arithmetic, Biharmonic, Block, Centres, Kernel, ThinPlate,
+    values_gradients_by_point, Arithmetic, Biharmonic, Block, Centres, Kernel, RadialFn, ThinPlate,
     Triharmonic, LANES,
 };
-use super::saddle::{Entries, SaddleSolver};
+use super::saddle::SaddleSolver;
 use super::Field;
 use crate::error::{Error, Result};
 use faer::Par;
@@ -123,14 +123,14 @@ fn saddle_solver(
     par: Par,
     whole: bool,
 ) -> Result<SaddleSolver> {
-    fn make(
+    fn make<K: RadialFn>(
         points: &[DVec3],
-        phi: impl Entries,
         smoothing: f64,
         sign: f64,
         par: Par,
         whole: bool,
     ) -> Result<SaddleSolver> {
+        let phi = Arithmetic::<K>::default();
         if whole {
             SaddleSolver::full(points, phi, smoothing, par)
         } else {
@@ -139,30 +139,9 @@ fn saddle_solver(
     }
     let sign = kernel.cpd_sign();
     match kernel {
-        Kernel::Triharmonic => make(
-            points,
-            Arithmetic::<Triharmonic>::default(),
-            smoothing,
-            sign,
-            par,
-            whole,
-        ),
-        Kernel::Biharmonic => make(
-            points,
-            Arithmetic::<Biharmonic>::default(),
-            smoothing,
-            sign,
-            par,
-            whole,
-        ),
-        Kernel::ThinPlate => make(
-            points,
-            Arithmetic::<ThinPlate>::default(),
-            smoothing,
-            sign,
-            par,
-            whole,
-        ),
+        Kernel::Triharmonic => make::<Triharmonic>(points, smoothing, sign, par, whole),
+        Kernel::Biharmonic => make::<Biharmonic>(points, smoothing, sign, par, whole),
+        Kernel::ThinPlate => make::<ThinPlate>(points, smoothing, sign, par, whole),
     }
 }
 
