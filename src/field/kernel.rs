@@ -325,7 +325,8 @@ mod avx512 {
         }
     }
 
-    /// Σ w φ for φ = r³ (`cube = true`) or φ = r; two blocks per pass over the centres.
+    /// Σ w φ for φ = r³ (`cube = true`) or φ = r; two blocks per pass over the centres (a last,
+    /// odd block alone).
     #[target_feature(enable = "avx512f")]
     pub unsafe fn values(c: &Centres, blocks: &[Block], out: &mut [[f64; LANES]], cube: bool) {
         let n = c.w.len();
@@ -346,20 +347,29 @@ mod avx512 {
             );
             let mut a0 = _mm512_setzero_pd();
             let mut a1 = _mm512_setzero_pd();
-            for j in 0..n {
-                let (cx, cy, cz) = (
+            let centre = |j: usize| {
+                (
                     _mm512_set1_pd(c.x[j]),
                     _mm512_set1_pd(c.y[j]),
                     _mm512_set1_pd(c.z[j]),
-                );
-                let w = _mm512_set1_pd(c.w[j]);
-                a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
-                a1 = _mm512_fmadd_pd(w, phi_block(p1x, p1y, p1z, cx, cy, cz, cube), a1);
+                    _mm512_set1_pd(c.w[j]),
+                )
+            };
+            if two {
+                for j in 0..n {
+                    let (cx, cy, cz, w) = centre(j);
+                    a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
+                    a1 = _mm512_fmadd_pd(w, phi_block(p1x, p1y, p1z, cx, cy, cz, cube), a1);
+                }
+                _mm512_storeu_pd(out[k + 1].as_mut_ptr(), a1);
+            } else {
+                // A last, odd block alone: the same sums in the same order, half the work.
+                for j in 0..n {
+                    let (cx, cy, cz, w) = centre(j);
+                    a0 = _mm512_fmadd_pd(w, phi_block(p0x, p0y, p0z, cx, cy, cz, cube), a0);
+                }
             }
             _mm512_storeu_pd(out[k].as_mut_ptr(), a0);
-            if two {
-                _mm512_storeu_pd(out[k + 1].as_mut_ptr(), a1);
-            }
             k += 2;
         }
     }
@@ -398,7 +408,8 @@ mod avx512 {
         }
     }
 
-    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass. Without
+    /// (Σ w φ, Σ w ∇φ) for φ = r³ (`cube = true`) or φ = r; two blocks per pass (a last, odd
+    /// block alone). Without
     /// `VALUES`, the values are left at 0 and not computed (the gradients are the same bits).
     #[target_feature(enable = "avx512f")]
     pub unsafe fn values_gradients<const VALUES: bool>(
@@ -432,7 +443,8 @@ mod avx512 {
                     _mm512_set1_pd(c.z[j]),
                 );
                 let w = _mm512_set1_pd(c.w[j]);
-                for (a, p) in acc.iter_mut().zip([p0, p1]) {
+                // A last, odd block alone: the same sums in the same order, half the work.
+                for (a, p) in acc.iter_mut().zip([p0, p1]).take(if two { 2 } else { 1 }) {
                     let (phi, s, dx, dy, dz) = phi_grad_block(p.0, p.1, p.2, cx, cy, cz, cube);
                     if VALUES {
                         a[0] = _mm512_fmadd_pd(w, phi, a[0]);
@@ -449,6 +461,113 @@ mod avx512 {
                 }
             }
             k += 2;
+        }
+    }
+
+    /// `out[i]` = φ(|p_i − c|) for the points p_i = (`xs[i]`, `ys[i]`, `zs[i]`), eight at a time,
+    /// with the arithmetic of the sums (each entry has the bits of the term the sums add).
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn column(
+        xs: &[f64],
+        ys: &[f64],
+        zs: &[f64],
+        c: [f64; 3],
+        out: &mut [f64],
+        cube: bool,
+    ) {
+        let n = out.len().min(xs.len()).min(ys.len()).min(zs.len());
+        let (cx, cy, cz) = (
+            _mm512_set1_pd(c[0]),
+            _mm512_set1_pd(c[1]),
+            _mm512_set1_pd(c[2]),
+        );
+        let mut i = 0;
+        while i < n {
+            let mask = first((n - i).min(8));
+            // SAFETY: the lanes of `mask` are rows i..min(i + 8, n) of every slice.
+            unsafe {
+                let px = _mm512_maskz_loadu_pd(mask, xs.as_ptr().add(i));
+                let py = _mm512_maskz_loadu_pd(mask, ys.as_ptr().add(i));
+                let pz = _mm512_maskz_loadu_pd(mask, zs.as_ptr().add(i));
+                let phi = phi_block(px, py, pz, cx, cy, cz, cube);
+                _mm512_mask_storeu_pd(out.as_mut_ptr().add(i), mask, phi);
+            }
+            i += 8;
+        }
+    }
+
+    /// Mask of the first `n` lanes (n at most 8).
+    #[inline(always)]
+    fn first(n: usize) -> __mmask8 {
+        ((1u16 << n) - 1) as __mmask8
+    }
+
+    /// Centres `j..j + 8` (the lanes of `mask`; zero in the others, whose weight is then 0).
+    #[inline(always)]
+    unsafe fn centres8(
+        c: &Centres,
+        j: usize,
+        mask: __mmask8,
+    ) -> (__m512d, __m512d, __m512d, __m512d) {
+        // SAFETY: the caller passes lanes of `mask` within the centres' length.
+        unsafe {
+            (
+                _mm512_maskz_loadu_pd(mask, c.x.as_ptr().add(j)),
+                _mm512_maskz_loadu_pd(mask, c.y.as_ptr().add(j)),
+                _mm512_maskz_loadu_pd(mask, c.z.as_ptr().add(j)),
+                _mm512_maskz_loadu_pd(mask, c.w.as_ptr().add(j)),
+            )
+        }
+    }
+
+    /// Σ w φ at each point of `pts` (normalised), eight centres at a time: lane l sums the
+    /// centres j ≡ l (mod 8) in increasing order, then the lanes are added in a fixed order, so
+    /// each point's sum has the same bits however many points are passed with it.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn values_by_point(c: &Centres, pts: &[[f64; 3]], out: &mut [f64], cube: bool) {
+        let n = c.w.len();
+        for (p, o) in pts.iter().zip(out.iter_mut()) {
+            let [px, py, pz] = p.map(|x| _mm512_set1_pd(x));
+            let mut acc = _mm512_setzero_pd();
+            let mut j = 0;
+            while j < n {
+                let mask = first((n - j).min(8));
+                // SAFETY: the lanes of `mask` are centres j..min(j + 8, n).
+                let (cx, cy, cz, w) = unsafe { centres8(c, j, mask) };
+                acc = _mm512_fmadd_pd(w, phi_block(px, py, pz, cx, cy, cz, cube), acc);
+                j += 8;
+            }
+            *o = _mm512_reduce_add_pd(acc);
+        }
+    }
+
+    /// [Σ w φ, Σ w ∇φ] at each point of `pts` (normalised), in the order of
+    /// [`values_by_point`].
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn values_gradients_by_point(
+        c: &Centres,
+        pts: &[[f64; 3]],
+        out: &mut [[f64; 4]],
+        cube: bool,
+    ) {
+        let n = c.w.len();
+        for (p, o) in pts.iter().zip(out.iter_mut()) {
+            let [px, py, pz] = p.map(|x| _mm512_set1_pd(x));
+            let mut acc = [_mm512_setzero_pd(); 4];
+            let mut j = 0;
+            while j < n {
+                let mask = first((n - j).min(8));
+                // SAFETY: the lanes of `mask` are centres j..min(j + 8, n).
+                let (cx, cy, cz, w) = unsafe { centres8(c, j, mask) };
+                let (phi, s, dx, dy, dz) = phi_grad_block(px, py, pz, cx, cy, cz, cube);
+                acc[0] = _mm512_fmadd_pd(w, phi, acc[0]);
+                let ws = _mm512_mul_pd(w, s);
+                acc[1] = _mm512_fmadd_pd(ws, dx, acc[1]);
+                acc[2] = _mm512_fmadd_pd(ws, dy, acc[2]);
+                acc[3] = _mm512_fmadd_pd(ws, dz, acc[3]);
+                j += 8;
+            }
+            *o = acc.map(|a| _mm512_reduce_add_pd(a));
         }
     }
 }
@@ -474,6 +593,11 @@ fn avx512_kernel<K: 'static>() -> Option<bool> {
     } else {
         None
     }
+}
+
+/// [`avx512_kernel`] where the CPU has AVX-512.
+fn avx512_cube<K: 'static>() -> Option<bool> {
+    avx512_kernel::<K>().filter(|_| has_avx512())
 }
 
 /// AVX2 and FMA: present whenever [`crate::simd::Isa::detect`] is not generic.
@@ -527,6 +651,74 @@ pub fn block_values_gradients<K: RadialFn>(
     }
 }
 
+/// Kernel sums at a few points against all centres, for the patches of a partition fit (which
+/// evaluate a handful of points each): `out[i]` = Σ_j w_j φ(|p_i − c_j|). With AVX-512 (r³ and r),
+/// vectorised over the centres, so that the work is proportional to the points; elsewhere over
+/// blocks of [`LANES`] points. Either way a point's sum does not depend on the other points.
+pub fn values_by_point<K: RadialFn>(c: &Centres, pts: &[[f64; 3]], out: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(cube) = avx512_cube::<K>() {
+        // SAFETY: `avx512_cube` checked that the CPU supports AVX-512F.
+        unsafe { avx512::values_by_point(c, pts, out, cube) };
+        return;
+    }
+    for (p, o) in pts.chunks(LANES).zip(out.chunks_mut(LANES)) {
+        let mut s = [[0.0; LANES]];
+        block_values::<K>(c, &[block_of(p)], &mut s);
+        o.copy_from_slice(&s[0][..o.len()]);
+    }
+}
+
+/// [Σ_j w_j φ, Σ_j w_j ∇φ] at a few points, as [`values_by_point`].
+pub fn values_gradients_by_point<K: RadialFn>(c: &Centres, pts: &[[f64; 3]], out: &mut [[f64; 4]]) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(cube) = avx512_cube::<K>() {
+        // SAFETY: `avx512_cube` checked that the CPU supports AVX-512F.
+        unsafe { avx512::values_gradients_by_point(c, pts, out, cube) };
+        return;
+    }
+    for (p, o) in pts.chunks(LANES).zip(out.chunks_mut(LANES)) {
+        let mut s = [[[0.0; LANES]; 4]];
+        block_values_gradients::<K>(c, &[block_of(p)], &mut s);
+        for (l, ol) in o.iter_mut().enumerate() {
+            *ol = std::array::from_fn(|m| s[0][m][l]);
+        }
+    }
+}
+
+/// The entries of an interpolation matrix with kernel `K` (see [`crate::field::saddle::Entries`]),
+/// computed as the sums compute their terms: with AVX-512 (r³ and r) each entry has the bits of
+/// the term φ(|p_i − c_j|) that evaluation at p_i adds for centre c_j.
+pub struct Arithmetic<K>(std::marker::PhantomData<K>);
+
+impl<K> Default for Arithmetic<K> {
+    fn default() -> Self {
+        Arithmetic(std::marker::PhantomData)
+    }
+}
+
+impl<K: RadialFn> crate::field::saddle::Entries for Arithmetic<K> {
+    fn column(&self, xs: &[f64], ys: &[f64], zs: &[f64], c: glam::DVec3, out: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(cube) = avx512_cube::<K>() {
+            // SAFETY: `avx512_cube` checked that the CPU supports AVX-512F.
+            unsafe { avx512::column(xs, ys, zs, c.to_array(), out, cube) };
+            return;
+        }
+        K::phi_r2.column(xs, ys, zs, c, out);
+    }
+}
+
+/// The block of up to [`LANES`] points (the last repeated in the lanes beyond them).
+fn block_of(p: &[[f64; 3]]) -> Block {
+    let mut b = Block::default();
+    for l in 0..LANES {
+        let q = p[l.min(p.len() - 1)];
+        (b.x[l], b.y[l], b.z[l]) = (q[0], q[1], q[2]);
+    }
+    b
+}
+
 /// [`block_values_gradients`] where only the gradients are wanted: `out[i][0]` (the value) is
 /// left unspecified, and the gradients are the same bits.
 pub fn block_gradients<K: RadialFn>(c: &Centres, blocks: &[Block], out: &mut [[[f64; LANES]; 4]]) {
@@ -553,8 +745,8 @@ pub fn block_gradients<K: RadialFn>(c: &Centres, blocks: &[Block], out: &mut [[[
 mod tests {
     use super::*;
 
-    #[test]
-    fn vector_paths_agree_with_scalar_sums() {
+    /// 203 random centres in [-1, 1]³ with weights sin(0.37 k).
+    fn centres() -> Centres {
         let pts = crate::field::testing::random_points(203, -1.0, 1.0, 9);
         let mut c = Centres::default();
         for (k, p) in pts.iter().enumerate() {
@@ -563,6 +755,12 @@ mod tests {
             c.z.push(p.z);
             c.w.push(((k as f64) * 0.37).sin());
         }
+        c
+    }
+
+    #[test]
+    fn vector_paths_agree_with_scalar_sums() {
+        let c = centres();
         let q = crate::field::testing::random_points(64, -1.2, 1.2, 4);
         let mut blocks = vec![Block::default(); 8];
         for (i, p) in q.iter().enumerate() {
@@ -629,6 +827,66 @@ mod tests {
         check::<Biharmonic>(&c, &blocks[..1], Kernel::Biharmonic);
         check::<Biharmonic>(&c, &blocks, Kernel::Biharmonic);
         check::<ThinPlate>(&c, &blocks, Kernel::ThinPlate);
+    }
+
+    /// Sums by point agree with the sums by block, do not depend on the other points passed
+    /// with a point, and a matrix column of [`Arithmetic`] holds the terms they add.
+    #[test]
+    fn sums_by_point_agree_and_do_not_depend_on_the_batch() {
+        use crate::field::saddle::Entries;
+        let c = centres();
+        let mut q: Vec<[f64; 3]> = crate::field::testing::random_points(21, -1.2, 1.2, 4)
+            .iter()
+            .map(|p| p.to_array())
+            .collect();
+        q[3] = [c.x[5], c.y[5], c.z[5]];
+        fn check<K: RadialFn>(c: &Centres, q: &[[f64; 3]]) {
+            let mut v = vec![0.0; q.len()];
+            let mut g = vec![[0.0; 4]; q.len()];
+            values_by_point::<K>(c, q, &mut v);
+            values_gradients_by_point::<K>(c, q, &mut g);
+            let mut bv = vec![0.0; q.len()];
+            let mut bg = vec![[0.0; 4]; q.len()];
+            for (i, p) in q.iter().enumerate() {
+                // Alone: the same bits.
+                values_by_point::<K>(c, &q[i..i + 1], &mut bv[i..i + 1]);
+                values_gradients_by_point::<K>(c, &q[i..i + 1], &mut bg[i..i + 1]);
+                assert_eq!(v[i].to_bits(), bv[i].to_bits());
+                assert!((0..4).all(|m| g[i][m].to_bits() == bg[i][m].to_bits()));
+                assert_eq!(v[i].to_bits(), g[i][0].to_bits());
+                // Against the sums by block.
+                let mut s = [[0.0; LANES]];
+                block_values::<K>(c, &[block_of(&[*p])], &mut s);
+                assert!((v[i] - s[0][0]).abs() < 1e-12 * s[0][0].abs().max(1.0));
+            }
+            // One centre of weight 1: the sum at p_i is the column's entry i (with AVX-512,
+            // where the entries use the sums' arithmetic).
+            if !(avx512_kernel::<K>().is_some() && has_avx512()) {
+                return;
+            }
+            for j in [0, 5, 202] {
+                let one = Centres {
+                    x: vec![c.x[j]],
+                    y: vec![c.y[j]],
+                    z: vec![c.z[j]],
+                    w: vec![1.0],
+                };
+                let (xs, ys, zs): (Vec<f64>, Vec<f64>, Vec<f64>) = (
+                    q.iter().map(|p| p[0]).collect(),
+                    q.iter().map(|p| p[1]).collect(),
+                    q.iter().map(|p| p[2]).collect(),
+                );
+                let mut col = vec![0.0; q.len()];
+                let centre = glam::DVec3::new(c.x[j], c.y[j], c.z[j]);
+                Arithmetic::<K>::default().column(&xs, &ys, &zs, centre, &mut col);
+                let mut v = vec![0.0; q.len()];
+                values_by_point::<K>(&one, q, &mut v);
+                assert!(col.iter().zip(&v).all(|(a, b)| a.to_bits() == b.to_bits()));
+            }
+        }
+        check::<Triharmonic>(&c, &q);
+        check::<Biharmonic>(&c, &q);
+        check::<ThinPlate>(&c, &q);
     }
 
     #[test]

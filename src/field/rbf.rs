@@ -12,8 +12,9 @@ pub use parts::SurfaceParts;
 
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::{
-    block_gradients, block_values, block_values_gradients, Biharmonic, Block, Centres, Kernel,
-    RadialFn, ThinPlate, Triharmonic, LANES,
+    block_gradients, block_values, block_values_gradients, values_by_point,
+    values_gradients_by_point, Arithmetic, Biharmonic, Block, Centres, Kernel, RadialFn, ThinPlate,
+    Triharmonic, LANES,
 };
 use super::saddle::SaddleSolver;
 use super::Field;
@@ -73,6 +74,24 @@ fn dispatch_values(kernel: Kernel, c: &Centres, blocks: &[Block], out: &mut [[f6
     }
 }
 
+/// Kernel sums at a few points (see [`values_by_point`]).
+fn dispatch_by_point(kernel: Kernel, c: &Centres, q: &[[f64; 3]], out: &mut [f64]) {
+    match kernel {
+        Kernel::Triharmonic => values_by_point::<Triharmonic>(c, q, out),
+        Kernel::Biharmonic => values_by_point::<Biharmonic>(c, q, out),
+        Kernel::ThinPlate => values_by_point::<ThinPlate>(c, q, out),
+    }
+}
+
+/// Kernel sums and gradients at a few points (see [`values_gradients_by_point`]).
+fn dispatch_gradients_by_point(kernel: Kernel, c: &Centres, q: &[[f64; 3]], out: &mut [[f64; 4]]) {
+    match kernel {
+        Kernel::Triharmonic => values_gradients_by_point::<Triharmonic>(c, q, out),
+        Kernel::Biharmonic => values_gradients_by_point::<Biharmonic>(c, q, out),
+        Kernel::ThinPlate => values_gradients_by_point::<ThinPlate>(c, q, out),
+    }
+}
+
 /// Kernel sums and gradients of a run of blocks; with `values` false, only the gradients.
 fn dispatch_values_gradients(
     kernel: Kernel,
@@ -104,25 +123,25 @@ fn saddle_solver(
     par: Par,
     whole: bool,
 ) -> Result<SaddleSolver> {
-    fn make(
+    fn make<K: RadialFn>(
         points: &[DVec3],
-        phi_r2: impl Fn(f64) -> f64 + Sync,
         smoothing: f64,
         sign: f64,
         par: Par,
         whole: bool,
     ) -> Result<SaddleSolver> {
+        let phi = Arithmetic::<K>::default();
         if whole {
-            SaddleSolver::full(points, phi_r2, smoothing, par)
+            SaddleSolver::full(points, phi, smoothing, par)
         } else {
-            SaddleSolver::with_parallelism(points, phi_r2, smoothing, sign, par)
+            SaddleSolver::with_parallelism(points, phi, smoothing, sign, par)
         }
     }
     let sign = kernel.cpd_sign();
     match kernel {
-        Kernel::Triharmonic => make(points, Triharmonic::phi_r2, smoothing, sign, par, whole),
-        Kernel::Biharmonic => make(points, Biharmonic::phi_r2, smoothing, sign, par, whole),
-        Kernel::ThinPlate => make(points, ThinPlate::phi_r2, smoothing, sign, par, whole),
+        Kernel::Triharmonic => make::<Triharmonic>(points, smoothing, sign, par, whole),
+        Kernel::Biharmonic => make::<Biharmonic>(points, smoothing, sign, par, whole),
+        Kernel::ThinPlate => make::<ThinPlate>(points, smoothing, sign, par, whole),
     }
 }
 
@@ -142,7 +161,7 @@ impl VariationalSurface {
     ) -> Result<Self> {
         check_system_memory(2 * points.len(), settings.memory_limit)?;
         let c = constraints::place(points, normals, placement)?;
-        Self::solve(c, settings, faer::get_global_parallelism())
+        Self::solve(c, settings, faer::get_global_parallelism(), false)
     }
 
     /// Fits a surface to the vertices of a triangle mesh, with area-weighted vertex normals
@@ -157,7 +176,7 @@ impl VariationalSurface {
         check_system_memory(2 * v.len(), settings.memory_limit)?;
         let caps = constraints::crease_caps(&v, &f, &n);
         let c = constraints::place_capped(&v, &n, placement, Some(&caps))?;
-        Self::solve(c, settings, faer::get_global_parallelism())
+        Self::solve(c, settings, faer::get_global_parallelism(), false)
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
@@ -171,10 +190,12 @@ impl VariationalSurface {
     ) -> Result<Self> {
         check_system_memory(points.len(), settings.memory_limit)?;
         let c = constraints::interpolation_data(points, values, merge_distance)?;
-        Self::solve(c, settings, faer::get_global_parallelism())
+        Self::solve(c, settings, faer::get_global_parallelism(), false)
     }
 
-    fn solve(c: Constraints, settings: &FitSettings, par: Par) -> Result<Self> {
+    /// Fits the constraints; `by_point` for a patch of a partition fit, whose residuals are
+    /// measured with the sums its evaluation uses ([`VariationalSurface::eval_on_this_thread`]).
+    fn solve(c: Constraints, settings: &FitSettings, par: Par, by_point: bool) -> Result<Self> {
         if !(settings.smoothing.is_finite() && settings.smoothing >= 0.0) {
             return Err(Error::invalid(
                 "smoothing",
@@ -234,7 +255,12 @@ impl VariationalSurface {
             s.set_solution(&x.0, x.1);
             // Residual of the system measured with our own evaluator (what users will see).
             let mut fvals = vec![0.0; n];
-            s.values_normalised(&np, &mut fvals);
+            if by_point {
+                let q: Vec<[f64; 3]> = np.iter().map(|p| p.to_array()).collect();
+                s.sums_by_point(&q, &mut fvals, None);
+            } else {
+                s.values_normalised(&np, &mut fvals);
+            }
             let rf: Vec<f64> = (0..n)
                 .map(|i| s.constraints.values[i] - fvals[i] - smoothing * s.soa.w[i])
                 .collect();
@@ -358,8 +384,9 @@ impl VariationalSurface {
     }
 
     /// Values, and gradients when `gradients` is given, at points in the caller's coordinates,
-    /// on the calling thread (for callers that split the work themselves). The bits are those of
-    /// [`Field::values`] and [`Field::values_gradients`].
+    /// on the calling thread: the evaluation of a partition fit's patches, by point (see
+    /// [`super::kernel::values_by_point`]), so that a point's value and gradient have the same
+    /// bits whatever other points are evaluated with it.
     pub(crate) fn eval_on_this_thread(
         &self,
         points: &[DVec3],
@@ -368,20 +395,35 @@ impl VariationalSurface {
     ) {
         assert_eq!(points.len(), values.len());
         let (shift, scale) = (self.shift, self.scale);
+        let q: Vec<[f64; 3]> = points
+            .iter()
+            .map(|p| ((*p - shift) * scale).to_array())
+            .collect();
+        if let Some(g) = &gradients {
+            assert_eq!(points.len(), g.len());
+        }
+        self.sums_by_point(&q, values, gradients);
+    }
+
+    /// Values, and gradients when `gradients` is given, at normalised points `q`, by point: the
+    /// kernel sums of [`values_by_point`] plus the polynomial (gradients in the caller's
+    /// coordinates).
+    fn sums_by_point(&self, q: &[[f64; 3]], values: &mut [f64], gradients: Option<&mut [DVec3]>) {
+        let [a, bx, by, bz] = self.npoly;
+        let poly = |s: f64, p: &[f64; 3]| s + a + bx * p[0] + by * p[1] + bz * p[2];
         match gradients {
             None => {
-                for (p, o) in points.chunks(EVAL_CHUNK).zip(values.chunks_mut(EVAL_CHUNK)) {
-                    self.values_chunk(p, o, &|p| (p - shift) * scale);
+                dispatch_by_point(self.kernel, &self.soa, q, values);
+                for (v, p) in values.iter_mut().zip(q) {
+                    *v = poly(*v, p);
                 }
             }
             Some(g) => {
-                assert_eq!(points.len(), g.len());
-                for ((p, v), g) in points
-                    .chunks(EVAL_CHUNK)
-                    .zip(values.chunks_mut(EVAL_CHUNK))
-                    .zip(g.chunks_mut(EVAL_CHUNK))
-                {
-                    self.gradients_chunk(p, Some(v), g);
+                let mut sums = vec![[0.0; 4]; q.len()];
+                dispatch_gradients_by_point(self.kernel, &self.soa, q, &mut sums);
+                for (((v, g), s), p) in values.iter_mut().zip(g.iter_mut()).zip(&sums).zip(q) {
+                    *v = poly(s[0], p);
+                    *g = DVec3::new(s[1] + bx, s[2] + by, s[3] + bz) * self.scale;
                 }
             }
         }
@@ -469,7 +511,7 @@ impl VariationalSurface {
             boundary,
             merged: 0,
         };
-        let mut s = Self::solve(c, settings, par)?;
+        let mut s = Self::solve(c, settings, par, true)?;
         s.centers = vec![];
         s.weights = vec![];
         s.constraints = Constraints::default();

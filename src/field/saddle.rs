@@ -105,14 +105,27 @@ fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) 
     }
 }
 
+/// The entries φ(|p_i − c_j|) of the matrix Φ, column by column. A closure of r² gives them
+/// as `phi(dx² + dy² + dz²)`; [`super::kernel::Arithmetic`] with the arithmetic of the
+/// kernel sums, so that the matrix holds the numbers evaluation gives.
+pub trait Entries: Sync {
+    /// `out[i]` = φ(|p_i − c|), p_i = (`xs[i]`, `ys[i]`, `zs[i]`).
+    fn column(&self, xs: &[f64], ys: &[f64], zs: &[f64], c: DVec3, out: &mut [f64]);
+}
+
+impl<F: Fn(f64) -> f64 + Sync> Entries for F {
+    fn column(&self, xs: &[f64], ys: &[f64], zs: &[f64], c: DVec3, out: &mut [f64]) {
+        let rows = xs.iter().zip(ys).zip(zs);
+        for (o, ((x, y), z)) in out.iter_mut().zip(rows) {
+            let (dx, dy, dz) = (x - c.x, y - c.y, z - c.z);
+            *o = self(dx * dx + dy * dy + dz * dz);
+        }
+    }
+}
+
 /// The lower triangle of Φ + sI, column-major, computed [`COLUMNS_PER_STEP`] columns at a time
 /// (the strict upper triangle is left zero).
-fn assemble(
-    points: &[DVec3],
-    phi_r2: &(impl Fn(f64) -> f64 + Sync),
-    smoothing: f64,
-    par: Par,
-) -> Result<Vec<f64>> {
+fn assemble(points: &[DVec3], phi: &impl Entries, smoothing: f64, par: Par) -> Result<Vec<f64>> {
     let n = points.len();
     let mut a = zeroed(n * n);
     // The coordinates by axis, so that a column's loop reads contiguous slices.
@@ -126,13 +139,7 @@ fn assemble(
         for_columns(step, n, par, |k, col| {
             let j = s * COLUMNS_PER_STEP + k;
             let cj = points[j];
-            let rows = xs[j..].iter().zip(&ys[j..]).zip(&zs[j..]);
-            for (out, ((x, y), z)) in col[j..].iter_mut().zip(rows) {
-                // |p_i − c_j|² as the evaluator computes it (kernel.rs), so that the matrix
-                // holds the numbers evaluation gives.
-                let (dx, dy, dz) = (x - cj.x, y - cj.y, z - cj.z);
-                *out = phi_r2(dx * dx + dy * dy + dz * dz);
-            }
+            phi.column(&xs[j..], &ys[j..], &zs[j..], cj, &mut col[j..]);
             col[j] += smoothing;
         });
     }
@@ -240,22 +247,11 @@ fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
 }
 
 impl SaddleSolver {
-    /// Factorizes the system for `points` (already normalised). `phi_r2` is the kernel as a
-    /// function of r² (see [`super::kernel::RadialFn`]); `sign` is
+    /// Factorizes the system for `points` (already normalised). `phi` gives the kernel's
+    /// entries (a function of r², see [`super::kernel::RadialFn`], or [`Entries`]); `sign` is
     /// +1 for kernels conditionally positive definite of order 2 (r³, r² log r) and −1 for −r.
-    pub fn new(
-        points: &[DVec3],
-        phi_r2: impl Fn(f64) -> f64 + Sync,
-        smoothing: f64,
-        sign: f64,
-    ) -> Result<Self> {
-        Self::with_parallelism(
-            points,
-            phi_r2,
-            smoothing,
-            sign,
-            faer::get_global_parallelism(),
-        )
+    pub fn new(points: &[DVec3], phi: impl Entries, smoothing: f64, sign: f64) -> Result<Self> {
+        Self::with_parallelism(points, phi, smoothing, sign, faer::get_global_parallelism())
     }
 
     /// As [`SaddleSolver::new`], with the parallelism of the assembly and factorization:
@@ -263,30 +259,25 @@ impl SaddleSolver {
     /// this thread's [`cancel`] token is set.
     pub fn with_parallelism(
         points: &[DVec3],
-        phi_r2: impl Fn(f64) -> f64 + Sync,
+        phi: impl Entries,
         smoothing: f64,
         sign: f64,
         par: Par,
     ) -> Result<Self> {
         let n = points.len();
-        let a = assemble(points, &phi_r2, smoothing, par)?;
+        let a = assemble(points, &phi, smoothing, par)?;
         if let Some(f) = Self::null_space(points, a, sign, par)? {
             return Ok(SaddleSolver { n, factor: f });
         }
-        Self::full(points, phi_r2, smoothing, par)
+        Self::full(points, phi, smoothing, par)
     }
 
     /// Bunch–Kaufman LBLᵀ of the whole (n + 4) × (n + 4) saddle-point matrix: the fallback of
     /// [`SaddleSolver::with_parallelism`], and for systems whose null-space solution is not
     /// finite.
-    pub fn full(
-        points: &[DVec3],
-        phi_r2: impl Fn(f64) -> f64 + Sync,
-        smoothing: f64,
-        par: Par,
-    ) -> Result<Self> {
+    pub fn full(points: &[DVec3], phi: impl Entries, smoothing: f64, par: Par) -> Result<Self> {
         let n = points.len();
-        let a = assemble(points, &phi_r2, smoothing, par)?;
+        let a = assemble(points, &phi, smoothing, par)?;
         let m = n + 4;
         let mut full = vec![0.0f64; m * m];
         for_columns(&mut full, m, par, |j, col| {
@@ -685,7 +676,9 @@ mod tests {
         let p = random_points(COLUMNS_PER_STEP + 300, -1.0, 1.0, 3);
         let t = cancel::Token::new();
         t.stop();
-        let r = cancel::run_under(t, || SaddleSolver::new(&p, |r2| r2 * r2.sqrt(), 0.0, 1.0));
+        let r = cancel::run_under(t, || {
+            SaddleSolver::new(&p, |r2: f64| r2 * r2.sqrt(), 0.0, 1.0)
+        });
         assert!(matches!(r, Err(crate::Error::Interrupted)));
     }
 }

@@ -217,6 +217,9 @@ impl PartitionSurface {
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
         let (cover_start, cover) = patches::cover(&tree, &fitted);
+        // The kept octree answers no more queries on points (evaluation only descends it).
+        let mut tree = tree;
+        tree.release_copy();
         Ok(PartitionSurface {
             settings: *settings,
             constraints: c,

@@ -52,6 +52,10 @@ pub struct Octree {
     /// Point indices, grouped by node (each node's run splits into its children's runs, in
     /// child order); increasing within a leaf.
     pub order: Vec<u32>,
+    /// The points in the order of `order` (`sorted[k]` = `points[order[k]]`), so that the
+    /// queries read each leaf's points from one run of memory; empty after
+    /// [`Octree::release_copy`].
+    sorted: Vec<DVec3>,
     /// The leaves' node indices, in node order.
     pub leaves: Vec<u32>,
     /// For each node, its position in `leaves` (`u32::MAX` for inner nodes).
@@ -139,8 +143,10 @@ impl Octree {
             }
             level = next..nodes.len();
         }
+        let sorted = order.iter().map(|&i| points[i as usize]).collect();
         Octree {
             order,
+            sorted,
             ..Octree::from_nodes(nodes)
         }
     }
@@ -159,6 +165,7 @@ impl Octree {
         Octree {
             nodes,
             order: Vec::new(),
+            sorted: Vec::new(),
             leaves,
             leaf_slot,
         }
@@ -281,11 +288,9 @@ impl Octree {
             if n.farthest_squared(c) <= r2 {
                 count += (n.end - n.start) as usize;
             } else if n.is_leaf() {
-                let run = &self.order[n.start as usize..n.end as usize];
-                count += run
-                    .iter()
-                    .filter(|&&i| (points[i as usize] - c).length_squared() <= r2)
-                    .count();
+                self.for_each_point(points, n, |_, p| {
+                    count += ((p - c).length_squared() <= r2) as usize
+                });
             } else {
                 stack.extend((0..8).map(|o| n.children + o));
                 continue;
@@ -312,15 +317,15 @@ impl Octree {
             }
             let n = &self.nodes[node as usize];
             if n.is_leaf() {
-                for &i in &self.order[n.start as usize..n.end as usize] {
-                    let e = (points[i as usize] - c).length_squared().to_bits();
+                self.for_each_point(points, n, |_, p| {
+                    let e = (p - c).length_squared().to_bits();
                     if best.len() < k {
                         best.push(e);
                     } else if e < *best.peek().unwrap() {
                         best.pop();
                         best.push(e);
                     }
-                }
+                });
             } else {
                 for o in 0..8 {
                     let ch = n.children + o;
@@ -337,13 +342,33 @@ impl Octree {
     pub fn for_each_within(&self, points: &[DVec3], c: DVec3, r: f64, mut visit: impl FnMut(u32)) {
         let r2 = r * r;
         self.for_each_leaf_meeting(c, r, |k| {
-            let n = &self.nodes[k as usize];
-            for &i in &self.order[n.start as usize..n.end as usize] {
-                if (points[i as usize] - c).length_squared() <= r2 {
+            self.for_each_point(points, &self.nodes[k as usize], |i, p| {
+                if (p - c).length_squared() <= r2 {
                     visit(i);
                 }
-            }
+            });
         });
+    }
+
+    /// Calls `f(i, points[i])` for the points of node `n`, in the order of its run of `order`
+    /// (`points` are those the tree was built from): read from the tree's own copy while it
+    /// has one.
+    #[inline(always)]
+    fn for_each_point(&self, points: &[DVec3], n: &Node, mut f: impl FnMut(u32, DVec3)) {
+        let (start, end) = (n.start as usize, n.end as usize);
+        let run = &self.order[start..end];
+        if self.sorted.is_empty() {
+            run.iter().for_each(|&i| f(i, points[i as usize]));
+        } else {
+            run.iter()
+                .zip(&self.sorted[start..end])
+                .for_each(|(&i, &p)| f(i, p));
+        }
+    }
+
+    /// Frees the tree's copy of its points (the queries then read `points` through `order`).
+    pub fn release_copy(&mut self) {
+        self.sorted = Vec::new();
     }
 }
 
@@ -409,6 +434,18 @@ mod tests {
                 .filter(|&i| (pts[i as usize] - c).length_squared() <= r * r)
                 .collect();
             assert_eq!(got, want);
+            // Without the tree's copy of the points: the same answers.
+            let mut bare = t.clone();
+            bare.release_copy();
+            let mut again = Vec::new();
+            bare.for_each_within(&pts, c, r, |i| again.push(i));
+            again.sort_unstable();
+            assert_eq!(again, want);
+            assert_eq!(bare.count_within(&pts, c, r), want.len());
+            assert_eq!(
+                bare.kth_nearest_distance(&pts, c, 7),
+                t.kth_nearest_distance(&pts, c, 7)
+            );
             assert_eq!(
                 t.more_within_than(&pts, c, r, want.len()),
                 false,
