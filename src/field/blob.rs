@@ -1318,31 +1318,9 @@ impl BlobField {
     ) -> Layer {
         let per_layer = (dims[0] * dims[1]) as usize;
         let mut pairs: Vec<(u32, u32)> = Vec::new();
-        let (zlo, zhi) = sides[2][bz as usize];
         for &i in here {
             let (c, rm) = (centers[i as usize], margin(self.radii[i as usize] + slack));
-            if c.z + rm < zlo || c.z - rm > zhi {
-                continue;
-            }
-            let xs = block_range(lattice, dims, c, rm, 0);
-            let ys = block_range(lattice, dims, c, rm, 1);
-            let r2 = rm * rm;
-            // The squared distance to each block's box as `box_distances2` sums it,
-            // (x² + y²) + z², from the gaps per axis; a row whose y² + z² exceeds r² has no
-            // block within reach (the rounded sums are monotone).
-            let gz2 = gap2(c.z, sides[2][bz as usize]);
-            for by in ys {
-                let gy2 = gap2(c.y, sides[1][by as usize]);
-                if gy2 + gz2 > r2 {
-                    continue;
-                }
-                for bx in xs.clone() {
-                    let gx2 = gap2(c.x, sides[0][bx as usize]);
-                    if (gx2 + gy2) + gz2 <= r2 {
-                        pairs.push((bx + dims[0] * by, i));
-                    }
-                }
-            }
+            blocks_reached(lattice, dims, sides, bz, (c, rm), |k| pairs.push((k, i)));
         }
         // Counting sort by block, stable: each list stays in index order.
         let mut start = vec![0u32; per_layer + 1];
@@ -1359,6 +1337,43 @@ impl BlobField {
             cursor[k as usize] += 1;
         }
         (start, items)
+    }
+}
+
+/// Calls `reached(bx + dims[0]·by)` for each block of z-layer `bz` whose box the sphere at `c`
+/// of radius `rm` reaches (the test every block list is made with), in ascending order; `sides`
+/// are the blocks' box coordinates per axis ([`block_sides`]).
+#[inline]
+fn blocks_reached(
+    lattice: &Lattice,
+    dims: [u32; 3],
+    sides: &[Vec<(f64, f64)>; 3],
+    bz: u32,
+    (c, rm): (DVec3, f64),
+    mut reached: impl FnMut(u32),
+) {
+    let (zlo, zhi) = sides[2][bz as usize];
+    if c.z + rm < zlo || c.z - rm > zhi {
+        return;
+    }
+    let xs = block_range(lattice, dims, c, rm, 0);
+    let ys = block_range(lattice, dims, c, rm, 1);
+    let r2 = rm * rm;
+    // The squared distance to each block's box as `box_distances2` sums it, (x² + y²) + z²,
+    // from the gaps per axis; a row whose y² + z² exceeds r² has no block within reach (the
+    // rounded sums are monotone).
+    let gz2 = gap2(c.z, sides[2][bz as usize]);
+    for by in ys {
+        let gy2 = gap2(c.y, sides[1][by as usize]);
+        if gy2 + gz2 > r2 {
+            continue;
+        }
+        for bx in xs.clone() {
+            let gx2 = gap2(c.x, sides[0][bx as usize]);
+            if (gx2 + gy2) + gz2 <= r2 {
+                reached(bx + dims[0] * by);
+            }
+        }
     }
 }
 
