@@ -9,10 +9,12 @@
 //! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
+mod hints;
 mod interior;
 mod kept;
 mod single;
 
+use hints::{Hints, Proof};
 pub use single::Precision;
 
 #[cfg(target_arch = "x86_64")]
@@ -1114,6 +1116,8 @@ pub struct BlockLists {
     /// The primitives that may reach each z-layer (`layer_candidates`), kept while layers are
     /// still to be listed (empty once every layer is).
     candidates: (Vec<u32>, Vec<u32>),
+    /// How each block's sign was found in the last call, with lists kept between calls.
+    hints: Option<Arc<Hints>>,
 }
 
 impl BlockLists {
@@ -1229,6 +1233,96 @@ impl BlobField {
             BlockSign::Mixed
         }
     }
+}
+
+impl BlobField {
+    /// The sign of `block` as [`BlockField::block_sign`] proves it, and the proof that did
+    /// ([`Proof::Unknown`]: the box bounds, or none). The proof `hint` names goes first and
+    /// alone: [`Proof::Crossed`] tries none.
+    fn block_sign_by(
+        &self,
+        blocks: &BlockLists,
+        lattice: &Lattice,
+        block: &Block,
+        hint: Proof,
+    ) -> (BlockSign, Proof) {
+        let Block { index: b, lo, n } = *block;
+        let list = blocks.list(b);
+        let inside = |coords: &BlockCoords| {
+            if self.block_inside(Isa::detect(), list, coords) {
+                (BlockSign::Inside, Proof::Pairs)
+            } else {
+                (BlockSign::Mixed, Proof::Unknown)
+            }
+        };
+        let octants = || {
+            if self.octants_outside(list, lattice, lo, n) {
+                (BlockSign::Outside, Proof::Octants)
+            } else {
+                (BlockSign::Mixed, Proof::Unknown)
+            }
+        };
+        match hint {
+            Proof::Crossed => return (BlockSign::Mixed, Proof::Unknown),
+            Proof::Pairs => return inside(&BlockCoords::new(lattice, lo, n)),
+            Proof::Octants => return octants(),
+            Proof::Unknown => {}
+        }
+        let (plo, phi) = block_box(lattice, b);
+        let sign = self.box_sign(list, plo, phi);
+        if sign != BlockSign::Mixed {
+            return (sign, Proof::Unknown);
+        }
+        // Inside the surface, the bounds over boxes of many points are loose (each term's
+        // smallest value is at the box's farthest corner): bound pairs of points instead, when
+        // the potential is above the threshold at the block's eight corners (most blocks the
+        // surface crosses have a corner outside, found at the cost of a term per primitive and
+        // corner).
+        let coords = BlockCoords::new(lattice, lo, n);
+        if self.corners_inside(Isa::detect(), list, &coords) {
+            return inside(&coords);
+        }
+        octants()
+    }
+
+    /// Whether the bounds over each of the block's eight octants (points 0..=3 and 4..=7 per
+    /// axis) prove it outside: outside the surface the bounds over the whole block are loose
+    /// where many terms overlap. Stops at the first octant that may be crossed; false for a
+    /// block of at most four points along an axis.
+    fn octants_outside(&self, list: &[u32], lattice: &Lattice, lo: [u32; 3], n: [u32; 3]) -> bool {
+        if !n.iter().all(|&v| v > 4) {
+            return false;
+        }
+        let half = |a: usize, s: u32| -> (u32, u32) {
+            if s == 0 {
+                (lo[a], lo[a] + 3)
+            } else {
+                (lo[a] + 4, lo[a] + n[a] - 1)
+            }
+        };
+        (0..8u32).all(|o| {
+            let (x, y, z) = (half(0, o & 1), half(1, (o >> 1) & 1), half(2, o >> 2));
+            let (plo, phi) = (
+                lattice.point([x.0, y.0, z.0]),
+                lattice.point([x.1, y.1, z.1]),
+            );
+            self.box_sign(list, plo, phi) == BlockSign::Outside
+        })
+    }
+}
+
+/// Whether the values of a block of `n` points per axis have both signs (inside: below zero).
+fn both_signs(values: &[f64; 512], n: [u32; 3]) -> bool {
+    let (mut inside, mut outside) = (false, false);
+    for plane in values.chunks_exact(64).take(n[2] as usize) {
+        for row in plane.chunks_exact(8).take(n[1] as usize) {
+            for &v in &row[..n[0] as usize] {
+                inside |= v < 0.0;
+                outside |= v >= 0.0;
+            }
+        }
+    }
+    inside && outside
 }
 
 /// The primitives per z-layer of blocks, in index order, as compressed rows (`start` has one
@@ -1437,13 +1531,14 @@ impl BlockField for BlobField {
     /// From the second call on one lattice on, the lists of every layer, kept for the next
     /// call and remade only where primitives moved far (the `kept` module).
     fn blocks_by_layers(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
-        if let Some(layers) = self.kept_lists(lattice, dims) {
+        if let Some((layers, hints)) = self.kept_lists(lattice, dims) {
             return BlockLists {
                 dims,
                 first: 0,
                 layers,
                 whole: true,
                 candidates: Default::default(),
+                hints: Some(hints),
             };
         }
         let candidates = layer_candidates(dims[2], self.centers.len(), |i| {
@@ -1455,6 +1550,7 @@ impl BlockField for BlobField {
             layers: Default::default(),
             whole: false,
             candidates,
+            hints: None,
         }
     }
 
@@ -1486,55 +1582,13 @@ impl BlockField for BlobField {
     /// the block's box; when the bounds leave the threshold out (by a margin of 1e-9 of the
     /// strengths' sum, far above rounding), the block has one sign.
     fn block_sign(&self, blocks: &BlockLists, lattice: &Lattice, block: &Block) -> BlockSign {
-        let Block { index: b, lo, n } = *block;
-        let list = blocks.list(b);
-        let (plo, phi) = block_box(lattice, b);
-        let sign = self.box_sign(list, plo, phi);
-        if sign != BlockSign::Mixed {
-            return sign;
-        }
-        // Inside the surface, the bounds over boxes of many points are loose (each term's
-        // smallest value is at the box's farthest corner): bound pairs of points instead, when
-        // the potential is above the threshold at the block's eight corners (most blocks the
-        // surface crosses have a corner outside, found at the cost of a term per primitive and
-        // corner).
-        let (isa, coords) = (Isa::detect(), BlockCoords::new(lattice, lo, n));
-        if self.corners_inside(isa, list, &coords) {
-            return if self.block_inside(isa, list, &coords) {
-                BlockSign::Inside
-            } else {
-                BlockSign::Mixed
-            };
-        }
-        // Outside the surface the bounds over the whole block are loose where many terms
-        // overlap: try its eight octants (points 0..=3 and 4..=7 per axis), and stop at the
-        // first that may be crossed.
-        if n.iter().all(|&v| v > 4) {
-            let half = |a: usize, s: u32| -> (u32, u32) {
-                if s == 0 {
-                    (lo[a], lo[a] + 3)
-                } else {
-                    (lo[a] + 4, lo[a] + n[a] - 1)
-                }
-            };
-            for o in 0..8u32 {
-                let (x, y, z) = (half(0, o & 1), half(1, (o >> 1) & 1), half(2, o >> 2));
-                let s = self.box_sign(
-                    list,
-                    lattice.point([x.0, y.0, z.0]),
-                    lattice.point([x.1, y.1, z.1]),
-                );
-                if s != BlockSign::Outside {
-                    return BlockSign::Mixed;
-                }
-            }
-            return BlockSign::Outside;
-        }
-        BlockSign::Mixed
+        self.block_sign_by(blocks, lattice, block, Proof::Unknown).0
     }
 
     /// The sign of [`BlockField::block_sign`] when it is one; otherwise splats the listed
-    /// primitives row by row, with the same arithmetic and order as the dense splat.
+    /// primitives row by row, with the same arithmetic and order as the dense splat. With lists
+    /// kept between calls, the proof that settled the block in the last call goes first, and
+    /// a block crossed then is splatted at once (the `hints` module).
     fn block_values(
         &self,
         blocks: &BlockLists,
@@ -1542,15 +1596,19 @@ impl BlockField for BlobField {
         block: &Block,
         out: &mut [f64; 512],
     ) -> BlockSign {
-        let sign = self.block_sign(blocks, lattice, block);
-        if sign != BlockSign::Mixed {
-            return sign;
-        }
         let Block { index: b, lo, n } = *block;
-        let list = blocks.list(b);
-        let block = BlockCoords::new(lattice, lo, n);
-        self.splat_block(Isa::detect(), list, &block, out);
-        BlockSign::Mixed
+        let k = (b[0] + blocks.dims[0] * (b[1] + blocks.dims[1] * b[2])) as usize;
+        let hint = blocks.hints.as_ref().map_or(Proof::Unknown, |h| h.get(k));
+        let (sign, proof) = self.block_sign_by(blocks, lattice, block, hint);
+        if sign == BlockSign::Mixed {
+            let list = blocks.list(b);
+            self.splat_block(Isa::detect(), list, &BlockCoords::new(lattice, lo, n), out);
+        }
+        if let Some(h) = &blocks.hints {
+            let crossed = sign == BlockSign::Mixed && both_signs(out, n);
+            h.set(k, if crossed { Proof::Crossed } else { proof });
+        }
+        sign
     }
 
     /// Eight points at a time over the block's list with AVX-512, four with AVX2 (the same

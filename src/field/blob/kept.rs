@@ -15,7 +15,9 @@
 //! Lists are kept for fields of up to [`KEEP_PRIMITIVES`] primitives; the first call on a
 //! lattice makes them as a one-off polygonization does (exact, a few layers at a time).
 
-use super::{block_range, block_sides, blocks_reached, layer_candidates, margin, BlobField, Layer};
+use super::{
+    block_range, block_sides, blocks_reached, layer_candidates, margin, BlobField, Hints, Layer,
+};
 use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -60,12 +62,19 @@ struct KeptLists {
     /// The slack of every radius.
     slack: f64,
     layers: Arc<Vec<Layer>>,
+    /// The proofs of the blocks' signs in the last call.
+    hints: Arc<Hints>,
 }
 
 impl BlobField {
     /// The lists of every layer of the blocks `dims` of `lattice`, kept and brought up to date
-    /// (see the module); `None` on the first call on a lattice, and for large fields.
-    pub(super) fn kept_lists(&self, lattice: &Lattice, dims: [u32; 3]) -> Option<Arc<Vec<Layer>>> {
+    /// (see the module), and the blocks' proofs in the last call (the `hints` module); `None`
+    /// on the first call on a lattice, and for large fields.
+    pub(super) fn kept_lists(
+        &self,
+        lattice: &Lattice,
+        dims: [u32; 3],
+    ) -> Option<(Arc<Vec<Layer>>, Arc<Hints>)> {
         let n = self.centers.len();
         if n == 0 || n > KEEP_PRIMITIVES {
             return None;
@@ -93,6 +102,10 @@ impl BlobField {
             k.radii.extend_from_slice(&self.radii);
             k.slack = slack;
             k.layers = Arc::new(vec![Default::default(); dims[2] as usize]);
+            let blocks = dims.iter().map(|&d| d as usize).product();
+            if k.hints.len() != blocks {
+                k.hints = Arc::new(Hints::new(blocks));
+            }
             let all = vec![true; dims[2] as usize];
             self.remake_layers(lattice, dims, k, &all);
         } else {
@@ -104,7 +117,7 @@ impl BlobField {
                 self.relist_blocks(lattice, dims, k, &moved);
             }
         }
-        Some(Arc::clone(&k.layers))
+        Some((Arc::clone(&k.layers), Arc::clone(&k.hints)))
     }
 
     /// The primitives farther than the slack from their reference position, in index order.
@@ -425,7 +438,7 @@ mod tests {
                 assert!(layers.is_none());
                 continue;
             }
-            let kept = layers.unwrap();
+            let kept = layers.unwrap().0;
             let guard = f.kept.0.lock().unwrap();
             let mut again = KeptLists {
                 on: guard.on,
@@ -433,6 +446,7 @@ mod tests {
                 radii: guard.radii.clone(),
                 slack: guard.slack,
                 layers: Arc::new(vec![Default::default(); dims[2] as usize]),
+                hints: Default::default(),
             };
             drop(guard);
             f.remake_layers(&lattice, dims, &mut again, &vec![true; dims[2] as usize]);
@@ -440,5 +454,64 @@ mod tests {
             assert!(*kept == *again.layers, "frame {k}");
         }
         assert!(relisted >= 6, "{relisted}");
+    }
+
+    /// Hints that no longer fit (the particles moved far between frames: blocks crossed in the
+    /// last frame are now inside or outside, and blocks proved inside or outside are now crossed)
+    /// give the mesh of a new field, bit for bit, in both precisions; after a frame, blocks of
+    /// every kind of hint are recorded.
+    #[test]
+    fn stale_hints_give_the_meshes_of_new_fields() {
+        use super::super::hints::Proof;
+        let p0 = particles();
+        let ball_from = 16 * 16 * 4;
+        let lattice = Lattice::new(
+            DVec3::new(-0.3, -0.3, -0.3),
+            DVec3::new(1.8, 1.8, 1.5),
+            [70, 70, 60],
+        )
+        .unwrap();
+        // (every particle, the ball too): all moved by half a block and more, then the ball
+        // alone far across, into the slab, and back.
+        let z = DVec3::ZERO;
+        let moves = [
+            (z, z),
+            (z, z),
+            (DVec3::new(0.08, 0.05, -0.09), z),
+            (z, DVec3::new(-0.6, -0.5, 0.0)),
+            (z, DVec3::new(0.0, 0.0, -0.8)),
+            (z, DVec3::new(0.05, 0.05, -0.8)),
+            (z, z),
+        ];
+        for precision in [Precision::Double, Precision::Single] {
+            let mut moving = field(&p0, precision);
+            for (k, &(all, ball)) in moves.iter().enumerate() {
+                let mut p = p0.clone();
+                for (i, q) in p.iter_mut().enumerate() {
+                    *q += all + if i >= ball_from { ball } else { z };
+                }
+                moving.update(&p, None, None).unwrap();
+                let settings = Settings::default();
+                let (got, _) = sparse::polygonize(&moving, &lattice, &settings).unwrap();
+                let (want, _) =
+                    sparse::polygonize(&field(&p, precision), &lattice, &settings).unwrap();
+                assert_eq!(got.triangles, want.triangles, "frame {k}");
+                let bits = |v: &[DVec3]| {
+                    v.iter()
+                        .map(|q| q.to_array().map(f64::to_bits))
+                        .collect::<Vec<_>>()
+                };
+                assert_eq!(bits(&got.vertices), bits(&want.vertices), "frame {k}");
+                assert_eq!(bits(&got.normals), bits(&want.normals), "frame {k}");
+                if k >= 1 {
+                    let kept = moving.kept.0.lock().unwrap();
+                    let hints: Vec<Proof> =
+                        (0..kept.hints.len()).map(|b| kept.hints.get(b)).collect();
+                    for proof in [Proof::Unknown, Proof::Pairs, Proof::Octants, Proof::Crossed] {
+                        assert!(hints.contains(&proof), "frame {k}: no {proof:?}");
+                    }
+                }
+            }
+        }
     }
 }
