@@ -7,10 +7,15 @@
 //! no block beyond those lists, so the lists still hold every primitive reaching each block (in
 //! index order, with a few that reach nothing: their terms are zero, and the values, signs,
 //! vertices and normals are those of the exact lists, bit for bit). Each later call moves the
-//! reference of every primitive that went farther to where it is, and remakes the layers that
-//! the old or the new grown sphere of such a primitive reaches; the other layers are kept as
-//! they are. A change in the number of primitives or in a radius, or another lattice, makes
-//! them all again.
+//! reference of every primitive that went farther to where it is. When at most one primitive
+//! in [`RELIST_ABOVE`] did, the blocks the old or the new grown sphere of such a primitive
+//! reaches are relisted (their old list without the moved primitives, merged with those that
+//! reach them now); when more did, the z-layers those spheres reach are made again from every
+//! primitive. The other blocks keep their lists. A change in the number of primitives or in a
+//! radius, or another lattice, makes them all again.
+//!
+//! Beside the lists, the proof that settled each block's sign in the last call (the `hints`
+//! module), which the next call tries first.
 //!
 //! Lists are kept for fields of up to [`KEEP_PRIMITIVES`] primitives; the first call on a
 //! lattice makes them as a one-off polygonization does (exact, a few layers at a time).
@@ -318,6 +323,38 @@ mod tests {
             .collect()
     }
 
+    fn lattice() -> Lattice {
+        Lattice::new(
+            DVec3::new(-0.3, -0.3, -0.3),
+            DVec3::new(1.8, 1.8, 1.5),
+            [70, 70, 60],
+        )
+        .unwrap()
+    }
+
+    /// Asserts that the sparse mesh of `moving` is that of a new field of the particles `p` (in
+    /// its precision), array for array and bit for bit, and not empty.
+    fn assert_mesh_of_a_new_field(
+        moving: &BlobField,
+        p: &[DVec3],
+        lattice: &Lattice,
+        settings: &Settings,
+        k: usize,
+    ) {
+        let (got, _) = sparse::polygonize(moving, lattice, settings).unwrap();
+        let fresh = field(p, moving.settings().precision);
+        let (want, _) = sparse::polygonize(&fresh, lattice, settings).unwrap();
+        assert!(!want.triangles.is_empty());
+        assert_eq!(got.triangles, want.triangles, "frame {k}");
+        let bits = |v: &[DVec3]| {
+            v.iter()
+                .map(|q| q.to_array().map(f64::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&got.vertices), bits(&want.vertices), "frame {k}");
+        assert_eq!(bits(&got.normals), bits(&want.normals), "frame {k}");
+    }
+
     fn field(p: &[DVec3], precision: Precision) -> BlobField {
         let settings = BlobSettings {
             precision,
@@ -341,12 +378,7 @@ mod tests {
     fn frames_of_a_field_moved_in_place_are_those_of_new_fields() {
         let p0 = particles();
         let ball_from = 16 * 16 * 4;
-        let lattice = Lattice::new(
-            DVec3::new(-0.3, -0.3, -0.3),
-            DVec3::new(1.8, 1.8, 1.5),
-            [70, 70, 60],
-        )
-        .unwrap();
+        let lattice = lattice();
         for precision in [Precision::Double, Precision::Single] {
             for normals in [false, true] {
                 let settings = Settings {
@@ -367,18 +399,7 @@ mod tests {
                     } else {
                         moving.update(&p, None, None).unwrap();
                     }
-                    let (got, _) = sparse::polygonize(&moving, &lattice, &settings).unwrap();
-                    let (want, _) =
-                        sparse::polygonize(&field(&p, precision), &lattice, &settings).unwrap();
-                    assert!(!want.triangles.is_empty());
-                    assert_eq!(got.triangles, want.triangles, "frame {k}");
-                    let bits = |v: &[DVec3]| {
-                        v.iter()
-                            .map(|q| q.to_array().map(f64::to_bits))
-                            .collect::<Vec<_>>()
-                    };
-                    assert_eq!(bits(&got.vertices), bits(&want.vertices), "frame {k}");
-                    assert_eq!(bits(&got.normals), bits(&want.normals), "frame {k}");
+                    assert_mesh_of_a_new_field(&moving, &p, &lattice, &settings, k);
                     kept += moving.kept.0.lock().unwrap().refs.len().min(1);
                 }
                 // Kept from the second frame on.
@@ -393,15 +414,10 @@ mod tests {
     /// the slack; and where many move (the layers remade).
     #[test]
     fn relisted_blocks_are_the_lists_made_again() {
-        use super::{KeptLists, Lattice};
+        use super::KeptLists;
         let p0 = particles();
         let n = p0.len();
-        let lattice = Lattice::new(
-            DVec3::new(-0.3, -0.3, -0.3),
-            DVec3::new(1.8, 1.8, 1.5),
-            [70, 70, 60],
-        )
-        .unwrap();
+        let lattice = lattice();
         let dims = crate::polygonize::sparse::block_grid(&lattice).dims;
         let mut f = field(&p0, Precision::Double);
         let mut p = p0.clone();
@@ -465,12 +481,7 @@ mod tests {
         use super::super::hints::Proof;
         let p0 = particles();
         let ball_from = 16 * 16 * 4;
-        let lattice = Lattice::new(
-            DVec3::new(-0.3, -0.3, -0.3),
-            DVec3::new(1.8, 1.8, 1.5),
-            [70, 70, 60],
-        )
-        .unwrap();
+        let lattice = lattice();
         // (every particle, the ball too): all moved by half a block and more, then the ball
         // alone far across, into the slab, and back.
         let z = DVec3::ZERO;
@@ -491,18 +502,7 @@ mod tests {
                     *q += all + if i >= ball_from { ball } else { z };
                 }
                 moving.update(&p, None, None).unwrap();
-                let settings = Settings::default();
-                let (got, _) = sparse::polygonize(&moving, &lattice, &settings).unwrap();
-                let (want, _) =
-                    sparse::polygonize(&field(&p, precision), &lattice, &settings).unwrap();
-                assert_eq!(got.triangles, want.triangles, "frame {k}");
-                let bits = |v: &[DVec3]| {
-                    v.iter()
-                        .map(|q| q.to_array().map(f64::to_bits))
-                        .collect::<Vec<_>>()
-                };
-                assert_eq!(bits(&got.vertices), bits(&want.vertices), "frame {k}");
-                assert_eq!(bits(&got.normals), bits(&want.normals), "frame {k}");
+                assert_mesh_of_a_new_field(&moving, &p, &lattice, &Settings::default(), k);
                 if k >= 1 {
                     let kept = moving.kept.0.lock().unwrap();
                     let hints: Vec<Proof> =
