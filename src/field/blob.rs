@@ -1263,7 +1263,7 @@ impl BlobField {
             }
         };
         match hint {
-            Proof::Crossed => return (BlockSign::Mixed, Proof::Unknown),
+            Proof::Crossed | Proof::OneSign => return (BlockSign::Mixed, Proof::Unknown),
             Proof::Pairs => return inside(&BlockCoords::new(lattice, lo, n)),
             Proof::Octants => return octants(),
             Proof::Unknown => {}
@@ -1308,6 +1308,27 @@ impl BlobField {
             );
             self.box_sign(list, plo, phi) == BlockSign::Outside
         })
+    }
+}
+
+/// The hint a block leaves for the next frame: the `proof` of its `sign`, or when it was
+/// splatted, [`Proof::Crossed`] if its values have both signs (`crossed`), else
+/// [`Proof::OneSign`] after proofs ([`Proof::Unknown`] after a splat without: the next frame
+/// proves it again).
+fn splatted_proof(
+    sign: BlockSign,
+    proof: Proof,
+    hint: Proof,
+    crossed: impl FnOnce() -> bool,
+) -> Proof {
+    if sign != BlockSign::Mixed {
+        proof
+    } else if crossed() {
+        Proof::Crossed
+    } else if matches!(hint, Proof::Crossed | Proof::OneSign) {
+        Proof::Unknown
+    } else {
+        Proof::OneSign
     }
 }
 
@@ -1605,8 +1626,7 @@ impl BlockField for BlobField {
             self.splat_block(Isa::detect(), list, &BlockCoords::new(lattice, lo, n), out);
         }
         if let Some(h) = &blocks.hints {
-            let crossed = sign == BlockSign::Mixed && both_signs(out, n);
-            h.set(k, if crossed { Proof::Crossed } else { proof });
+            h.set(k, splatted_proof(sign, proof, hint, || both_signs(out, n)));
         }
         sign
     }

@@ -1,7 +1,8 @@
 //! Which proof settled each block's sign in the last polygonization of a lattice, kept beside
 //! the block lists (the `kept` module) for the next frame of an animation: a block crossed by
-//! the surface in the last frame is splatted at once, one proved inside from pairs of points
-//! or outside from its octants goes straight to that proof. A hint only orders the work: every
+//! the surface in the last frame is splatted at once (so is one whose proofs failed and whose
+//! values had one sign, every other frame), one proved inside from pairs of points or outside
+//! from its octants goes straight to that proof. A hint only orders the work: every
 //! sign claimed is still proved on this frame's field, and a block splatted without proofs
 //! gives its values, so the mesh is the one without hints.
 
@@ -19,6 +20,9 @@ pub(crate) enum Proof {
     Octants = 2,
     /// Splatted, and its values had both signs.
     Crossed = 3,
+    /// Splatted after proofs that failed, and its values had one sign: splatted again without
+    /// proofs in the next frame, then proved again in the one after.
+    OneSign = 4,
 }
 
 impl Proof {
@@ -27,6 +31,7 @@ impl Proof {
             1 => Proof::Pairs,
             2 => Proof::Octants,
             3 => Proof::Crossed,
+            4 => Proof::OneSign,
             _ => Proof::Unknown,
         }
     }

@@ -507,7 +507,8 @@ mod tests {
                     let kept = moving.kept.0.lock().unwrap();
                     let hints: Vec<Proof> =
                         (0..kept.hints.len()).map(|b| kept.hints.get(b)).collect();
-                    for proof in [Proof::Unknown, Proof::Pairs, Proof::Octants, Proof::Crossed] {
+                    let all = [Proof::Pairs, Proof::Octants, Proof::Crossed, Proof::OneSign];
+                    for proof in [Proof::Unknown].into_iter().chain(all) {
                         assert!(hints.contains(&proof), "frame {k}: no {proof:?}");
                     }
                 }
