@@ -314,14 +314,18 @@ impl BlobField {
             let c = self.centers[i as usize];
             c.cmpge(lo - grow).all() && c.cmple(hi + grow).all()
         };
-        let near = |i: u32| within(i, grow);
-        let half_radius =
-            |i: u32| !near(i) && within(i, DVec3::splat(0.5 * self.radii[i as usize]));
+        let (mut first, mut second, mut then) = (Vec::new(), Vec::new(), Vec::new());
+        for &i in list {
+            if within(i, grow) {
+                first.push(i);
+            } else if within(i, DVec3::splat(0.5 * self.radii[i as usize])) {
+                second.push(i);
+            } else {
+                then.push(i);
+            }
+        }
         let mut low: Pairs = [[[0.0; PAIRS]; BLOCK_POINTS]; BLOCK_POINTS];
-        let first = list.iter().filter(|&&i| near(i));
-        let second = list.iter().filter(|&&i| half_radius(i));
-        let then = list.iter().filter(|&&i| !near(i) && !half_radius(i));
-        for (m, &i) in first.chain(second).chain(then).enumerate() {
+        for (m, &i) in first.iter().chain(&second).chain(&then).enumerate() {
             let (c, inv, a, r) = self.primitive(i);
             let qx = farthest(std::array::from_fn(|l| {
                 ((xs[l] - c.x) * (xs[l] - c.x)) * inv
