@@ -111,6 +111,30 @@ def test_tessellator_output_does_not_depend_on_earlier_calls():
         assert kept.stats["evaluations"] == fresh.stats["evaluations"] == sp.stats["evaluations"]
 
 
+def slab_and_ball(seed, side, ball, radius, center):
+    """Particles 0.1 apart, jittered by ±0.01: a slab of ``side`` × ``side`` × 4 from the origin
+    and a ball of ``radius`` (at most ``ball``/10) at ``center``; and which particles are the
+    ball's."""
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(*[np.arange(side) * 0.1] * 2, np.arange(4) * 0.1, indexing="ij"), -1).reshape(-1, 3)
+    b = np.stack(np.meshgrid(*[np.arange(-ball, ball + 1) * 0.1] * 3, indexing="ij"), -1).reshape(-1, 3)
+    b = b[np.linalg.norm(b, axis=1) <= radius] + center
+    p = np.vstack([g, b]) + rng.uniform(-0.01, 0.01, (len(g) + len(b), 3))
+    return p, np.arange(len(p)) >= len(g)
+
+
+def assert_meshes_of_a_new_field(field, tess, p, kw, k):
+    """Sparse and ``tess`` on ``field`` (updated in place to ``p``) give the arrays sparse gives
+    on a new field of ``p``, bit for bit (frame ``k``); returns that mesh."""
+    want = im.polygonize(im.BlobField(p, 0.2, 1.0, 0.9, precision=field.precision), method="sparse", **kw)
+    assert len(want.faces) > 0
+    for got in (im.polygonize(field, method="sparse", **kw), tess.polygonize(field, **kw)):
+        assert np.array_equal(got.faces, want.faces), k
+        assert np.array_equal(got.vertices, want.vertices), k
+        assert np.array_equal(got.normals, want.normals), k
+    return want
+
+
 @pytest.mark.parametrize("precision", ["double", "single"])
 def test_frames_of_a_field_updated_in_place_are_those_of_a_new_field(precision):
     # From its second polygonization on one lattice, a field keeps its lists of primitives per
@@ -119,12 +143,7 @@ def test_frames_of_a_field_updated_in_place_are_those_of_a_new_field(precision):
     # falling through several layers of blocks (remade ones), then fewer particles (all
     # remade). Every frame, sparse and a Tessellator on the field updated in place give the
     # arrays sparse gives on a new field of the frame's particles, bit for bit.
-    rng = np.random.default_rng(3)
-    g = np.stack(np.meshgrid(*[np.arange(14) * 0.1] * 2, np.arange(4) * 0.1, indexing="ij"), -1).reshape(-1, 3)
-    b = np.stack(np.meshgrid(*[np.arange(-3, 4) * 0.1] * 3, indexing="ij"), -1).reshape(-1, 3)
-    b = b[np.linalg.norm(b, axis=1) <= 0.3] + [0.65, 0.65, 1.0]
-    p0 = np.vstack([g, b]) + rng.uniform(-0.01, 0.01, (len(g) + len(b), 3))
-    ball = np.arange(len(p0)) >= len(g)
+    p0, ball = slab_and_ball(3, 14, 3, 0.3, [0.65, 0.65, 1.0])
     kw = dict(bounds=[[-0.3, -0.3, -0.3], [1.6, 1.6, 1.5]], resolution=[64, 64, 60])
     field = im.BlobField(p0, 0.2, 1.0, 0.9, precision=precision)
     tess = im.Tessellator()
@@ -136,12 +155,37 @@ def test_frames_of_a_field_updated_in_place_are_those_of_a_new_field(precision):
             field.update(p, radii=0.2, strengths=1.0)
         else:
             field.update(p)
-        want = im.polygonize(im.BlobField(p, 0.2, 1.0, 0.9, precision=precision), method="sparse", **kw)
-        assert len(want.faces) > 0
-        for got in (im.polygonize(field, method="sparse", **kw), tess.polygonize(field, **kw)):
-            assert np.array_equal(got.faces, want.faces), k
-            assert np.array_equal(got.vertices, want.vertices), k
-            assert np.array_equal(got.normals, want.normals), k
+        assert_meshes_of_a_new_field(field, tess, p, kw, k)
+
+
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_frames_moved_none_few_many_and_out_are_those_of_a_new_field(precision):
+    # After updates in place (kept block lists relisted block by block or layer by layer, signs
+    # first tried with last frame's proofs): frames where no particle moves, a few jump across
+    # the lattice, some leave it and come back, and all move by half a block. Every frame,
+    # sparse and a Tessellator on the field updated in place give the arrays sparse gives on a
+    # new field, bit for bit, and dense's triangles and vertices.
+    p, _ = slab_and_ball(5, 12, 2, 0.25, [0.55, 0.55, 0.9])
+    few = np.random.default_rng(5).choice(len(p), 12, replace=False)
+    kw = dict(bounds=[[-0.3, -0.3, -0.3], [1.4, 1.4, 1.4]], resolution=[51, 51, 51])
+    moves = [
+        lambda q: q,  # none
+        lambda q: q,  # none again (every hint from the last frame)
+        lambda q: q + np.where(np.isin(np.arange(len(q)), few)[:, None], [0.5, -0.3, 0.2], 0.0),  # a few jump
+        lambda q: q + np.where(np.isin(np.arange(len(q)), few)[:, None], [0.0, 0.0, 5.0], 0.0),  # they leave
+        lambda q: q - np.where(np.isin(np.arange(len(q)), few)[:, None], [0.0, 0.0, 5.2], 0.0),  # and come back
+        lambda q: q + [0.04, -0.05, 0.06],  # all, by half a block and more
+    ]
+    field = im.BlobField(p, 0.2, 1.0, 0.9, precision=precision)
+    tess = im.Tessellator()
+    for k, move in enumerate(moves):
+        p = move(p)
+        field.update(p)
+        want = assert_meshes_of_a_new_field(field, tess, p, kw, k)
+        dense = im.polygonize(field, method="dense", **kw)
+        assert im.compare(dense, want) == {"missing": 0, "extra": 0, "common": len(dense.faces)}, k
+        order = lambda v: v[np.lexsort(v.T)]
+        assert np.array_equal(order(dense.vertices), order(want.vertices)), k
 
 
 def test_animation_memory_stays_flat():

@@ -9,10 +9,12 @@
 //! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
+mod hints;
 mod interior;
 mod kept;
 mod single;
 
+use hints::{Hints, Proof};
 pub use single::Precision;
 
 #[cfg(target_arch = "x86_64")]
@@ -1098,6 +1100,8 @@ pub struct BlockLists {
     /// The primitives that may reach each z-layer (`layer_candidates`), kept while layers are
     /// still to be listed (empty once every layer is).
     candidates: (Vec<u32>, Vec<u32>),
+    /// How each block's sign was found in the last call, with lists kept between calls.
+    hints: Option<Arc<Hints>>,
 }
 
 impl BlockLists {
@@ -1215,6 +1219,117 @@ impl BlobField {
     }
 }
 
+impl BlobField {
+    /// The sign of `block` as [`BlockField::block_sign`] proves it, and the proof that did
+    /// ([`Proof::Unknown`]: the box bounds, or none). The proof `hint` names goes first and
+    /// alone: [`Proof::Crossed`] tries none.
+    fn block_sign_by(
+        &self,
+        blocks: &BlockLists,
+        lattice: &Lattice,
+        block: &Block,
+        hint: Proof,
+    ) -> (BlockSign, Proof) {
+        let Block { index: b, lo, n } = *block;
+        let list = blocks.list(b);
+        let inside = |coords: &BlockCoords| {
+            if self.block_inside(Isa::detect(), list, coords) {
+                (BlockSign::Inside, Proof::Pairs)
+            } else {
+                (BlockSign::Mixed, Proof::Unknown)
+            }
+        };
+        let octants = || {
+            if self.octants_outside(list, lattice, lo, n) {
+                (BlockSign::Outside, Proof::Octants)
+            } else {
+                (BlockSign::Mixed, Proof::Unknown)
+            }
+        };
+        match hint {
+            Proof::Crossed | Proof::OneSign => return (BlockSign::Mixed, Proof::Unknown),
+            Proof::Pairs => return inside(&BlockCoords::new(lattice, lo, n)),
+            Proof::Octants => return octants(),
+            Proof::Unknown => {}
+        }
+        let (plo, phi) = block_box(lattice, b);
+        let sign = self.box_sign(list, plo, phi);
+        if sign != BlockSign::Mixed {
+            return (sign, Proof::Unknown);
+        }
+        // Inside the surface, the bounds over boxes of many points are loose (each term's
+        // smallest value is at the box's farthest corner): bound pairs of points instead, when
+        // the potential is above the threshold at the block's eight corners (most blocks the
+        // surface crosses have a corner outside, found at the cost of a term per primitive and
+        // corner).
+        let coords = BlockCoords::new(lattice, lo, n);
+        if self.corners_inside(Isa::detect(), list, &coords) {
+            return inside(&coords);
+        }
+        octants()
+    }
+
+    /// Whether the bounds over each of the block's eight octants (points 0..=3 and 4..=7 per
+    /// axis) prove it outside: outside the surface the bounds over the whole block are loose
+    /// where many terms overlap. Stops at the first octant that may be crossed; false for a
+    /// block of at most four points along an axis.
+    fn octants_outside(&self, list: &[u32], lattice: &Lattice, lo: [u32; 3], n: [u32; 3]) -> bool {
+        if !n.iter().all(|&v| v > 4) {
+            return false;
+        }
+        let half = |a: usize, s: u32| -> (u32, u32) {
+            if s == 0 {
+                (lo[a], lo[a] + 3)
+            } else {
+                (lo[a] + 4, lo[a] + n[a] - 1)
+            }
+        };
+        (0..8u32).all(|o| {
+            let (x, y, z) = (half(0, o & 1), half(1, (o >> 1) & 1), half(2, o >> 2));
+            let (plo, phi) = (
+                lattice.point([x.0, y.0, z.0]),
+                lattice.point([x.1, y.1, z.1]),
+            );
+            self.box_sign(list, plo, phi) == BlockSign::Outside
+        })
+    }
+}
+
+/// The hint a block leaves for the next frame: the `proof` of its `sign`, or when it was
+/// splatted, [`Proof::Crossed`] if its values have both signs (`crossed`), else
+/// [`Proof::OneSign`] after proofs ([`Proof::Unknown`] after a splat without: the next frame
+/// proves it again).
+fn splatted_proof(
+    sign: BlockSign,
+    proof: Proof,
+    hint: Proof,
+    crossed: impl FnOnce() -> bool,
+) -> Proof {
+    if sign != BlockSign::Mixed {
+        proof
+    } else if crossed() {
+        Proof::Crossed
+    } else if matches!(hint, Proof::Crossed | Proof::OneSign) {
+        Proof::Unknown
+    } else {
+        Proof::OneSign
+    }
+}
+
+/// Whether the values of a block of `n` points per axis have both signs (inside: below zero).
+fn both_signs(values: &[f64; 512], n: [u32; 3]) -> bool {
+    let (mut inside, mut outside) = (false, false);
+    for plane in values.chunks_exact(64).take(n[2] as usize) {
+        for row in plane.chunks_exact(8).take(n[1] as usize) {
+            for &v in &row[..n[0] as usize] {
+                inside |= v < 0.0;
+                outside |= v >= 0.0;
+            }
+        }
+    }
+    inside && outside
+}
+
 /// The primitives per z-layer of blocks, in index order, as compressed rows (`start` has one
 /// more entry than there are `layers`): primitive i in every layer of `layers_of(i)`, a range
 /// holding every layer its sphere may reach.
@@ -1302,31 +1417,9 @@ impl BlobField {
     ) -> Layer {
         let per_layer = (dims[0] * dims[1]) as usize;
         let mut pairs: Vec<(u32, u32)> = Vec::new();
-        let (zlo, zhi) = sides[2][bz as usize];
         for &i in here {
             let (c, rm) = (centers[i as usize], margin(self.radii[i as usize] + slack));
-            if c.z + rm < zlo || c.z - rm > zhi {
-                continue;
-            }
-            let xs = block_range(lattice, dims, c, rm, 0);
-            let ys = block_range(lattice, dims, c, rm, 1);
-            let r2 = rm * rm;
-            // The squared distance to each block's box as `box_distances2` sums it,
-            // (x² + y²) + z², from the gaps per axis; a row whose y² + z² exceeds r² has no
-            // block within reach (the rounded sums are monotone).
-            let gz2 = gap2(c.z, sides[2][bz as usize]);
-            for by in ys {
-                let gy2 = gap2(c.y, sides[1][by as usize]);
-                if gy2 + gz2 > r2 {
-                    continue;
-                }
-                for bx in xs.clone() {
-                    let gx2 = gap2(c.x, sides[0][bx as usize]);
-                    if (gx2 + gy2) + gz2 <= r2 {
-                        pairs.push((bx + dims[0] * by, i));
-                    }
-                }
-            }
+            blocks_reached(lattice, dims, sides, bz, (c, rm), |k| pairs.push((k, i)));
         }
         // Counting sort by block, stable: each list stays in index order.
         let mut start = vec![0u32; per_layer + 1];
@@ -1343,6 +1436,43 @@ impl BlobField {
             cursor[k as usize] += 1;
         }
         (start, items)
+    }
+}
+
+/// Calls `reached(bx + dims[0]·by)` for each block of z-layer `bz` whose box the sphere at `c`
+/// of radius `rm` reaches (the test every block list is made with), in ascending order; `sides`
+/// are the blocks' box coordinates per axis ([`block_sides`]).
+#[inline]
+fn blocks_reached(
+    lattice: &Lattice,
+    dims: [u32; 3],
+    sides: &[Vec<(f64, f64)>; 3],
+    bz: u32,
+    (c, rm): (DVec3, f64),
+    mut reached: impl FnMut(u32),
+) {
+    let (zlo, zhi) = sides[2][bz as usize];
+    if c.z + rm < zlo || c.z - rm > zhi {
+        return;
+    }
+    let xs = block_range(lattice, dims, c, rm, 0);
+    let ys = block_range(lattice, dims, c, rm, 1);
+    let r2 = rm * rm;
+    // The squared distance to each block's box as `box_distances2` sums it, (x² + y²) + z²,
+    // from the gaps per axis; a row whose y² + z² exceeds r² has no block within reach (the
+    // rounded sums are monotone).
+    let gz2 = gap2(c.z, sides[2][bz as usize]);
+    for by in ys {
+        let gy2 = gap2(c.y, sides[1][by as usize]);
+        if gy2 + gz2 > r2 {
+            continue;
+        }
+        for bx in xs.clone() {
+            let gx2 = gap2(c.x, sides[0][bx as usize]);
+            if (gx2 + gy2) + gz2 <= r2 {
+                reached(bx + dims[0] * by);
+            }
+        }
     }
 }
 
@@ -1406,13 +1536,14 @@ impl BlockField for BlobField {
     /// From the second call on one lattice on, the lists of every layer, kept for the next
     /// call and remade only where primitives moved far (the `kept` module).
     fn blocks_by_layers(&self, lattice: &Lattice, dims: [u32; 3]) -> BlockLists {
-        if let Some(layers) = self.kept_lists(lattice, dims) {
+        if let Some((layers, hints)) = self.kept_lists(lattice, dims) {
             return BlockLists {
                 dims,
                 first: 0,
                 layers,
                 whole: true,
                 candidates: Default::default(),
+                hints: Some(hints),
             };
         }
         let candidates = layer_candidates(dims[2], self.centers.len(), |i| {
@@ -1424,6 +1555,7 @@ impl BlockField for BlobField {
             layers: Default::default(),
             whole: false,
             candidates,
+            hints: None,
         }
     }
 
@@ -1455,55 +1587,13 @@ impl BlockField for BlobField {
     /// the block's box; when the bounds leave the threshold out (by a margin of 1e-9 of the
     /// strengths' sum, far above rounding), the block has one sign.
     fn block_sign(&self, blocks: &BlockLists, lattice: &Lattice, block: &Block) -> BlockSign {
-        let Block { index: b, lo, n } = *block;
-        let list = blocks.list(b);
-        let (plo, phi) = block_box(lattice, b);
-        let sign = self.box_sign(list, plo, phi);
-        if sign != BlockSign::Mixed {
-            return sign;
-        }
-        // Inside the surface, the bounds over boxes of many points are loose (each term's
-        // smallest value is at the box's farthest corner): bound pairs of points instead, when
-        // the potential is above the threshold at the block's eight corners (most blocks the
-        // surface crosses have a corner outside, found at the cost of a term per primitive and
-        // corner).
-        let (isa, coords) = (Isa::detect(), BlockCoords::new(lattice, lo, n));
-        if self.corners_inside(isa, list, &coords) {
-            return if self.block_inside(isa, list, &coords) {
-                BlockSign::Inside
-            } else {
-                BlockSign::Mixed
-            };
-        }
-        // Outside the surface the bounds over the whole block are loose where many terms
-        // overlap: try its eight octants (points 0..=3 and 4..=7 per axis), and stop at the
-        // first that may be crossed.
-        if n.iter().all(|&v| v > 4) {
-            let half = |a: usize, s: u32| -> (u32, u32) {
-                if s == 0 {
-                    (lo[a], lo[a] + 3)
-                } else {
-                    (lo[a] + 4, lo[a] + n[a] - 1)
-                }
-            };
-            for o in 0..8u32 {
-                let (x, y, z) = (half(0, o & 1), half(1, (o >> 1) & 1), half(2, o >> 2));
-                let s = self.box_sign(
-                    list,
-                    lattice.point([x.0, y.0, z.0]),
-                    lattice.point([x.1, y.1, z.1]),
-                );
-                if s != BlockSign::Outside {
-                    return BlockSign::Mixed;
-                }
-            }
-            return BlockSign::Outside;
-        }
-        BlockSign::Mixed
+        self.block_sign_by(blocks, lattice, block, Proof::Unknown).0
     }
 
     /// The sign of [`BlockField::block_sign`] when it is one; otherwise splats the listed
-    /// primitives row by row, with the same arithmetic and order as the dense splat.
+    /// primitives row by row, with the same arithmetic and order as the dense splat. With lists
+    /// kept between calls, the proof that settled the block in the last call goes first, and
+    /// a block crossed then is splatted at once (the `hints` module).
     fn block_values(
         &self,
         blocks: &BlockLists,
@@ -1511,15 +1601,18 @@ impl BlockField for BlobField {
         block: &Block,
         out: &mut [f64; 512],
     ) -> BlockSign {
-        let sign = self.block_sign(blocks, lattice, block);
-        if sign != BlockSign::Mixed {
-            return sign;
-        }
         let Block { index: b, lo, n } = *block;
-        let list = blocks.list(b);
-        let block = BlockCoords::new(lattice, lo, n);
-        self.splat_block(Isa::detect(), list, &block, out);
-        BlockSign::Mixed
+        let k = (b[0] + blocks.dims[0] * (b[1] + blocks.dims[1] * b[2])) as usize;
+        let hint = blocks.hints.as_ref().map_or(Proof::Unknown, |h| h.get(k));
+        let (sign, proof) = self.block_sign_by(blocks, lattice, block, hint);
+        if sign == BlockSign::Mixed {
+            let list = blocks.list(b);
+            self.splat_block(Isa::detect(), list, &BlockCoords::new(lattice, lo, n), out);
+        }
+        if let Some(h) = &blocks.hints {
+            h.set(k, splatted_proof(sign, proof, hint, || both_signs(out, n)));
+        }
+        sign
     }
 
     /// Eight points at a time over the block's list with AVX-512, four with AVX2 (the same

@@ -179,8 +179,10 @@ impl PyBlobField {
     /// For animation: from the second polygonization over the same lattice on (``"sparse"``,
     /// ``"tracking"`` or a :class:`Tessellator`), a field of up to 2²⁰ primitives keeps the
     /// lists of primitives per block of the lattice, made with radii grown by an eighth of the
-    /// largest, and after ``update`` remakes only the z-layers of blocks that primitives moved
-    /// beyond that reach; the meshes are those of a new field, bit for bit.
+    /// largest, and after ``update`` relists only the blocks that primitives moved beyond that
+    /// reach (the z-layers they reach, when more than a quarter of the primitives did); it also
+    /// keeps how each block's sign was proved, and tries that proof first in the next frame.
+    /// The meshes are those of a new field, bit for bit.
     ///
     /// Parameters
     /// ----------

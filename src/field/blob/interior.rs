@@ -299,7 +299,8 @@ impl BlobField {
         let above = |low: &Pairs| low.iter().flatten().flatten().all(|&v| v > goal);
         let BlockCoords { xs, ys, zs, .. } = block;
         // The primitives centred within a quarter of the block's side of its box add the most:
-        // they go first, so that the sum is above the threshold sooner.
+        // they go first, then those within half their radius of it, so that the sum is above
+        // the threshold sooner.
         let (lo, hi) = (
             DVec3::new(xs[0], ys[0], zs[0]),
             DVec3::new(
@@ -309,15 +310,22 @@ impl BlobField {
             ),
         );
         let grow = (hi - lo) * 0.25;
-        let (lo, hi) = (lo - grow, hi + grow);
-        let near = |i: u32| {
+        let within = |i: u32, grow: DVec3| {
             let c = self.centers[i as usize];
-            c.cmpge(lo).all() && c.cmple(hi).all()
+            c.cmpge(lo - grow).all() && c.cmple(hi + grow).all()
         };
+        let (mut first, mut second, mut then) = (Vec::new(), Vec::new(), Vec::new());
+        for &i in list {
+            if within(i, grow) {
+                first.push(i);
+            } else if within(i, DVec3::splat(0.5 * self.radii[i as usize])) {
+                second.push(i);
+            } else {
+                then.push(i);
+            }
+        }
         let mut low: Pairs = [[[0.0; PAIRS]; BLOCK_POINTS]; BLOCK_POINTS];
-        let first = list.iter().filter(|&&i| near(i));
-        let then = list.iter().filter(|&&i| !near(i));
-        for (m, &i) in first.chain(then).enumerate() {
+        for (m, &i) in first.iter().chain(&second).chain(&then).enumerate() {
             let (c, inv, a, r) = self.primitive(i);
             let qx = farthest(std::array::from_fn(|l| {
                 ((xs[l] - c.x) * (xs[l] - c.x)) * inv

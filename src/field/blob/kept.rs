@@ -7,15 +7,22 @@
 //! no block beyond those lists, so the lists still hold every primitive reaching each block (in
 //! index order, with a few that reach nothing: their terms are zero, and the values, signs,
 //! vertices and normals are those of the exact lists, bit for bit). Each later call moves the
-//! reference of every primitive that went farther to where it is, and remakes the layers that
-//! the old or the new grown sphere of such a primitive reaches; the other layers are kept as
-//! they are. A change in the number of primitives or in a radius, or another lattice, makes
-//! them all again.
+//! reference of every primitive that went farther to where it is. When at most one primitive
+//! in [`RELIST_ABOVE`] did, the blocks the old or the new grown sphere of such a primitive
+//! reaches are relisted (their old list without the moved primitives, merged with those that
+//! reach them now); when more did, the z-layers those spheres reach are made again from every
+//! primitive. The other blocks keep their lists. A change in the number of primitives or in a
+//! radius, or another lattice, makes them all again.
+//!
+//! Beside the lists, the proof that settled each block's sign in the last call (the `hints`
+//! module), which the next call tries first.
 //!
 //! Lists are kept for fields of up to [`KEEP_PRIMITIVES`] primitives; the first call on a
 //! lattice makes them as a one-off polygonization does (exact, a few layers at a time).
 
-use super::{block_range, block_sides, layer_candidates, margin, BlobField, Layer};
+use super::{
+    block_range, block_sides, blocks_reached, layer_candidates, margin, BlobField, Hints, Layer,
+};
 use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -23,6 +30,10 @@ use std::sync::{Arc, Mutex};
 
 /// The slack of the kept lists, as a fraction of the largest radius.
 const SLACK: f64 = 0.125;
+
+/// When more than one primitive in this many moved beyond the slack, the layers they reach are
+/// remade from all primitives; fewer, the blocks they reach are relisted from their old lists.
+const RELIST_ABOVE: usize = 4;
 
 /// Fields of more primitives keep no lists (their lists take hundreds of megabytes).
 pub(super) const KEEP_PRIMITIVES: usize = 1 << 20;
@@ -56,12 +67,19 @@ struct KeptLists {
     /// The slack of every radius.
     slack: f64,
     layers: Arc<Vec<Layer>>,
+    /// The proofs of the blocks' signs in the last call.
+    hints: Arc<Hints>,
 }
 
 impl BlobField {
     /// The lists of every layer of the blocks `dims` of `lattice`, kept and brought up to date
-    /// (see the module); `None` on the first call on a lattice, and for large fields.
-    pub(super) fn kept_lists(&self, lattice: &Lattice, dims: [u32; 3]) -> Option<Arc<Vec<Layer>>> {
+    /// (see the module), and the blocks' proofs in the last call (the `hints` module); `None`
+    /// on the first call on a lattice, and for large fields.
+    pub(super) fn kept_lists(
+        &self,
+        lattice: &Lattice,
+        dims: [u32; 3],
+    ) -> Option<(Arc<Vec<Layer>>, Arc<Hints>)> {
         let n = self.centers.len();
         if n == 0 || n > KEEP_PRIMITIVES {
             return None;
@@ -89,27 +107,45 @@ impl BlobField {
             k.radii.extend_from_slice(&self.radii);
             k.slack = slack;
             k.layers = Arc::new(vec![Default::default(); dims[2] as usize]);
+            let blocks = dims.iter().map(|&d| d as usize).product();
+            if k.hints.len() != blocks {
+                k.hints = Arc::new(Hints::new(blocks));
+            }
             let all = vec![true; dims[2] as usize];
             self.remake_layers(lattice, dims, k, &all);
         } else {
-            let dirty = self.move_references(lattice, dims, k);
-            if dirty.contains(&true) {
+            let moved = self.moved_primitives(k);
+            if moved.len() > n / RELIST_ABOVE {
+                let dirty = self.move_references(lattice, dims, k, &moved);
                 self.remake_layers(lattice, dims, k, &dirty);
+            } else if !moved.is_empty() {
+                self.relist_blocks(lattice, dims, k, &moved);
             }
         }
-        Some(Arc::clone(&k.layers))
+        Some((Arc::clone(&k.layers), Arc::clone(&k.hints)))
     }
 
-    /// Moves the reference of each primitive farther than the slack from it to its position;
-    /// returns the z-layers of blocks that its old or its new grown sphere may reach.
-    fn move_references(&self, lattice: &Lattice, dims: [u32; 3], k: &mut KeptLists) -> Vec<bool> {
-        let mut dirty = vec![false; dims[2] as usize];
+    /// The primitives farther than the slack from their reference position, in index order.
+    fn moved_primitives(&self, k: &KeptLists) -> Vec<usize> {
         let s2 = k.slack * k.slack;
-        let moved: Vec<usize> = (0..self.centers.len())
+        (0..self.centers.len())
             .into_par_iter()
+            .with_min_len(4096)
             .filter(|&i| (self.centers[i] - k.refs[i]).length_squared() > s2)
-            .collect();
-        for i in moved {
+            .collect()
+    }
+
+    /// Moves the reference of each primitive of `moved` to its position; returns the z-layers
+    /// of blocks that its old or its new grown sphere may reach.
+    fn move_references(
+        &self,
+        lattice: &Lattice,
+        dims: [u32; 3],
+        k: &mut KeptLists,
+        moved: &[usize],
+    ) -> Vec<bool> {
+        let mut dirty = vec![false; dims[2] as usize];
+        for &i in moved {
             let rm = margin(self.radii[i] + k.slack);
             for c in [k.refs[i], self.centers[i]] {
                 for z in block_range(lattice, dims, c, rm, 2) {
@@ -119,6 +155,53 @@ impl BlobField {
             k.refs[i] = self.centers[i];
         }
         dirty
+    }
+
+    /// Moves the reference of each primitive of `moved` (in index order) to its position and
+    /// brings the lists of the blocks its old or its new grown sphere reaches up to date: each
+    /// such block's list without the moved primitives, merged with those whose new sphere
+    /// reaches it (the same test as [`BlobField::layer_lists`], so the lists a remake would
+    /// make); the other blocks' lists are copied. In parallel over the z-layers changed.
+    fn relist_blocks(&self, lattice: &Lattice, dims: [u32; 3], k: &mut KeptLists, moved: &[usize]) {
+        let per_layer = (dims[0] * dims[1]) as usize;
+        let sides = block_sides(lattice, dims);
+        let mut dirty = vec![false; per_layer * dims[2] as usize];
+        let mut is_moved = vec![false; self.centers.len()];
+        // (block, primitive) for each block a moved primitive's new sphere reaches.
+        let mut entrants: Vec<(u32, u32)> = Vec::new();
+        for &i in moved {
+            let rm = margin(self.radii[i] + k.slack);
+            let (old, new) = (k.refs[i], self.centers[i]);
+            for z in block_range(lattice, dims, old, rm, 2) {
+                let first = z as usize * per_layer;
+                blocks_reached(lattice, dims, &sides, z, (old, rm), |b| {
+                    dirty[first + b as usize] = true;
+                });
+            }
+            for z in block_range(lattice, dims, new, rm, 2) {
+                let first = z as usize * per_layer;
+                blocks_reached(lattice, dims, &sides, z, (new, rm), |b| {
+                    dirty[first + b as usize] = true;
+                    entrants.push(((first + b as usize) as u32, i as u32));
+                });
+            }
+            k.refs[i] = new;
+            is_moved[i] = true;
+        }
+        // Stable: each block's entrants stay in index order.
+        entrants.sort_by_key(|&(b, _)| b);
+        let (dirty, is_moved, entrants) = (&dirty[..], &is_moved[..], &entrants[..]);
+        Arc::make_mut(&mut k.layers)
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(z, _)| dirty[z * per_layer..(z + 1) * per_layer].contains(&true))
+            .for_each(|(z, layer)| {
+                let first = z * per_layer;
+                let from = entrants.partition_point(|&(b, _)| (b as usize) < first);
+                let to = entrants.partition_point(|&(b, _)| (b as usize) < first + per_layer);
+                let here = (&dirty[first..first + per_layer], &entrants[from..to]);
+                *layer = relist_layer(layer, first as u32, here, is_moved);
+            });
     }
 
     /// Makes the lists of the layers marked `dirty` from the reference positions, in parallel
@@ -146,12 +229,49 @@ impl BlobField {
     }
 }
 
+/// The lists of a z-layer of blocks (`first`: the number of its first block) after a
+/// relisting ([`BlobField::relist_blocks`]): the blocks marked in `dirty` lose the primitives
+/// marked in `is_moved` and gain their `entrants` (ascending by block, each block's in index
+/// order); the others keep their lists.
+fn relist_layer(
+    (start, items): &Layer,
+    first: u32,
+    (dirty, entrants): (&[bool], &[(u32, u32)]),
+    is_moved: &[bool],
+) -> Layer {
+    let mut new_start = Vec::with_capacity(start.len());
+    let mut new_items = Vec::with_capacity(items.len() + entrants.len());
+    new_start.push(0u32);
+    let mut e = 0;
+    for (b, &changed) in dirty.iter().enumerate() {
+        let old = &items[start[b] as usize..start[b + 1] as usize];
+        if changed {
+            let end = e + entrants[e..].partition_point(|&(g, _)| g == first + b as u32);
+            let mut gained = entrants[e..end].iter().map(|&(_, i)| i).peekable();
+            for &i in old.iter().filter(|&&i| !is_moved[i as usize]) {
+                while let Some(j) = gained.next_if(|&j| j < i) {
+                    new_items.push(j);
+                }
+                new_items.push(i);
+            }
+            new_items.extend(gained);
+            e = end;
+        } else {
+            new_items.extend_from_slice(old);
+        }
+        new_start.push(new_items.len() as u32);
+    }
+    debug_assert_eq!(e, entrants.len());
+    (new_start, new_items)
+}
+
 #[cfg(test)]
 mod tests {
     use crate::field::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
     use crate::lattice::Lattice;
     use crate::polygonize::{sparse, Settings};
     use glam::{DVec3, Vec3Swizzles};
+    use std::sync::Arc;
 
     /// Particles on a jittered lattice of spacing 0.1: a slab and a ball above it.
     fn particles() -> Vec<DVec3> {
@@ -203,6 +323,38 @@ mod tests {
             .collect()
     }
 
+    fn lattice() -> Lattice {
+        Lattice::new(
+            DVec3::new(-0.3, -0.3, -0.3),
+            DVec3::new(1.8, 1.8, 1.5),
+            [70, 70, 60],
+        )
+        .unwrap()
+    }
+
+    /// Asserts that the sparse mesh of `moving` is that of a new field of the particles `p` (in
+    /// its precision), array for array and bit for bit, and not empty.
+    fn assert_mesh_of_a_new_field(
+        moving: &BlobField,
+        p: &[DVec3],
+        lattice: &Lattice,
+        settings: &Settings,
+        k: usize,
+    ) {
+        let (got, _) = sparse::polygonize(moving, lattice, settings).unwrap();
+        let fresh = field(p, moving.settings().precision);
+        let (want, _) = sparse::polygonize(&fresh, lattice, settings).unwrap();
+        assert!(!want.triangles.is_empty());
+        assert_eq!(got.triangles, want.triangles, "frame {k}");
+        let bits = |v: &[DVec3]| {
+            v.iter()
+                .map(|q| q.to_array().map(f64::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&got.vertices), bits(&want.vertices), "frame {k}");
+        assert_eq!(bits(&got.normals), bits(&want.normals), "frame {k}");
+    }
+
     fn field(p: &[DVec3], precision: Precision) -> BlobField {
         let settings = BlobSettings {
             precision,
@@ -226,12 +378,7 @@ mod tests {
     fn frames_of_a_field_moved_in_place_are_those_of_new_fields() {
         let p0 = particles();
         let ball_from = 16 * 16 * 4;
-        let lattice = Lattice::new(
-            DVec3::new(-0.3, -0.3, -0.3),
-            DVec3::new(1.8, 1.8, 1.5),
-            [70, 70, 60],
-        )
-        .unwrap();
+        let lattice = lattice();
         for precision in [Precision::Double, Precision::Single] {
             for normals in [false, true] {
                 let settings = Settings {
@@ -252,22 +399,119 @@ mod tests {
                     } else {
                         moving.update(&p, None, None).unwrap();
                     }
-                    let (got, _) = sparse::polygonize(&moving, &lattice, &settings).unwrap();
-                    let (want, _) =
-                        sparse::polygonize(&field(&p, precision), &lattice, &settings).unwrap();
-                    assert!(!want.triangles.is_empty());
-                    assert_eq!(got.triangles, want.triangles, "frame {k}");
-                    let bits = |v: &[DVec3]| {
-                        v.iter()
-                            .map(|q| q.to_array().map(f64::to_bits))
-                            .collect::<Vec<_>>()
-                    };
-                    assert_eq!(bits(&got.vertices), bits(&want.vertices), "frame {k}");
-                    assert_eq!(bits(&got.normals), bits(&want.normals), "frame {k}");
+                    assert_mesh_of_a_new_field(&moving, &p, &lattice, &settings, k);
                     kept += moving.kept.0.lock().unwrap().refs.len().min(1);
                 }
                 // Kept from the second frame on.
                 assert_eq!(kept, 7);
+            }
+        }
+    }
+
+    /// The lists relisted block by block (few primitives moved far) are those that making every
+    /// layer again from the same reference positions gives, entry for entry: over frames where
+    /// a few primitives jump across the lattice, leave it, come back into it, and move within
+    /// the slack; and where many move (the layers remade).
+    #[test]
+    fn relisted_blocks_are_the_lists_made_again() {
+        use super::KeptLists;
+        let p0 = particles();
+        let n = p0.len();
+        let lattice = lattice();
+        let dims = crate::polygonize::sparse::block_grid(&lattice).dims;
+        let mut f = field(&p0, Precision::Double);
+        let mut p = p0.clone();
+        let mut relisted = 0;
+        for k in 0..10usize {
+            for (i, q) in p.iter_mut().enumerate() {
+                let s = (i * 7 + k * 13) % 101;
+                *q += match (k, s) {
+                    // Far out of the lattice and back in.
+                    (3, 0..=4) => DVec3::new(0.0, 0.0, 9.0),
+                    (4, 0..=4) => DVec3::new(0.0, 0.0, -9.0),
+                    // Across the lattice.
+                    (_, 5..=9) => {
+                        DVec3::new(0.37, -0.21, 0.11) * if k % 2 == 0 { 1.0 } else { -1.0 }
+                    }
+                    // Within the slack, or everything at frame 8.
+                    _ if k == 8 => DVec3::new(0.05, 0.0, 0.0),
+                    _ => DVec3::new(0.001, -0.002, 0.0015),
+                };
+            }
+            f.update(&p, None, None).unwrap();
+            let moved = {
+                let k = f.kept.0.lock().unwrap();
+                let s2 = k.slack * k.slack;
+                (0..n)
+                    .filter(|&i| !k.refs.is_empty() && (p[i] - k.refs[i]).length_squared() > s2)
+                    .count()
+            };
+            if moved > 0 && moved <= n / super::RELIST_ABOVE {
+                relisted += 1;
+            }
+            let layers = f.kept_lists(&lattice, dims);
+            if k == 0 {
+                assert!(layers.is_none());
+                continue;
+            }
+            let kept = layers.unwrap().0;
+            let guard = f.kept.0.lock().unwrap();
+            let mut again = KeptLists {
+                on: guard.on,
+                refs: guard.refs.clone(),
+                radii: guard.radii.clone(),
+                slack: guard.slack,
+                layers: Arc::new(vec![Default::default(); dims[2] as usize]),
+                hints: Default::default(),
+            };
+            drop(guard);
+            f.remake_layers(&lattice, dims, &mut again, &vec![true; dims[2] as usize]);
+            assert!(kept.iter().map(|l| l.1.len()).sum::<usize>() > 0);
+            assert!(*kept == *again.layers, "frame {k}");
+        }
+        assert!(relisted >= 6, "{relisted}");
+    }
+
+    /// Hints that no longer fit (the particles moved far between frames: blocks crossed in the
+    /// last frame are now inside or outside, and blocks proved inside or outside are now crossed)
+    /// give the mesh of a new field, bit for bit, in both precisions; after a frame, blocks of
+    /// every kind of hint are recorded.
+    #[test]
+    fn stale_hints_give_the_meshes_of_new_fields() {
+        use super::super::hints::Proof;
+        let p0 = particles();
+        let ball_from = 16 * 16 * 4;
+        let lattice = lattice();
+        // (every particle, the ball too): all moved by half a block and more, then the ball
+        // alone far across, into the slab, and back.
+        let z = DVec3::ZERO;
+        let moves = [
+            (z, z),
+            (z, z),
+            (DVec3::new(0.08, 0.05, -0.09), z),
+            (z, DVec3::new(-0.6, -0.5, 0.0)),
+            (z, DVec3::new(0.0, 0.0, -0.8)),
+            (z, DVec3::new(0.05, 0.05, -0.8)),
+            (z, z),
+        ];
+        for precision in [Precision::Double, Precision::Single] {
+            let mut moving = field(&p0, precision);
+            for (k, &(all, ball)) in moves.iter().enumerate() {
+                let mut p = p0.clone();
+                for (i, q) in p.iter_mut().enumerate() {
+                    *q += all + if i >= ball_from { ball } else { z };
+                }
+                moving.update(&p, None, None).unwrap();
+                assert_mesh_of_a_new_field(&moving, &p, &lattice, &Settings::default(), k);
+                if k >= 1 {
+                    let kept = moving.kept.0.lock().unwrap();
+                    let hints: Vec<Proof> =
+                        (0..kept.hints.len()).map(|b| kept.hints.get(b)).collect();
+                    let all = [Proof::Pairs, Proof::Octants, Proof::Crossed, Proof::OneSign];
+                    for proof in [Proof::Unknown].into_iter().chain(all) {
+                        assert!(hints.contains(&proof), "frame {k}: no {proof:?}");
+                    }
+                }
             }
         }
     }
