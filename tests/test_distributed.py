@@ -534,9 +534,9 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot):
 
 @pytest.mark.parametrize("transport", ["files", "comms", "files-unseen"])
 def test_tiles_reach_the_client_through_files_or_dask(client, blobs, monkeypatch, transport):
-    """Workers on the client's machine pass their tiles through files in the run's directory
-    (removed afterwards); without one ("comms"), or where the workers do not see it
-    ("files-unseen"), the tiles come through Dask: the same mesh each way."""
+    """Workers on the client's machine pass their tiles (here of any size) through files in the
+    run's directory (removed afterwards); without one ("comms"), or where the workers do not
+    see it ("files-unseen"), the tiles come through Dask: the same mesh each way."""
     from implicitmesh import _tile_files
 
     made, original = [], _tile_files.make_directory
@@ -548,6 +548,7 @@ def test_tiles_reach_the_client_through_files_or_dask(client, blobs, monkeypatch
         return d
 
     monkeypatch.setattr(_tile_files, "make_directory", make_directory)
+    monkeypatch.setattr(_tile_files, "MIN_BYTES", 0)
     read = _tile_files.read
     files_read = []
 
@@ -571,14 +572,15 @@ def test_tile_files_read_back_exactly_and_are_removed(tmp_path):
     arrays = dict(v=rng.random((7, 3)), n=rng.random((7, 3)), k=rng.integers(0, 2**60, 5, dtype=np.uint64),
                   f=rng.integers(0, 7, (9, 3), dtype=np.uint32), b=np.arange(5, dtype=np.uint32))
     empty = {k: a[:0] for k, a in arrays.items()}
+    assert not _tile_files.write((str(tmp_path), 10**6), "small", arrays)
     for name, tile in (("full", arrays), ("empty", empty)):
-        assert _tile_files.write(str(tmp_path), name, tile)
+        assert _tile_files.write((str(tmp_path), 0), name, tile)
         with _tile_files.read(str(tmp_path), name) as back:
             for k, a in tile.items():
                 assert back[k].dtype == a.dtype and back[k].shape == a.shape and np.array_equal(back[k], a)
                 assert a.size == 0 or (not back[k].flags.writeable and back[k].ctypes.data % a.itemsize == 0)
         assert not (tmp_path / name).exists()
-    assert not _tile_files.write(str(tmp_path / "missing"), "x", arrays)
+    assert not _tile_files.write((str(tmp_path / "missing"), 0), "x", arrays)
     assert list(tmp_path.iterdir()) == []
     # A run directory whose client has ended is removed; a running client's is kept.
     import subprocess

@@ -23,6 +23,9 @@ from typing import Iterator
 
 import numpy as np
 
+#: Tiles of fewer bytes go through Dask's comms (a file costs more than sending them).
+MIN_BYTES = 1 << 20
+
 #: The arrays of a tile's file, in their order in it (8-byte elements first).
 ORDER = ("v", "n", "k", "f", "b")
 
@@ -70,10 +73,12 @@ def remove_directory(directory: str | None) -> None:
         shutil.rmtree(directory, ignore_errors=True)
 
 
-def write(directory: str, name: str, arrays: dict[str, np.ndarray]) -> bool:
-    """Writes the tile ``arrays`` (``ORDER``) to ``directory/name``; False when the directory is
+def write(local: tuple[str, int], name: str, arrays: dict[str, np.ndarray]) -> bool:
+    """Writes the tile ``arrays`` (``ORDER``) to ``directory/name``, ``local = (directory,
+    min_bytes)``; False for a tile of fewer than ``min_bytes`` bytes, or when the directory is
     not on this machine or the file cannot be written (nothing is left behind)."""
-    if not os.path.isdir(directory):
+    directory, min_bytes = local
+    if sum(a.nbytes for a in arrays.values()) < min_bytes or not os.path.isdir(directory):
         return False
     path = os.path.join(directory, name)
     tmp = path + ".part"

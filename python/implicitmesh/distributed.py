@@ -176,10 +176,11 @@ def _tile_fields(field: Any, shared: Any, cells, origin: np.ndarray, cell: np.nd
 
 
 def _run_tile(field, bounds, resolution, window, method, options, output, local=None):
-    """One task: polygonizes the cells ``window`` of the lattice; returns the tile's mesh (in the
-    gathered run's directory ``local`` when this worker can write there, see
-    :mod:`implicitmesh._tile_files`), or with ``output`` writes it to ``output/tile-….npz`` and
-    returns its entry of the manifest."""
+    """One task: polygonizes the cells ``window`` of the lattice; returns the tile's mesh (in a
+    file of the gathered run's directory when ``local = (directory, min_bytes)`` is given, this
+    worker can write there and the tile is large enough, see :mod:`implicitmesh._tile_files`),
+    or with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the
+    manifest."""
     v, f, n, stats, b, k = _core.polygonize(
         field, bounds, resolution, method=method, window=window, boundary=True, **options
     )
@@ -416,7 +417,14 @@ def polygonize(
         submit = functools.partial(
             _submit_tile,
             client,
-            (bounds, resolution, method, options, None if output is None else str(output), local),
+            (
+                bounds,
+                resolution,
+                method,
+                options,
+                None if output is None else str(output),
+                None if local is None else (local, _tile_files.MIN_BYTES),
+            ),
         )
         windows: list = []
         for (lo, hi), part in zip(tiles(cells, tile3), _tile_fields(field, shared, cells, origin, cell, tile3)):

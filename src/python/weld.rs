@@ -205,6 +205,10 @@ pub fn weld_tiles<'py>(
     welded_tuple(py, welded)
 }
 
+/// Tiles of fewer triangles and vertices than this are welded on the calling thread, without the
+/// machinery that lets Ctrl-C stop a long call.
+const SMALL_TILE: usize = 1 << 16;
+
 /// The weld of tile meshes added one at a time, in window order, as a tiled run's tiles arrive
 /// (each tile can be freed once added); ``result()`` is the mesh :func:`weld_tiles` makes of
 /// the tiles added, array for array.
@@ -261,6 +265,10 @@ impl PyStreamedWeld {
         let weld = self.weld.as_mut().ok_or_else(|| {
             pyo3::exceptions::PyRuntimeError::new_err("StreamedWeld: result() was taken")
         })?;
+        if tile.faces.len() + tile.vertices.len() < SMALL_TILE {
+            // Done before Ctrl-C would be looked at: no task to poll.
+            return py.detach(|| weld.add(&tile, lattice)).map_err(PyErr::from);
+        }
         run(py, None, false, || weld.add(&tile, lattice))
     }
 
