@@ -101,7 +101,7 @@ const JOINED: Id = Id::MAX;
 ///
 /// The welded rows are written from the front of vectors reserved for an estimate of the
 /// whole (the rows so far per tile, times the tiles, plus a quarter) and not touched beyond
-/// the rows written ([`crate::memory::reserve_huge`]); a vector short of room grows to a new
+/// the rows written (`memory::reserve_huge`); a vector short of room grows to a new
 /// estimate.
 #[derive(Debug, Default)]
 pub struct StreamedWeld {
