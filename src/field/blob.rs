@@ -14,7 +14,7 @@ mod interior;
 mod kept;
 mod single;
 
-use hints::{Hints, Proof};
+use hints::{Hints, Proof, ONE_SIGN_FRAMES};
 pub use single::Precision;
 
 #[cfg(target_arch = "x86_64")]
@@ -1247,7 +1247,7 @@ impl BlobField {
             }
         };
         match hint {
-            Proof::Crossed | Proof::OneSign => return (BlockSign::Mixed, Proof::Unknown),
+            Proof::Crossed | Proof::OneSign { .. } => return (BlockSign::Mixed, Proof::Unknown),
             Proof::Pairs => return inside(&BlockCoords::new(lattice, lo, n)),
             Proof::Octants => return octants(),
             Proof::Unknown => {}
@@ -1297,8 +1297,9 @@ impl BlobField {
 
 /// The hint a block leaves for the next frame: the `proof` of its `sign`, or when it was
 /// splatted, [`Proof::Crossed`] if its values have both signs (`crossed`), else
-/// [`Proof::OneSign`] after proofs ([`Proof::Unknown`] after a splat without: the next frame
-/// proves it again).
+/// [`Proof::OneSign`] after proofs (for [`ONE_SIGN_FRAMES`] frames, counted down by the splats
+/// without proofs that follow), and [`Proof::Unknown`] after a splat without proofs that ends
+/// the count or follows a crossed frame: the next frame proves it again.
 fn splatted_proof(
     sign: BlockSign,
     proof: Proof,
@@ -1309,10 +1310,14 @@ fn splatted_proof(
         proof
     } else if crossed() {
         Proof::Crossed
-    } else if matches!(hint, Proof::Crossed | Proof::OneSign) {
-        Proof::Unknown
     } else {
-        Proof::OneSign
+        match hint {
+            Proof::Crossed | Proof::OneSign { frames: 0 } => Proof::Unknown,
+            Proof::OneSign { frames } => Proof::OneSign { frames: frames - 1 },
+            _ => Proof::OneSign {
+                frames: ONE_SIGN_FRAMES - 1,
+            },
+        }
     }
 }
 
