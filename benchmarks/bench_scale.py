@@ -9,6 +9,7 @@ its face normals. Accuracy is the symmetric Chamfer distance to that mesh as a f
 bounding-box diagonal (see :func:`distances`).
 
     python -m benchmarks.bench_scale [--quick] [--results DIR]
+    python -m benchmarks.bench_scale --largest    # 10⁷ points, ours and Poisson, merged into the results
     python -m benchmarks.bench_scale one METHOD POINTS [MODEL]   # one JSON line, in this process
 """
 
@@ -21,7 +22,8 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks.timing import ROOT, RunRecord, run_case_process, fmt_ratio, fmt_s, md_table, run_markdown, run_section
+from benchmarks.timing import (ROOT, RunRecord, fmt_ratio, fmt_s, load_raw, md_table, record_section, results_dir,
+                               run_case_process, run_markdown, section_parser)
 
 MESH = ROOT / "tests" / "data" / "meshes"
 MODEL = "knot"
@@ -47,6 +49,10 @@ QUICK_METHODS = ("ours-256", "poisson-8")
 RUNS = {False: 3, True: 1}
 #: Cases too long to repeat: run once.
 ONCE = 1_000_000
+#: The largest size (``--largest``, about 12 minutes and 12 GB): ours and its peer at 1024 cells,
+#: once each, merged into the stored results; a full run keeps the stored cases of this size.
+LARGEST = 10_000_000
+LARGEST_METHODS = ("ours-1024", "poisson-10")
 
 
 def vmhwm_mib() -> float:
@@ -175,13 +181,30 @@ def log(msg: str) -> None:
     print(f"[bench_scale] {msg}", file=sys.stderr, flush=True)
 
 
+def measure_largest(a: argparse.Namespace) -> dict:
+    """The :data:`LARGEST` cases, merged into the stored results (which must exist)."""
+    raw = load_raw(results_dir(a.results, a.quick), "scale")
+    if raw is None:
+        raise SystemExit("--largest adds to stored results: run the full benchmark first")
+    run = RunRecord("benchmarks.bench_scale", False)
+    cases = []
+    for method in LARGEST_METHODS:
+        log(f"{method}, {LARGEST:,} points, 1 run")
+        cases.append({"method": method, "n": LARGEST, "runs": [run_one(method, LARGEST)]})
+    raw["cases"] = [c for c in raw["cases"] if c["n"] != LARGEST] + cases
+    raw["largest_run"] = run.finish(("numpy", "open3d", "implicitmesh"))
+    return raw
+
+
 def measure(a: argparse.Namespace) -> dict:
+    if a.largest:
+        return measure_largest(a)
     run = RunRecord("benchmarks.bench_scale", a.quick)
     cases = []
     for n in SIZES[a.quick]:
         methods = [m for ours in OURS for m in (ours, PEER[ours])
                    if not (m == "ferreus-128" and n > FERREUS_MAX_POINTS) and not (m == "ours-128" and n > FERREUS_MAX_POINTS)
-                   and not (m == "ours-256-tol" and n < TOLERANCE_MIN_POINTS)]
+                   and not (m.endswith("-tol") and n < TOLERANCE_MIN_POINTS)]
         methods = list(dict.fromkeys(methods))  # a peer shared by two of ours runs once
         for method in QUICK_METHODS if a.quick else methods:
             repeats = 1 if n >= ONCE else RUNS[a.quick]
@@ -193,8 +216,13 @@ def measure(a: argparse.Namespace) -> dict:
         for model in OTHER_MODELS:
             log(f"{method}, {n:,} points of {model}, 1 run")
             others.append({"method": method, "n": n, "model": model, "runs": [run_one(method, n, model)]})
-    return {"model": MODEL, "cases": cases, "others": others,
-            "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "ferreus_rbf", "implicitmesh"))}
+    raw = {"model": MODEL, "cases": cases, "others": others,
+           "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "ferreus_rbf", "implicitmesh"))}
+    stored = None if a.quick else load_raw(results_dir(a.results, a.quick), "scale")
+    if stored and "largest_run" in stored:
+        raw["cases"] += [c for c in stored["cases"] if c["n"] == LARGEST]
+        raw["largest_run"] = stored["largest_run"]
+    return raw
 
 
 def median(runs: list[dict], key: str) -> float | None:
@@ -275,6 +303,7 @@ def render(raw: dict) -> str:
         "",
         run_markdown(run),
         "",
+        *largest_note(raw),
         md_table(["points", "method", "seconds (fit + mesh)", "total (s)", "peer / ours", "peak MiB", "triangles",
                   "Chamfer", "Hausdorff", "watertight, χ, bodies", "runs"], rows),
         "",
@@ -282,11 +311,25 @@ def render(raw: dict) -> str:
     ])
 
 
+def largest_note(raw: dict) -> list[str]:
+    """The paragraph on the :data:`LARGEST` rows, which run apart (no lines when there are none)."""
+    run = raw.get("largest_run")
+    if not run or not any(c["n"] == LARGEST for c in raw["cases"]):
+        return []
+    foreign = run["foreign_load"]
+    return [f"The {LARGEST:,}-point rows ran apart, {run['date']}, with `{run['command']}` (implicitmesh "
+            f"{run['machine'].get('implicitmesh', '?')}; other processes used "
+            f"{foreign if foreign is None else round(foreign, 2)} cores on average), once each.", ""]
+
+
 def main() -> int:
     if len(sys.argv) in (4, 5) and sys.argv[1] == "one":
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), *sys.argv[4:])))
         return 0
-    return run_section("scale", measure, render, __doc__.split("\n")[0], "10⁴ points, one run per case")
+    parser = section_parser(__doc__.split("\n")[0], "10⁴ points, one run per case")
+    parser.add_argument("--largest", action="store_true",
+                        help=f"run only the {LARGEST:,}-point cases and add them to the stored results")
+    return record_section("scale", measure, render, parser.parse_args())
 
 
 if __name__ == "__main__":
