@@ -209,6 +209,12 @@ pub fn weld_tiles<'py>(
 /// machinery that lets Ctrl-C stop a long call.
 const SMALL_TILE: usize = 1 << 16;
 
+/// Tiles of fewer triangles and vertices than this are welded holding the GIL: their weld takes
+/// tens of microseconds, while giving the GIL to another thread and taking it back can wait
+/// for the interpreter's switch interval (5 ms) whenever another thread runs Python (Dask's
+/// event loop, in a tiled run's client).
+const TINY_TILE: usize = 1 << 12;
+
 /// The weld of tile meshes added one at a time, in window order, as a tiled run's tiles arrive
 /// (each tile can be freed once added); ``result()`` is the mesh :func:`weld_tiles` makes of
 /// the tiles added, array for array.
@@ -244,7 +250,8 @@ impl PyStreamedWeld {
     /// Adds the next tile: ``window`` its cells ``[[i0, j0, k0], [i1, j1, k1]]``, ``vertices``
     /// (V, 3) float64, ``faces`` (F, 3) uint32, ``normals`` (V, 3) or (0, 3) float64,
     /// ``boundary`` (B,) uint32 and ``keys`` (B,) uint64 as ``polygonize(..., window=window,
-    /// boundary=True)`` returns them. The arrays are read in place (the GIL released).
+    /// boundary=True)`` returns them. The arrays are read in place (the GIL released, except
+    /// for tiles of fewer than 4,096 triangles and vertices, which take microseconds).
     ///
     /// Raises ValueError naming the argument at fault (the weld is then unchanged), and
     /// KeyboardInterrupt on Ctrl-C.
@@ -265,7 +272,11 @@ impl PyStreamedWeld {
         let weld = self.weld.as_mut().ok_or_else(|| {
             pyo3::exceptions::PyRuntimeError::new_err("StreamedWeld: result() was taken")
         })?;
-        if tile.faces.len() + tile.vertices.len() < SMALL_TILE {
+        let rows = tile.faces.len() + tile.vertices.len();
+        if rows < TINY_TILE {
+            return weld.add(&tile, lattice).map_err(PyErr::from);
+        }
+        if rows < SMALL_TILE {
             // Done before Ctrl-C would be looked at: no task to poll.
             return py.detach(|| weld.add(&tile, lattice)).map_err(PyErr::from);
         }
