@@ -70,6 +70,11 @@ def test_states_no_fit_makes_are_refused(surface):
         cases["bad weights"] = {**good, "normalized_weights": good["normalized_weights"][:-1]}
     else:
         cases["bad patches"] = {**good, "patch_radius": good["patch_radius"][:-1]}
+        index = good["patch_index"].copy()
+        index[0] = len(good["constraint_values"])
+        cases["index past the constraints"] = {**good, "patch_index": index}
+        cases["index not uint32"] = {**good, "patch_index": good["patch_index"].astype(np.int64)}
+        cases["short index"] = {**good, "patch_index": good["patch_index"][:-1]}
     for what, state in cases.items():
         with pytest.raises(ValueError, match="state|constraint"):
             im.VariationalSurface.from_state(state)
@@ -82,3 +87,43 @@ def test_load_refuses_other_files(tmp_path):
         im.load(tmp_path / "other.npz")
     with pytest.raises(ValueError, match="field"):
         im.save(tmp_path / "f.npz", lambda p: p[:, 0])
+
+
+def _format_1(state: dict) -> dict:
+    """A format-2 partition state in format 1, where every patch kept its normalised centres
+    (computed as the fit does: (c − shift) · scale per coordinate)."""
+    start, shared = state["patch_start"], state["patch_shared"]
+    points, index = state["constraint_points"], state["patch_index"]
+    own, shift, scale = state["patch_normalized_centers"], state["patch_shift"].reshape(-1, 3), state["patch_scale"]
+    runs, at_index, at_own = [], 0, 0
+    for k in range(len(shared)):
+        n = start[k + 1] - start[k]
+        if shared[k]:
+            runs.append((points[index[at_index:at_index + n]] - shift[k]) * scale[k])
+            at_index += n
+        else:
+            runs.append(own[at_own:at_own + n])
+            at_own += n
+    old = {k: v for k, v in state.items() if k not in ("patch_index", "patch_shared")}
+    return {**old, "format": 1, "patch_normalized_centers": np.concatenate(runs)}
+
+
+def test_partition_patches_keep_indices_into_the_constraints(queries):
+    p, n = im.shapes.fibonacci_sphere(1200)
+    s = im.VariationalSurface.fit(p * 0.8, n, method="partition")
+    state = s.to_state()
+    assert state["format"] == 2 and state["patch_index"].dtype == np.uint32
+    shared = state["patch_shared"].astype(bool)
+    sizes = np.diff(state["patch_start"])
+    assert shared.sum() > 20 and len(state["patch_index"]) == sizes[shared].sum()
+    # Only the plane patches (5 points of their own each) keep centres.
+    assert len(state["patch_normalized_centers"]) == 5 * (~shared).sum()
+    assert set(sizes[~shared]) <= {5}
+    # A state of format 1 (every patch's normalised centres) loads to the same bits; its
+    # centres take more than five times the bytes of the indices.
+    old = _format_1(state)
+    back = im.VariationalSurface.from_state(old)
+    assert np.array_equal(back.evaluate(queries), s.evaluate(queries))
+    assert np.array_equal(back.gradient(queries), s.gradient(queries))
+    assert old["patch_normalized_centers"].nbytes > 5 * state["patch_index"].nbytes
+    assert back.to_state()["patch_normalized_centers"].shape == old["patch_normalized_centers"].shape

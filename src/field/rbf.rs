@@ -6,9 +6,11 @@
 //! the data; the interpolant is similarity-equivariant, so this changes nothing but the rounding.
 
 mod parts;
+mod patch;
 
 pub(crate) use parts::bad_state;
 pub use parts::SurfaceParts;
+pub use patch::{PatchCentres, PatchFit};
 
 use super::constraints::{self, bounding_box, Constraints};
 use super::kernel::{
@@ -110,6 +112,38 @@ fn dispatch_values_gradients(
     }
 }
 
+/// Values, and gradients when `gradients` is given, at normalised points `q`, by point: the
+/// kernel sums of [`values_by_point`] over the centres `c` plus the normalised polynomial
+/// `npoly` (gradients in the caller's coordinates, through `scale`).
+fn sums_by_point(
+    kernel: Kernel,
+    c: &Centres,
+    npoly: [f64; 4],
+    scale: f64,
+    q: &[[f64; 3]],
+    values: &mut [f64],
+    gradients: Option<&mut [DVec3]>,
+) {
+    let [a, bx, by, bz] = npoly;
+    let poly = |s: f64, p: &[f64; 3]| s + a + bx * p[0] + by * p[1] + bz * p[2];
+    match gradients {
+        None => {
+            dispatch_by_point(kernel, c, q, values);
+            for (v, p) in values.iter_mut().zip(q) {
+                *v = poly(*v, p);
+            }
+        }
+        Some(g) => {
+            let mut sums = vec![[0.0; 4]; q.len()];
+            dispatch_gradients_by_point(kernel, c, q, &mut sums);
+            for (((v, g), s), p) in values.iter_mut().zip(g.iter_mut()).zip(&sums).zip(q) {
+                *v = poly(s[0], p);
+                *g = DVec3::new(s[1] + bx, s[2] + by, s[3] + bz) * scale;
+            }
+        }
+    }
+}
+
 /// Points per rayon task when evaluating (a multiple of LANES).
 const EVAL_CHUNK: usize = 256;
 
@@ -194,7 +228,7 @@ impl VariationalSurface {
     }
 
     /// Fits the constraints; `by_point` for a patch of a partition fit, whose residuals are
-    /// measured with the sums its evaluation uses ([`VariationalSurface::eval_on_this_thread`]).
+    /// measured with the sums its evaluation uses ([`PatchFit::eval_on_this_thread`]).
     fn solve(c: Constraints, settings: &FitSettings, par: Par, by_point: bool) -> Result<Self> {
         if !(settings.smoothing.is_finite() && settings.smoothing >= 0.0) {
             return Err(Error::invalid(
@@ -383,50 +417,12 @@ impl VariationalSurface {
         }
     }
 
-    /// Values, and gradients when `gradients` is given, at points in the caller's coordinates,
-    /// on the calling thread: the evaluation of a partition fit's patches, by point (see
-    /// [`super::kernel::values_by_point`]), so that a point's value and gradient have the same
-    /// bits whatever other points are evaluated with it.
-    pub(crate) fn eval_on_this_thread(
-        &self,
-        points: &[DVec3],
-        values: &mut [f64],
-        gradients: Option<&mut [DVec3]>,
-    ) {
-        assert_eq!(points.len(), values.len());
-        let (shift, scale) = (self.shift, self.scale);
-        let q: Vec<[f64; 3]> = points
-            .iter()
-            .map(|p| ((*p - shift) * scale).to_array())
-            .collect();
-        if let Some(g) = &gradients {
-            assert_eq!(points.len(), g.len());
-        }
-        self.sums_by_point(&q, values, gradients);
-    }
-
     /// Values, and gradients when `gradients` is given, at normalised points `q`, by point: the
     /// kernel sums of [`values_by_point`] plus the polynomial (gradients in the caller's
     /// coordinates).
     fn sums_by_point(&self, q: &[[f64; 3]], values: &mut [f64], gradients: Option<&mut [DVec3]>) {
-        let [a, bx, by, bz] = self.npoly;
-        let poly = |s: f64, p: &[f64; 3]| s + a + bx * p[0] + by * p[1] + bz * p[2];
-        match gradients {
-            None => {
-                dispatch_by_point(self.kernel, &self.soa, q, values);
-                for (v, p) in values.iter_mut().zip(q) {
-                    *v = poly(*v, p);
-                }
-            }
-            Some(g) => {
-                let mut sums = vec![[0.0; 4]; q.len()];
-                dispatch_gradients_by_point(self.kernel, &self.soa, q, &mut sums);
-                for (((v, g), s), p) in values.iter_mut().zip(g.iter_mut()).zip(&sums).zip(q) {
-                    *v = poly(s[0], p);
-                    *g = DVec3::new(s[1] + bx, s[2] + by, s[3] + bz) * self.scale;
-                }
-            }
-        }
+        let (kernel, npoly, scale) = (self.kernel, self.npoly, self.scale);
+        sums_by_point(kernel, &self.soa, npoly, scale, q, values, gradients);
     }
 
     /// Gradients at many points, and the values too when `values` is given (the gradients are
@@ -496,7 +492,7 @@ impl VariationalSurface {
     /// Fits the interpolant of `points` and `values` as one patch of a partition-of-unity fit:
     /// as [`VariationalSurface::interpolate`] without its checks, with the given parallelism
     /// for the factorization, and keeping only what evaluation needs (the centres, weights and
-    /// constraints read back empty).
+    /// constraints read back empty; [`PatchFit`] keeps less).
     pub(crate) fn fit_patch(
         points: Vec<DVec3>,
         values: Vec<f64>,
@@ -516,11 +512,6 @@ impl VariationalSurface {
         s.weights = vec![];
         s.constraints = Constraints::default();
         Ok(s)
-    }
-
-    /// Bytes a patch of `n` centres keeps after [`VariationalSurface::fit_patch`].
-    pub(crate) fn patch_bytes(n: usize) -> u64 {
-        (std::mem::size_of::<Self>() + 4 * 8 * n) as u64
     }
 
     /// Bytes the dense system of `n` constraints needs while it is solved.

@@ -11,13 +11,15 @@ use crate::field::partition::octree::Node;
 use crate::field::partition::{PartitionParts, PartitionSettings, PartitionSurface, PatchParts};
 use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use glam::DVec3;
-use numpy::PyArray1;
+use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
 
-/// The version of the layout below; states of other versions are refused.
-const FORMAT: i64 = 1;
+/// The version of the layout below; states of other versions are refused. Format 1 differs
+/// only in a partition fit's patches: each kept its normalised centres, where format 2 keeps
+/// indices into the constraints (`patch_index`) for the patches marked in `patch_shared`.
+const FORMAT: i64 = 2;
 
 fn bad(what: impl std::fmt::Display) -> PyErr {
     value_error("state", format!("not a saved surface: {what}"))
@@ -172,8 +174,10 @@ fn tree_of(d: &Bound<'_, PyDict>) -> PyResult<Option<Vec<Node>>> {
         .map(Some)
 }
 
-/// The patches, flattened: per patch its ball, counts and fit's numbers; their normalised
-/// centres and weights one after another (`patch_start` says where each patch's begin).
+/// The patches, flattened: per patch its ball, counts and fit's numbers; their weights one
+/// after another (`patch_start` says where each patch's begin), and so their centres: indices
+/// into the constraints (`patch_index`, uint32) for the patches `patch_shared` marks, normalised
+/// centres of their own (`patch_normalized_centers`) for the others.
 fn put_patches(py: Python<'_>, d: &Bound<'_, PyDict>, patches: &[PatchParts]) -> PyResult<()> {
     let fits = || patches.iter().map(|q| &q.fit);
     let flat = |f: &dyn Fn(&SurfaceParts) -> Vec<f64>| fits().flat_map(f).collect::<Vec<f64>>();
@@ -198,6 +202,13 @@ fn put_patches(py: Python<'_>, d: &Bound<'_, PyDict>, patches: &[PatchParts]) ->
         .flat_map(|f| f.normalized_centers.iter().copied())
         .collect();
     d.set_item("patch_normalized_centers", points_to_py(py, nc)?)?;
+    let shared = patches.iter().map(|q| !q.index.is_empty() as usize);
+    d.set_item("patch_shared", counts_to_py(py, shared))?;
+    let index: Vec<u32> = patches
+        .iter()
+        .flat_map(|q| q.index.iter().copied())
+        .collect();
+    d.set_item("patch_index", PyArray1::from_vec(py, index))?;
     let nw = flat(&|f| f.normalized_weights.clone());
     d.set_item("patch_normalized_weights", values_to_py(py, nw))?;
     let np = flat(&|f| f.normalized_polynomial.to_vec());
@@ -234,6 +245,11 @@ fn patches_of(d: &Bound<'_, PyDict>, kernel: Kernel) -> PyResult<Vec<PatchParts>
     let residual = values_of(d, "patch_residual")?;
     let cholesky = counts_of(d, "patch_cholesky")?;
     let n = centre.len();
+    // Format 1: every patch has centres of its own.
+    let (shared, index) = match d.get_item("patch_index")? {
+        Some(index) => (counts_of(d, "patch_shared")?, indices(&index)?),
+        None => (vec![0; n], vec![]),
+    };
     let lengths_agree = start.len() == n + 1
         && [
             radius.len(),
@@ -243,21 +259,35 @@ fn patches_of(d: &Bound<'_, PyDict>, kernel: Kernel) -> PyResult<Vec<PatchParts>
             residual.len(),
         ]
         .iter()
-        .chain(&[cholesky.len()])
+        .chain(&[cholesky.len(), shared.len()])
         .all(|&l| l == n)
         && np.len() == 4 * n
         && poly.len() == 4 * n
         && shift.len() == 3 * n
         && start.windows(2).all(|w| w[0] <= w[1])
         && start[0] == 0
-        && start[n] == nc.len()
-        && nw.len() == nc.len();
-    if !lengths_agree {
+        && start[n] == nw.len()
+        && (0..n).all(|k| shared[k] <= 1);
+    // The runs of centres of each patch: in `index` when shared, else in `nc`.
+    let (mut own_at, mut index_at) = (0, 0);
+    let mut runs = Vec::with_capacity(n);
+    for k in 0..n.min(start.len().saturating_sub(1)) {
+        let len = start[k + 1].saturating_sub(start[k]);
+        let at = if shared.get(k) == Some(&1) {
+            &mut index_at
+        } else {
+            &mut own_at
+        };
+        runs.push(*at..*at + len);
+        *at += len;
+    }
+    if !(lengths_agree && own_at == nc.len() && index_at == index.len()) {
         return Err(bad("the patches' arrays differ in length"));
     }
     (0..n)
         .map(|k| {
-            let run = start[k]..start[k + 1];
+            let (weights, centres) = (start[k]..start[k + 1], runs[k].clone());
+            let own = shared[k] == 0;
             Ok(PatchParts {
                 centre: centre[k],
                 radius: radius[k],
@@ -268,24 +298,38 @@ fn patches_of(d: &Bound<'_, PyDict>, kernel: Kernel) -> PyResult<Vec<PatchParts>
                     polynomial: four(poly[4 * k..4 * k + 4].to_vec(), "patch_polynomial")?,
                     shift: DVec3::from_slice(&shift[3 * k..3 * k + 3]),
                     scale: scale[k],
-                    normalized_centers: nc[run.clone()].to_vec(),
-                    normalized_weights: nw[run].to_vec(),
+                    normalized_centers: if own {
+                        nc[centres.clone()].to_vec()
+                    } else {
+                        vec![]
+                    },
+                    normalized_weights: nw[weights].to_vec(),
                     normalized_polynomial: four(np[4 * k..4 * k + 4].to_vec(), "patch_polynomial")?,
                     residual: residual[k],
                     factorization: if cholesky[k] == 1 { "cholesky" } else { "lblt" }.into(),
                     ..Default::default()
                 },
+                index: if own { vec![] } else { index[centres].to_vec() },
             })
         })
         .collect()
 }
 
+/// A uint32 array's numbers.
+fn indices(a: &Bound<'_, PyAny>) -> PyResult<Vec<u32>> {
+    let a: PyReadonlyArray1<u32> = a
+        .extract()
+        .map_err(|_| bad("\"patch_index\" is not a 1-D array of uint32"))?;
+    Ok(a.as_slice()
+        .map_or_else(|_| a.as_array().to_vec(), <[u32]>::to_vec))
+}
+
 /// The fitted surface of a state [`state`] made.
 pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
     let format: i64 = number(d, "format")?;
-    if format != FORMAT {
+    if !(1..=FORMAT).contains(&format) {
         return Err(bad(format!(
-            "format {format}; this version reads format {FORMAT}"
+            "format {format}; this version reads formats 1 to {FORMAT}"
         )));
     }
     let method: String = number(d, "method")?;

@@ -5,7 +5,8 @@
 //! A batch is sorted by the octree leaf of each point and cut into groups of at most
 //! `GROUP` (256) points of one leaf; rayon runs the groups, and each group evaluates the leaf's
 //! covering patches, in increasing order, with the vectorised kernel sums of
-//! [`VariationalSurface`](crate::field::rbf::VariationalSurface). Every sum is per point and the
+//! [`PatchFit`](crate::field::rbf::PatchFit), each patch's centres gathered from the surface's
+//! constraints (and normalised) once for the consecutive groups of a rayon job that use it. Every sum is per point and the
 //! patches are added in a fixed order, so a point's value has the same bits whatever the batch,
 //! its grouping or the number of threads.
 //!
@@ -18,8 +19,10 @@
 //! cube wherever it does at π(x), since π does not lengthen distances to points of the cube.
 
 use super::PartitionSurface;
+use crate::field::kernel::Centres;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::collections::HashMap;
 
 /// Most points a group holds.
 const GROUP: usize = 256;
@@ -34,6 +37,40 @@ pub fn weight(x: DVec3, c: DVec3, r: f64) -> (f64, DVec3) {
     }
     let u = 1.0 - t;
     (u * u * u, d * (-6.0 * u * u / (r * r)))
+}
+
+/// Patches gathered at once by one rayon job of a blend.
+const GATHERED: usize = 64;
+
+/// The centres of the patches one rayon job of a blend evaluated last (at most [`GATHERED`]),
+/// gathered once: its groups come in leaf order, and neighbouring leaves share most of their
+/// patches. The buffers are reused when it starts again.
+#[derive(Default)]
+struct Gathered {
+    /// Where each kept patch's centres are in `centres`.
+    slot: HashMap<u32, usize>,
+    centres: Vec<Centres>,
+}
+
+impl Gathered {
+    /// Patch `i` of `s`'s centres, gathered now unless they are kept.
+    fn of(&mut self, s: &PartitionSurface, i: u32) -> &Centres {
+        if let Some(&k) = self.slot.get(&i) {
+            return &self.centres[k];
+        }
+        if self.slot.len() == GATHERED {
+            self.slot.clear();
+        }
+        let k = self.slot.len();
+        if k == self.centres.len() {
+            self.centres.push(Centres::default());
+        }
+        s.patches[i as usize]
+            .fit
+            .gather(&s.centres, &mut self.centres[k]);
+        self.slot.insert(i, k);
+        &self.centres[k]
+    }
 }
 
 impl PartitionSurface {
@@ -66,9 +103,9 @@ impl PartitionSurface {
         let with_gradients = gradients.is_some();
         let results: Vec<(Vec<f64>, Vec<DVec3>)> = groups
             .par_iter()
-            .map(|&(l, s, e)| {
+            .map_init(Gathered::default, |gathered, &(l, s, e)| {
                 let pts: Vec<DVec3> = order[s..e].iter().map(|&i| points[i as usize]).collect();
-                self.blend_group(l, &pts, with_gradients)
+                self.blend_group(l, &pts, with_gradients, gathered)
             })
             .collect();
         for (&(_, s, _), (v, _)) in groups.iter().zip(&results) {
@@ -93,7 +130,13 @@ impl PartitionSurface {
     }
 
     /// Blend at points all in leaf `l` (as clamped into the cube).
-    fn blend_group(&self, l: u32, pts: &[DVec3], with_gradients: bool) -> (Vec<f64>, Vec<DVec3>) {
+    fn blend_group(
+        &self,
+        l: u32,
+        pts: &[DVec3],
+        with_gradients: bool,
+        gathered: &mut Gathered,
+    ) -> (Vec<f64>, Vec<DVec3>) {
         let m = pts.len();
         let (lo, hi) = self.tree.cube();
         let clamped: Vec<DVec3> = pts.iter().map(|p| p.clamp(lo, hi)).collect();
@@ -106,6 +149,7 @@ impl PartitionSurface {
         let mut sub_w = Vec::with_capacity(m);
         let mut fv = vec![0.0; m];
         let mut fg = vec![DVec3::ZERO; m];
+
         for &i in self.covering(l) {
             let patch = &self.patches[i as usize];
             sub_idx.clear();
@@ -123,13 +167,9 @@ impl PartitionSurface {
                 continue;
             }
             let q = sub_idx.len();
-            if with_gradients {
-                patch
-                    .fit
-                    .eval_on_this_thread(&sub_pts, &mut fv[..q], Some(&mut fg[..q]));
-            } else {
-                patch.fit.eval_on_this_thread(&sub_pts, &mut fv[..q], None);
-            }
+            let g = with_gradients.then_some(&mut fg[..q]);
+            let centres = gathered.of(self, i);
+            patch.fit.eval_gathered(centres, &sub_pts, &mut fv[..q], g);
             for (j, &k) in sub_idx.iter().enumerate() {
                 let (w, dw) = sub_w[j];
                 sum[k] += w * fv[j];

@@ -2,18 +2,20 @@
 //! box use, so that a task polygonizing one tile of a lattice receives that alone and its bytes
 //! follow the tile: the patches covering the octree leaves the box meets, the octree split only
 //! where it meets the box (it travels with the cut, see [`PartitionSurface::parts`]), and the
-//! constraints inside the kept patches' supports.
+//! constraints the kept patches' centres are, renumbered.
 
 use super::{patches, Constraints, PartitionSurface};
+use crate::field::rbf::PatchCentres;
 use glam::DVec3;
 
 impl PartitionSurface {
     /// The surface with only the patches covering the octree leaves that points of the box
     /// `[lo, hi]` fall in (a point is blended from the patches of the leaf holding it clamped
     /// into the root cube), in their order, the octree pruned to the box
-    /// ([`super::octree::Octree::pruned_to_box`]), and the constraints inside the kept
-    /// patches' supports, in their order (at least one data point, for its bounds): at every
-    /// point of the box it evaluates to the same bits, values and gradients, as `self`.
+    /// ([`super::octree::Octree::pruned_to_box`]), and the constraints the kept patches' centres
+    /// are (which hold those inside their supports), in their order and renumbered (at least one
+    /// data point, for its bounds): at every point of the box it evaluates to the same bits,
+    /// values and gradients, as `self`.
     pub fn cut(&self, lo: DVec3, hi: DVec3) -> PartitionSurface {
         // Points are clamped into the root cube before their leaf is looked up.
         let (clo, chi) = self.tree.cube();
@@ -26,18 +28,20 @@ impl PartitionSurface {
                 keep[i as usize] = true;
             }
         });
-        let patches: Vec<_> = self
+        let mut patches: Vec<_> = self
             .patches
             .iter()
             .zip(&keep)
             .filter(|(_, &k)| k)
             .map(|(p, _)| p.clone())
             .collect();
+        let constraints = self.constraints_indexed(&mut patches);
         let tree = self.tree.pruned_to_box(blo, bhi);
         let (cover_start, cover) = patches::cover(&tree, &patches);
         PartitionSurface {
             settings: self.settings,
-            constraints: self.constraints_within(&patches),
+            centres: constraints.points.clone(),
+            constraints,
             tree,
             cut: true,
             patches,
@@ -47,28 +51,35 @@ impl PartitionSurface {
         }
     }
 
-    /// The constraints inside the supports of `patches`, in their order (data points first, as
-    /// in every [`Constraints`]); the first data point when none of them is.
-    fn constraints_within(&self, patches: &[patches::Patch]) -> Constraints {
+    /// The constraints the centres of `patches` are, in their order (data points first, as in
+    /// every [`Constraints`]; the first data point when none of them is), with the patches'
+    /// indices renumbered into them (a cut's patches index its constraints, see
+    /// [`PartitionSurface::constraint_at`]).
+    fn constraints_indexed(&self, patches: &mut [patches::Patch]) -> Constraints {
         let c = &self.constraints;
         let mut keep = vec![false; c.points.len()];
-        // A cut's octree has no points; its constraints are kept whole by the cuts made from it.
-        if self.tree.order.is_empty() {
-            keep.fill(true);
-        }
-        for p in patches {
-            let r2 = p.radius * p.radius;
-            self.tree.for_each_leaf_meeting(p.centre, p.radius, |k| {
-                let n = &self.tree.nodes[k as usize];
-                for &i in &self.tree.order[n.start as usize..n.end as usize] {
-                    if c.points[i as usize].distance_squared(p.centre) <= r2 {
-                        keep[i as usize] = true;
-                    }
+        for p in patches.iter() {
+            if let PatchCentres::Shared(index) = p.fit.centres() {
+                for &k in index {
+                    keep[self.constraint_at(k) as usize] = true;
                 }
-            });
+            }
         }
         if !keep[..c.boundary].contains(&true) {
             keep[0] = true;
+        }
+        // The new index of each kept constraint.
+        let mut renumber = vec![u32::MAX; c.points.len()];
+        let kept_at = renumber.iter_mut().zip(&keep).filter(|(_, &k)| k);
+        for (next, (r, _)) in kept_at.enumerate() {
+            *r = next as u32;
+        }
+        // The new index of the constraint at each position of the points the patches index.
+        let new: Vec<u32> = (0..self.centres.len() as u32)
+            .map(|k| renumber[self.constraint_at(k) as usize])
+            .collect();
+        for p in patches.iter_mut() {
+            p.fit.renumber(&new);
         }
         Constraints {
             points: kept(&c.points, &keep),

@@ -119,6 +119,10 @@ pub struct PartitionSurface {
     /// constraints (and so is part of its [`PartitionSurface::parts`]).
     cut: bool,
     patches: Vec<Patch>,
+    /// The points the patches' indices name: the constraint points in the octree's order
+    /// (`tree.order`) for a whole surface, a cut's constraint points for a cut (whose octree
+    /// holds no points), so that a patch's centres lie in a few runs of memory.
+    centres: Vec<DVec3>,
     /// Patches covering each leaf: `cover[cover_start[l]..cover_start[l + 1]]`, increasing.
     cover_start: Vec<u32>,
     cover: Vec<u32>,
@@ -211,21 +215,23 @@ impl PartitionSurface {
         let supports = patches::supports(&tree, &c.points, &levels, settings, planes);
         let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
-            + (c.points.len() * 48) as u64
+            + (c.points.len() * (48 + 24)) as u64
             + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
         patches::check_memory(bytes, settings.fit.memory_limit)?;
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
         let (cover_start, cover) = patches::cover(&tree, &fitted);
-        // The kept octree answers no more queries on points (evaluation only descends it).
+        // The kept octree answers no more queries on points (evaluation only descends it): its
+        // copy of them is what the patches index.
         let mut tree = tree;
-        tree.release_copy();
+        let centres = tree.take_copy();
         Ok(PartitionSurface {
             settings: *settings,
             constraints: c,
             tree,
             cut: false,
             patches: fitted,
+            centres,
             cover_start,
             cover,
             residual,
@@ -256,6 +262,14 @@ impl PartitionSurface {
     /// The octree.
     pub fn octree(&self) -> &Octree {
         &self.tree
+    }
+    /// The constraint (its index in [`PartitionSurface::constraints`]) at position `k` of the
+    /// points the patches index.
+    pub fn constraint_at(&self, k: u32) -> u32 {
+        match self.tree.order.is_empty() {
+            true => k,
+            false => self.tree.order[k as usize],
+        }
     }
     /// Bounding box of the boundary constraints (the data points).
     pub fn data_bounding_box(&self) -> (DVec3, DVec3) {

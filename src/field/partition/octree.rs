@@ -368,7 +368,13 @@ impl Octree {
 
     /// Frees the tree's copy of its points (the queries then read `points` through `order`).
     pub fn release_copy(&mut self) {
-        self.sorted = Vec::new();
+        self.take_copy();
+    }
+
+    /// The tree's copy of its points (`copy[k]` = `points[order[k]]`), which it no longer keeps
+    /// (as after [`Octree::release_copy`]).
+    pub fn take_copy(&mut self) -> Vec<DVec3> {
+        std::mem::take(&mut self.sorted)
     }
 }
 

@@ -7,7 +7,7 @@ use super::octree::Node;
 use super::{patches, Octree, PartitionSettings, PartitionSurface, Patch};
 use crate::error::Result;
 use crate::field::constraints::Constraints;
-use crate::field::rbf::{bad_state, SurfaceParts, VariationalSurface};
+use crate::field::rbf::{bad_state, PatchFit, SurfaceParts};
 use glam::DVec3;
 
 /// One patch: its ball, its counts and its fit.
@@ -17,7 +17,11 @@ pub struct PatchParts {
     pub radius: f64,
     pub inside: usize,
     pub size: usize,
+    /// The fit's numbers; its normalised centres only for a patch with centres of its own.
     pub fit: SurfaceParts,
+    /// The constraints its centres are (indices into [`PartitionParts::constraints`]); empty
+    /// for a patch with centres of its own.
+    pub index: Vec<u32>,
 }
 
 /// Everything a [`PartitionSurface`] holds besides what is built again from it.
@@ -41,12 +45,17 @@ impl PartitionSurface {
             patches: self
                 .patches
                 .iter()
-                .map(|p| PatchParts {
-                    centre: p.centre,
-                    radius: p.radius,
-                    inside: p.inside,
-                    size: p.size,
-                    fit: p.fit.parts(),
+                .map(|p| {
+                    let (fit, index) = p.fit.parts();
+                    let index = index.iter().map(|&k| self.constraint_at(k)).collect();
+                    PatchParts {
+                        centre: p.centre,
+                        radius: p.radius,
+                        inside: p.inside,
+                        size: p.size,
+                        fit,
+                        index,
+                    }
                 })
                 .collect(),
             residual: self.residual,
@@ -68,6 +77,17 @@ impl PartitionSurface {
         if p.patches.is_empty() {
             return Err(bad_state("no patches"));
         }
+        let cut = p.tree.is_some();
+        let mut tree: Octree = match p.tree {
+            Some(nodes) => Octree::from_nodes(checked_nodes(nodes)?),
+            None => Self::tree(c, &p.settings),
+        };
+        // The patches index the constraints in the octree's order (a cut's octree has none).
+        let centres = match cut {
+            true => c.points.clone(),
+            false => tree.take_copy(),
+        };
+        let rank = (!cut).then(|| patches::inverse(&tree.order));
         let patches = p
             .patches
             .into_iter()
@@ -80,15 +100,16 @@ impl PartitionSurface {
                     radius: q.radius,
                     inside: q.inside,
                     size: q.size,
-                    fit: VariationalSurface::from_parts(q.fit)?,
+                    fit: {
+                        let mut fit = PatchFit::from_parts(q.fit, q.index, c.points.len())?;
+                        if let Some(rank) = &rank {
+                            fit.renumber(rank);
+                        }
+                        fit
+                    },
                 })
             })
             .collect::<Result<Vec<_>>>()?;
-        let cut = p.tree.is_some();
-        let tree: Octree = match p.tree {
-            Some(nodes) => Octree::from_nodes(checked_nodes(nodes)?),
-            None => Self::tree(c, &p.settings),
-        };
         let (cover_start, cover) = patches::cover(&tree, &patches);
         Ok(PartitionSurface {
             settings: p.settings,
@@ -96,6 +117,7 @@ impl PartitionSurface {
             tree,
             cut,
             patches,
+            centres,
             cover_start,
             cover,
             residual: p.residual,

@@ -15,7 +15,7 @@ use super::octree::Octree;
 use super::PartitionSettings;
 use crate::error::Result;
 use crate::field::constraints::Constraints;
-use crate::field::rbf::{self, VariationalSurface};
+use crate::field::rbf::{self, PatchFit, VariationalSurface};
 use faer::Par;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -30,7 +30,8 @@ pub struct Patch {
     pub inside: usize,
     /// Number of constraints it interpolates (`inside`, and those completing a small system).
     pub size: usize,
-    pub fit: VariationalSurface,
+    /// Its interpolant, whose centres are indices into the surface's constraints.
+    pub fit: PatchFit,
 }
 
 /// Where a patch's system comes from.
@@ -168,7 +169,7 @@ pub fn supports(
 pub fn estimate_bytes(sizes: &[usize], threads: usize) -> u64 {
     let kept: u64 = sizes
         .iter()
-        .map(|&m| VariationalSurface::patch_bytes(m) + 4 * m as u64)
+        .map(|&m| PatchFit::bytes(m) + 4 * m as u64)
         .sum();
     let mut largest: Vec<usize> = sizes.to_vec();
     largest.sort_unstable_by(|a, b| b.cmp(a));
@@ -181,7 +182,8 @@ pub fn estimate_bytes(sizes: &[usize], threads: usize) -> u64 {
 }
 
 /// Fits one patch per support, in parallel; errors with the first failing patch's error (in
-/// leaf order).
+/// leaf order). Each patch's centres are indices into the constraint points in the tree's
+/// order (`rank[i]` the position of constraint `i` in `tree.order`).
 pub fn fit(
     tree: &Octree,
     c: &Constraints,
@@ -189,6 +191,7 @@ pub fn fit(
     supports: &[Support],
     settings: &PartitionSettings,
 ) -> Result<Vec<Patch>> {
+    let rank = inverse(&tree.order);
     // The memory of all patches is checked before (see `check_memory`).
     let rbf_settings = rbf::FitSettings {
         memory_limit: u64::MAX,
@@ -206,7 +209,7 @@ pub fn fit(
             let (centre, radius) = (s.centre, s.radius);
             if s.is_plane() {
                 let (pts, vals) = empty::plane(c, tree, centre, radius);
-                let fit = VariationalSurface::fit_patch(pts, vals, &rbf_settings, Par::Seq)?;
+                let fit = PatchFit::fit(None, pts, vals, &rbf_settings, Par::Seq)?;
                 return Ok(Patch {
                     centre,
                     radius,
@@ -235,9 +238,11 @@ pub fn fit(
             outside.sort_unstable();
             let inside = idx.len();
             idx.extend_from_slice(&outside);
-            let pts: Vec<DVec3> = idx.iter().map(|&i| c.points[i as usize]).collect();
-            let vals: Vec<f64> = idx.iter().map(|&i| c.values[i as usize]).collect();
-            let fit = VariationalSurface::fit_patch(pts, vals, &rbf_settings, Par::Seq)?;
+            let size = idx.len();
+            let pts = idx.iter().map(|&i| c.points[i as usize]).collect();
+            let vals = idx.iter().map(|&i| c.values[i as usize]).collect();
+            let index = idx.iter().map(|&i| rank[i as usize]).collect();
+            let fit = PatchFit::fit(Some(index), pts, vals, &rbf_settings, Par::Seq)?;
             if let Some(t) = &token {
                 t.advance(inside as u64)?;
             }
@@ -245,12 +250,21 @@ pub fn fit(
                 centre,
                 radius,
                 inside,
-                size: idx.len(),
+                size,
                 fit,
             })
         })
         .collect();
     fitted.into_iter().collect()
+}
+
+/// The inverse of the permutation `order`: `inverse(order)[order[k]] = k`.
+pub fn inverse(order: &[u32]) -> Vec<u32> {
+    let mut rank = vec![0u32; order.len()];
+    for (k, &i) in order.iter().enumerate() {
+        rank[i as usize] = k as u32;
+    }
+    rank
 }
 
 /// For each leaf (its position in `tree.leaves`), the patches whose support meets it, in

@@ -1,4 +1,5 @@
 use super::*;
+use crate::field::rbf::PatchCentres;
 use crate::field::testing::{gradient_error, random_points};
 
 /// `n` points on a torus (major radius 0.6, minor 0.25, axis z) with outward normals.
@@ -13,6 +14,16 @@ fn torus_data(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
             (ring * 0.6 + normal * 0.25, normal)
         })
         .unzip()
+}
+
+/// Patch `i`'s value and gradient at `x`.
+fn patch_at(s: &PartitionSurface, i: usize, x: DVec3) -> (f64, DVec3) {
+    let (mut v, mut g) = ([0.0], [DVec3::ZERO]);
+    let all = &s.centres;
+    let scratch = &mut crate::field::kernel::Centres::default();
+    let fit = &s.patches[i].fit;
+    fit.eval_on_this_thread(all, scratch, &[x], &mut v, Some(&mut g));
+    (v[0], g[0])
 }
 
 pub(super) fn torus_surface() -> PartitionSurface {
@@ -79,10 +90,25 @@ fn patches_hold_every_constraint_of_their_support() {
             "patch {i}: {}",
             p.size
         );
+        // Its centres are the constraints it interpolates, by index (a plane's are its own).
+        match p.fit.centres() {
+            PatchCentres::Shared(index) => {
+                assert_eq!(index.len(), p.size, "patch {i}");
+                assert_eq!(p.fit.normalized_weights().len(), p.size, "patch {i}");
+                let within = |&k: &u32| {
+                    let j = s.constraint_at(k) as usize;
+                    (c.points[j] - p.centre).length_squared() <= p.radius * p.radius
+                };
+                assert_eq!(index.iter().filter(|j| within(j)).count(), p.inside);
+            }
+            PatchCentres::Own(own) => {
+                assert_eq!((p.inside, own.len()), (0, empty::PLANE_POINTS), "patch {i}")
+            }
+        }
         // The patch interpolates every constraint inside its support.
         for (q, v) in c.points.iter().zip(&c.values) {
             if (*q - p.centre).length_squared() <= p.radius * p.radius {
-                assert!((p.fit.value(*q) - v).abs() <= 1e-11, "patch {i}");
+                assert!((patch_at(&s, i, *q).0 - v).abs() <= 1e-11, "patch {i}");
             }
         }
         // Each patch's ball covers its leaf (with room: the weight is positive on the leaf).
@@ -247,7 +273,12 @@ fn empty_patches_carry_the_sign_of_space() {
     let s = torus_surface();
     let torus = |x: DVec3| DVec3::new(x.truncate().length() - 0.6, x.z, 0.0).length() - 0.25;
     let mut planes = 0;
-    for p in s.patches().iter().filter(|p| p.inside == 0) {
+    for (i, p) in s
+        .patches()
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.inside == 0)
+    {
         planes += 1;
         let side = torus(p.centre).signum();
         let rim = [
@@ -259,10 +290,10 @@ fn empty_patches_carry_the_sign_of_space() {
             DVec3::NEG_Z,
         ];
         for x in std::iter::once(p.centre).chain(rim.iter().map(|e| p.centre + *e * p.radius)) {
-            let v = p.fit.value(x);
+            let (v, g) = patch_at(&s, i, x);
             assert_eq!(v.signum(), side, "{} at {x}", p.centre);
             // The slope w/d = 3/4 along the direction away from the nearest data point.
-            assert!((p.fit.gradient(x).length() - 0.75).abs() < 1e-9);
+            assert!((g.length() - 0.75).abs() < 1e-9);
         }
     }
     assert!(planes > 10, "{planes}");
