@@ -9,10 +9,7 @@ polygonization. A worker that does not see the directory (another machine), or c
 file (shared memory full), returns the arrays as usual.
 
 The file holds the arrays in ``.npy`` format one after another, the 8-byte ones first so that
-every array's data is aligned; bytes after the last array are not read. A welded tile's file is
-not deleted but renamed ``free-…``, and the next task on the machine writes over it (keeping
-its pages, which memory not touched before costs several times more to fill than memory in
-use); the run's directory goes, with every file in it, when the run ends.
+every array's data is aligned.
 """
 
 from __future__ import annotations
@@ -38,9 +35,6 @@ SHARED_MEMORY = "/dev/shm"
 
 #: The run directories' names: this prefix, the client's process id, a dash.
 PREFIX = "implicitmesh-tiles-"
-
-#: The names of welded tiles' files that a task may write over.
-FREE = "free-"
 
 
 def make_directory() -> str | None:
@@ -89,7 +83,7 @@ def write(local: tuple[str, int], name: str, arrays: dict[str, np.ndarray]) -> b
     path = os.path.join(directory, name)
     tmp = path + ".part"
     try:
-        with open(tmp, "r+b" if claim_free(directory, tmp) else "wb") as fh:
+        with open(tmp, "wb") as fh:
             for key in ORDER:
                 np.lib.format.write_array(fh, np.ascontiguousarray(arrays[key]), allow_pickle=False)
         os.replace(tmp, path)
@@ -102,27 +96,10 @@ def write(local: tuple[str, int], name: str, arrays: dict[str, np.ndarray]) -> b
     return True
 
 
-def claim_free(directory: str, path: str) -> bool:
-    """Renames a free file of ``directory`` (a welded tile's) to ``path``; False when there is
-    none (another task may take one first: the rename is atomic)."""
-    try:
-        names = [n for n in os.listdir(directory) if n.startswith(FREE)]
-    except OSError:
-        return False
-    for n in names:
-        try:
-            os.rename(os.path.join(directory, n), path)
-            return True
-        except OSError:
-            continue
-    return False
-
-
 @contextmanager
 def read(directory: str, name: str) -> Iterator[dict[str, np.ndarray]]:
     """The tile arrays of ``directory/name``, read-only views of the file mapped in memory, valid
-    inside the ``with`` block; the file is then free for another tile (deleted instead if a
-    view of it outlives the block)."""
+    inside the ``with`` block; the file is deleted afterwards."""
     path = os.path.join(directory, name)
     with open(path, "rb") as fh:
         size = os.fstat(fh.fileno()).st_size
@@ -143,13 +120,9 @@ def read(directory: str, name: str) -> Iterator[dict[str, np.ndarray]]:
     finally:
         arrays.clear()
         del data
-        kept = False
         if mapped is not None:
             try:
                 mapped.close()
             except BufferError:  # a caller kept a view: the mapping goes with it
-                kept = True
-        if kept:
-            os.remove(path)
-        else:
-            os.replace(path, os.path.join(directory, FREE + name))
+                pass
+        os.remove(path)

@@ -255,7 +255,7 @@ def _collect(
 
 def _weld_entry(stream: "_core.StreamedWeld", entry: dict, local: str | None) -> None:
     """Welds the tile of a task's ``entry`` into ``stream``: its arrays, or the file it wrote in
-    the run's directory ``local`` (then free for another tile); the entry keeps its counts."""
+    the run's directory ``local`` (then deleted); the entry keeps its counts."""
     if "local" in entry:
         with _tile_files.read(local, entry.pop("local")) as a:
             _add_tile(stream, entry["window"], *(a[k] for k in ("v", "f", "n", "b", "k")))
