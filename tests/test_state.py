@@ -90,8 +90,9 @@ def test_load_refuses_other_files(tmp_path):
 
 
 def _format_1(state: dict) -> dict:
-    """A format-2 partition state in format 1, where every patch kept its normalised centres
-    (computed as the fit does: (c − shift) · scale per coordinate)."""
+    """A format-3 partition state in format 1, where every patch kept its normalised centres
+    (computed as the fit does: (c − shift) · scale per coordinate) and every data point its
+    normal constraint (no ``constraint_normal_of``)."""
     start, shared = state["patch_start"], state["patch_shared"]
     points, index = state["constraint_points"], state["patch_index"]
     own, shift, scale = state["patch_normalized_centers"], state["patch_shift"].reshape(-1, 3), state["patch_scale"]
@@ -104,7 +105,8 @@ def _format_1(state: dict) -> dict:
         else:
             runs.append(own[at_own:at_own + n])
             at_own += n
-    old = {k: v for k, v in state.items() if k not in ("patch_index", "patch_shared")}
+    dropped = ("patch_index", "patch_shared", "constraint_normal_of")
+    old = {k: v for k, v in state.items() if k not in dropped}
     return {**old, "format": 1, "patch_normalized_centers": np.concatenate(runs)}
 
 
@@ -112,7 +114,10 @@ def test_partition_patches_keep_indices_into_the_constraints(queries):
     p, n = im.shapes.fibonacci_sphere(1200)
     s = im.VariationalSurface.fit(p * 0.8, n, method="partition")
     state = s.to_state()
-    assert state["format"] == 2 and state["patch_index"].dtype == np.uint32
+    assert state["format"] == 3 and state["patch_index"].dtype == np.uint32
+    # Every data point has its normal constraint, right after the data points.
+    boundary = state["constraint_boundary"]
+    assert np.array_equal(state["constraint_normal_of"], np.arange(boundary))
     shared = state["patch_shared"].astype(bool)
     sizes = np.diff(state["patch_start"])
     assert shared.sum() > 20 and len(state["patch_index"]) == sizes[shared].sum()
@@ -127,3 +132,8 @@ def test_partition_patches_keep_indices_into_the_constraints(queries):
     assert np.array_equal(back.gradient(queries), s.gradient(queries))
     assert old["patch_normalized_centers"].nbytes > 5 * state["patch_index"].nbytes
     assert back.to_state()["patch_normalized_centers"].shape == old["patch_normalized_centers"].shape
+    assert np.array_equal(back.to_state()["constraint_normal_of"], state["constraint_normal_of"])
+    # Normal constraints named out of order are refused, by the state's name.
+    bad = {**state, "constraint_normal_of": state["constraint_normal_of"][::-1].copy()}
+    with pytest.raises(ValueError, match="constraint_normal_of"):
+        im.VariationalSurface.from_state(bad)

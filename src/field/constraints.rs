@@ -33,6 +33,12 @@ pub struct ConstraintSettings {
     /// they keep legs thinner than 4d whole, but on such legs the fit grows sheets far from the
     /// data (docs/variational.md, "Thin parts").
     pub thin_reach_over_d: f64,
+    /// Normal constraints for only one data point (the first) per cell of a grid of this many
+    /// typical spacings; 0 or `None` (default) places one for every data point. Fewer normal
+    /// constraints make a partition fit cheaper, but they hold the field's sign near the data:
+    /// with one per 2 spacings (about one data point in ten) fits of 10⁶ points grew small
+    /// bubbles (docs/variational.md).
+    pub normal_cell_over_spacing: Option<f64>,
 }
 
 /// Normals facing each other more than this (cosine of the angle between them) belong to two
@@ -48,13 +54,16 @@ impl Default for ConstraintSettings {
             shrink: true,
             merge_distance: None,
             thin_reach_over_d: 0.0,
+            normal_cell_over_spacing: None,
         }
     }
 }
 
 /// Constraint points and values: the first `boundary` entries are the data points (value 0), the
-/// next `boundary` the normal constraints, in the same order, and the rest the inner constraints
-/// of thin parts ([`super::thin`]), in the order of their data points.
+/// next `normal_of.len()` the normal constraints (of every data point, or at scan scale of a
+/// subset, see [`ConstraintSettings::normal_cell_over_spacing`]), in the order of their data
+/// points, and the rest the inner constraints of thin parts ([`super::thin`]), in the order of
+/// their data points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Constraints {
     pub points: Vec<DVec3>,
@@ -63,8 +72,27 @@ pub struct Constraints {
     pub offsets: Vec<f64>,
     /// Number of boundary constraints (= data points, after merging near-duplicates).
     pub boundary: usize,
+    /// The data point of each normal constraint, increasing (empty without normals; a
+    /// [`PartitionSurface::cut`](super::partition::PartitionSurface::cut) keeps none).
+    pub normal_of: Vec<u32>,
     /// Number of data points merged into others (see [`super::duplicates`]).
     pub merged: usize,
+}
+
+impl Constraints {
+    /// The data point constraint `i` belongs to, for constraints up to the normal ones; for
+    /// the inner constraints of thin parts, their rank among them modulo the data points (a key
+    /// spread like the data's, for hashing).
+    pub fn data_point(&self, i: usize) -> usize {
+        let (b, normals) = (self.boundary, self.normal_of.len());
+        if i < b {
+            i
+        } else if i < b + normals {
+            self.normal_of[i - b] as usize
+        } else {
+            (i - b - normals) % b.max(1)
+        }
+    }
 }
 
 /// Largest side of the axis-aligned bounding box.
@@ -171,6 +199,7 @@ pub fn interpolation_data(
         points,
         values,
         offsets: vec![],
+        normal_of: vec![],
         merged: merge.merged(),
     })
 }
@@ -195,6 +224,10 @@ pub fn unit_normals(name: &'static str, normals: &[DVec3]) -> Result<Vec<DVec3>>
 /// The default offset `d` is at most this many times the data's typical spacing (median
 /// nearest-neighbour distance, [`duplicates::typical_spacing`]).
 pub const D_OVER_SPACING: f64 = 6.0;
+
+/// A cell side, in typical spacings, for [`ConstraintSettings::normal_cell_over_spacing`]: one
+/// data point in about ten keeps its normal constraint.
+pub const NORMAL_CELL_OVER_SPACING: f64 = 2.0;
 
 /// From this many points on, the default offset is capped by the spacing (fewer points lie
 /// further apart than 0.0075 × the largest side / [`D_OVER_SPACING`]).
@@ -289,19 +322,30 @@ fn place_distinct(
     if settings.shrink {
         // The points nearer than d_i to q_i + d_i n_i lie in the grid's cells within d_i of it
         // (searched with a radius a little larger, for the rounding of squared distances).
+        // Points taken in the grid's order: each query reads the cells the one before read.
         let grid = Grid::new(points, d);
-        offsets.par_iter_mut().enumerate().for_each(|(i, di)| {
-            for _ in 0..60 {
-                let p = points[i] + normals[i] * *di;
-                let nearer = grid.any_within(p, *di * (1.0 + 1e-9), |j| {
-                    j as usize != i && (points[j as usize] - p).length() < *di
-                });
-                if !nearer {
-                    break;
+        let shrunk: Vec<f64> = grid
+            .order()
+            .par_iter()
+            .map(|&i| {
+                let i = i as usize;
+                let mut di = d;
+                for _ in 0..60 {
+                    let p = points[i] + normals[i] * di;
+                    let nearer = grid.any_within(p, di * (1.0 + 1e-9), |j, q| {
+                        j as usize != i && (q - p).length() < di
+                    });
+                    if !nearer {
+                        break;
+                    }
+                    di *= 0.5;
                 }
-                *di *= 0.5;
-            }
-        });
+                di
+            })
+            .collect();
+        for (&i, di) in grid.order().iter().zip(shrunk) {
+            offsets[i as usize] = di;
+        }
     }
 
     let inner = if settings.thin_reach_over_d > 0.0 {
@@ -314,15 +358,18 @@ fn place_distinct(
     };
 
     let n = points.len();
+    let normal_of = normal_points(points, settings)?;
     let ratio_at = |i: usize| match caps {
         Some(c) if ratio > 0.0 => ratio.min(c[i]),
         _ => ratio,
     };
-    let mut cpoints = Vec::with_capacity(2 * n + inner.len());
-    let mut values = Vec::with_capacity(2 * n + inner.len());
+    let total = n + normal_of.len() + inner.len();
+    let mut cpoints = Vec::with_capacity(total);
+    let mut values = Vec::with_capacity(total);
     cpoints.extend_from_slice(points);
     values.extend(std::iter::repeat_n(0.0, n));
-    for i in 0..n {
+    for &i in &normal_of {
+        let i = i as usize;
         cpoints.push(points[i] + normals[i] * offsets[i]);
         values.push(ratio_at(i) * offsets[i]);
     }
@@ -335,8 +382,36 @@ fn place_distinct(
         values,
         offsets,
         boundary: n,
+        normal_of,
         merged: 0,
     })
+}
+
+/// The data points that get a normal constraint, increasing: every one, or the first of each
+/// cell of [`ConstraintSettings::normal_cell_over_spacing`] typical spacings.
+fn normal_points(points: &[DVec3], settings: &ConstraintSettings) -> Result<Vec<u32>> {
+    let every = || (0..points.len() as u32).collect();
+    let cells = match settings.normal_cell_over_spacing {
+        Some(c) if !(c.is_finite() && c >= 0.0) => {
+            return Err(Error::invalid(
+                "normal_cell_over_spacing",
+                format!("must be finite and non-negative, got {c}"),
+            ))
+        }
+        Some(c) => c,
+        None => 0.0,
+    };
+    if cells == 0.0 {
+        return Ok(every());
+    }
+    let spacing = duplicates::typical_spacing(points, &Grid::new(points, 0.0));
+    if spacing <= 0.0 {
+        return Ok(every());
+    }
+    let grid = Grid::new(points, cells * spacing);
+    let mut first = grid.first_of_each_cell();
+    first.par_sort_unstable();
+    Ok(first)
 }
 
 /// Per-vertex caps on w_i/d_i for a mesh: 0.9 × the smallest cosine between the vertex normal
@@ -619,6 +694,43 @@ mod tests {
             }
             assert!((c.values[pts.len() + i] - 0.75 * c.offsets[i]).abs() < 1e-15);
         }
+    }
+
+    #[test]
+    fn normal_constraints_of_one_point_per_cell() {
+        let p = crate::field::testing::fibonacci_sphere(20_000);
+        let every = place(&p, &p, &ConstraintSettings::default()).unwrap();
+        assert_eq!(every.normal_of, (0..20_000).collect::<Vec<u32>>());
+        let thinned = ConstraintSettings {
+            normal_cell_over_spacing: Some(NORMAL_CELL_OVER_SPACING),
+            ..Default::default()
+        };
+        let c = place(&p, &p, &thinned).unwrap();
+        let k = c.normal_of.len();
+        assert!(k > 500 && k < 10_000, "{k} normal constraints");
+        assert!(c.normal_of.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(c.points.len(), 20_000 + k);
+        assert_eq!(&c.points[..20_000], &p[..]);
+        // Each normal constraint lies on its data point's normal, at that point's offset, with
+        // the same offsets as when every point has one.
+        assert_eq!(c.offsets, every.offsets);
+        for (slot, &j) in c.normal_of.iter().enumerate() {
+            let j = j as usize;
+            assert_eq!(c.points[20_000 + slot], every.points[20_000 + j]);
+            assert_eq!(c.values[20_000 + slot], every.values[20_000 + j]);
+            assert_eq!(c.data_point(20_000 + slot), j);
+        }
+        // Every data point has a normal constraint within a few cells' reach.
+        let reach =
+            4.0 * NORMAL_CELL_OVER_SPACING * duplicates::typical_spacing(&p, &Grid::new(&p, 0.0));
+        let kept: Vec<DVec3> = c.normal_of.iter().map(|&j| p[j as usize]).collect();
+        let grid = Grid::new(&kept, reach);
+        assert!(p.iter().all(|q| grid.any_within(*q, reach, |_, _| true)));
+        let bad = ConstraintSettings {
+            normal_cell_over_spacing: Some(-1.0),
+            ..Default::default()
+        };
+        assert!(place(&p, &p, &bad).is_err());
     }
 
     #[test]

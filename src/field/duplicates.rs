@@ -117,9 +117,9 @@ pub fn typical_spacing(points: &[DVec3], grid: &Grid) -> f64 {
             let mut r = start;
             loop {
                 let mut best = f64::INFINITY;
-                grid.for_each_within(p, r, |j| {
+                grid.for_each_within_points(p, r, |j, q| {
                     if j as usize != i {
-                        best = best.min((points[j as usize] - p).length());
+                        best = best.min((q - p).length());
                     }
                 });
                 if best.is_finite() || r > 4.0 * side {
@@ -149,16 +149,19 @@ pub fn default_tolerance(points: &[DVec3], grid: &Grid) -> f64 {
 pub fn merge(points: &[DVec3], tolerance: Option<f64>) -> Merge {
     let grid = Grid::new(points, tolerance.unwrap_or(0.0));
     let tol = tolerance.unwrap_or_else(|| default_tolerance(points, &grid));
-    // Each point's neighbours with smaller indices; almost all lists are empty.
+    // Each point's neighbours with smaller indices; almost all lists are empty. Points are
+    // taken in the grid's order (each query reads the cells the one before read); the groups,
+    // each under its smallest index, do not depend on the order of the pairs.
     let reach = tol * (1.0 + 1e-9) + f64::MIN_POSITIVE;
-    let earlier: Vec<(u32, u32)> = points
+    let earlier: Vec<(u32, u32)> = grid
+        .order()
         .par_iter()
-        .enumerate()
-        .flat_map_iter(|(i, p)| {
+        .flat_map_iter(|&i| {
+            let p = points[i as usize];
             let mut found = Vec::new();
-            grid.for_each_within(*p, reach, |j| {
-                if (j as usize) < i && (points[j as usize] - *p).length() <= tol {
-                    found.push((i as u32, j));
+            grid.for_each_within_points(p, reach, |j, q| {
+                if j < i && (q - p).length() <= tol {
+                    found.push((i, j));
                 }
             });
             found

@@ -1,5 +1,7 @@
 //! A uniform grid over a point set, for fixed-radius neighbour queries: the points are sorted by
-//! cell (counting sort), so that the points of a cell are one contiguous run of indices.
+//! cell (counting sort), so that the points of a cell are one contiguous run of indices, and
+//! queries read them from a copy in that order. Queries issued in [`Grid::order`] find their
+//! neighbours in memory the previous query read.
 //!
 //! The number of cells is capped at about eight per point, so a query radius far below the
 //! spacing of the points (a duplicate tolerance) still gives a grid of bounded size; queries
@@ -17,6 +19,8 @@ pub struct Grid<'a> {
     start: Vec<u32>,
     /// Point indices, sorted by cell and, within a cell, increasing.
     order: Vec<u32>,
+    /// The points in the order of `order`.
+    sorted: Vec<DVec3>,
 }
 
 impl<'a> Grid<'a> {
@@ -76,6 +80,7 @@ impl<'a> Grid<'a> {
             order[fill[k] as usize] = i as u32;
             fill[k] += 1;
         }
+        let sorted = order.iter().map(|&i| points[i as usize]).collect();
         Grid {
             points,
             lo,
@@ -83,26 +88,52 @@ impl<'a> Grid<'a> {
             dims,
             start,
             order,
+            sorted,
         }
+    }
+
+    /// The point indices sorted by cell (increasing within a cell): queries around the points
+    /// in this order read memory that the query before read.
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
+
+    /// The smallest index of each non-empty cell.
+    pub fn first_of_each_cell(&self) -> Vec<u32> {
+        self.start
+            .windows(2)
+            .filter(|w| w[1] > w[0])
+            .map(|w| self.order[w[0] as usize])
+            .collect()
     }
 
     /// Calls `visit(j)` for every point `j` with `|points[j] − p| ≤ radius`, cell by cell (z,
     /// then y, then x), increasing within a cell.
     pub fn for_each_within(&self, p: DVec3, radius: f64, mut visit: impl FnMut(u32)) {
+        self.for_each_within_points(p, radius, |j, _| visit(j));
+    }
+
+    /// As [`Grid::for_each_within`], with the point: `visit(j, points[j])`.
+    pub fn for_each_within_points(&self, p: DVec3, radius: f64, mut visit: impl FnMut(u32, DVec3)) {
         let r2 = radius * radius;
-        self.for_each_cell_within(p, radius, |run| {
-            for &j in run {
-                if (self.points[j as usize] - p).length_squared() <= r2 {
-                    visit(j);
+        self.for_each_cell_within(p, radius, |run, pts| {
+            for (&j, q) in run.iter().zip(pts) {
+                if (*q - p).length_squared() <= r2 {
+                    visit(j, *q);
                 }
             }
             false
         });
     }
 
-    /// Calls `visit(run)` with the points of each row of cells meeting the cube of half-side
-    /// `radius` around `p` (z, then y), until it returns `true`.
-    fn for_each_cell_within(&self, p: DVec3, radius: f64, mut visit: impl FnMut(&[u32]) -> bool) {
+    /// Calls `visit(indices, points)` with the points of each row of cells meeting the cube of
+    /// half-side `radius` around `p` (z, then y), until it returns `true`.
+    fn for_each_cell_within(
+        &self,
+        p: DVec3,
+        radius: f64,
+        mut visit: impl FnMut(&[u32], &[DVec3]) -> bool,
+    ) {
         if self.points.is_empty() {
             return;
         }
@@ -125,20 +156,27 @@ impl<'a> Grid<'a> {
                     self.start[row + rx.0] as usize,
                     self.start[row + rx.1 + 1] as usize,
                 );
-                if visit(&self.order[a..b]) {
+                if visit(&self.order[a..b], &self.sorted[a..b]) {
                     return;
                 }
             }
         }
     }
 
-    /// Whether `accept(j)` holds for some point `j` within `radius` of `p`; stops at the first.
-    pub fn any_within(&self, p: DVec3, radius: f64, mut accept: impl FnMut(u32) -> bool) -> bool {
+    /// Whether `accept(j, points[j])` holds for some point `j` within `radius` of `p`; stops at
+    /// the first.
+    pub fn any_within(
+        &self,
+        p: DVec3,
+        radius: f64,
+        mut accept: impl FnMut(u32, DVec3) -> bool,
+    ) -> bool {
         let mut found = false;
-        self.for_each_cell_within(p, radius, |run| {
-            found = run.iter().any(|&j| {
-                (self.points[j as usize] - p).length_squared() <= radius * radius && accept(j)
-            });
+        self.for_each_cell_within(p, radius, |run, pts| {
+            found = run
+                .iter()
+                .zip(pts)
+                .any(|(&j, q)| (*q - p).length_squared() <= radius * radius && accept(j, *q));
             found
         });
         found
@@ -182,7 +220,7 @@ mod tests {
                 // Another point nearer than `radius`; the grid's query stops at the first.
                 let brute = (0..pts.len())
                     .any(|j| j != i && (pts[j] - *p).length_squared() <= radius * radius);
-                assert_eq!(g.any_within(*p, radius, |j| j as usize != i), brute);
+                assert_eq!(g.any_within(*p, radius, |j, _| j as usize != i), brute);
             }
         }
     }

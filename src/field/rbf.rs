@@ -505,6 +505,7 @@ impl VariationalSurface {
             values,
             offsets: vec![],
             boundary,
+            normal_of: vec![],
             merged: 0,
         };
         let mut s = Self::solve(c, settings, par, true)?;

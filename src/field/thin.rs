@@ -61,10 +61,10 @@ pub fn inner_points(points: &[DVec3], normals: &[DVec3], depths: &[f64]) -> Vec<
             let i = candidates[a];
             let c = middles[a];
             let r = 0.25 * depths[i];
-            let crowded = data.any_within(c, r, |j| (points[j as usize] - c).length() < r)
-                || others.any_within(c, r, |b| {
+            let crowded = data.any_within(c, r, |_, q| (q - c).length() < r)
+                || others.any_within(c, r, |b, m| {
                     let j = candidates[b as usize];
-                    j < i && (middles[b as usize] - c).length() < 0.25 * depths[i].min(depths[j])
+                    j < i && (m - c).length() < 0.25 * depths[i].min(depths[j])
                 });
             !crowded
         })

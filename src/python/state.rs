@@ -19,7 +19,9 @@ use std::sync::Arc;
 /// The version of the layout below; states of other versions are refused. Format 1 differs
 /// only in a partition fit's patches: each kept its normalised centres, where format 2 keeps
 /// indices into the constraints (`patch_index`) for the patches marked in `patch_shared`.
-const FORMAT: i64 = 2;
+/// Format 3 adds `constraint_normal_of`, the data points that have a normal constraint (in
+/// formats 1 and 2 every data point with an offset has one).
+const FORMAT: i64 = 3;
 
 fn bad(what: impl std::fmt::Display) -> PyErr {
     value_error("state", format!("not a saved surface: {what}"))
@@ -66,15 +68,41 @@ fn put_constraints(py: Python<'_>, d: &Bound<'_, PyDict>, c: &Constraints) -> Py
     d.set_item("constraint_values", values_to_py(py, c.values.clone()))?;
     d.set_item("constraint_offsets", values_to_py(py, c.offsets.clone()))?;
     d.set_item("constraint_boundary", c.boundary)?;
+    let normal_of: Vec<usize> = c.normal_of.iter().map(|&j| j as usize).collect();
+    d.set_item("constraint_normal_of", counts_to_py(py, normal_of))?;
     d.set_item("merged_points", c.merged)
 }
 
 fn constraints_of(d: &Bound<'_, PyDict>) -> PyResult<Constraints> {
+    let points = points_of(d, "constraint_points")?;
+    let offsets = values_of(d, "constraint_offsets")?;
+    let boundary: usize = number(d, "constraint_boundary")?;
+    // Formats 1 and 2 placed a normal constraint for every data point that has an offset.
+    let normal_of: Vec<u32> = match d.get_item("constraint_normal_of")? {
+        Some(_) => counts_of(d, "constraint_normal_of")?
+            .into_iter()
+            .map(|j| u32::try_from(j).map_err(|_| bad(format!("normal of data point {j}"))))
+            .collect::<PyResult<_>>()?,
+        None if offsets.len() == boundary && points.len() >= 2 * boundary => {
+            (0..boundary as u32).collect()
+        }
+        None => vec![],
+    };
+    let increasing = normal_of.windows(2).all(|w| w[0] < w[1]);
+    if !increasing
+        || normal_of.last().is_some_and(|&j| j as usize >= boundary)
+        || boundary + normal_of.len() > points.len()
+    {
+        return Err(bad(
+            "\"constraint_normal_of\" does not name data points in order",
+        ));
+    }
     Ok(Constraints {
-        points: points_of(d, "constraint_points")?,
+        points,
         values: values_of(d, "constraint_values")?,
-        offsets: values_of(d, "constraint_offsets")?,
-        boundary: number(d, "constraint_boundary")?,
+        offsets,
+        boundary,
+        normal_of,
         merged: match d.get_item("merged_points")? {
             Some(_) => number(d, "merged_points")?,
             None => 0,

@@ -391,9 +391,9 @@ impl PyVariationalSurface {
     ///     partition fit counts patch by patch; the global fit counts the columns of its system
     ///     factorized, in steps of 2048.
     /// partition_options : dict, optional
-    ///     The partition fit's patches: ``"max_per_leaf"`` (int, default 96: the octree splits
-    ///     leaves holding more constraints), ``"max_patch"`` (int, default 400: and leaves whose
-    ///     patch would hold more), ``"min_points"`` (int, default 256: smaller patches complete
+    ///     The partition fit's patches: ``"max_per_leaf"`` (int, default 64: the octree splits
+    ///     leaves holding more constraints), ``"max_patch"`` (int, default 256: and leaves whose
+    ///     patch would hold more), ``"min_points"`` (int, default 128: smaller patches complete
     ///     their system with constraints from further away; patches with no data in reach are
     ///     planes that carry the sign of space, or for :meth:`interpolate` complete with half as
     ///     many) and ``"overlap"`` (float, default

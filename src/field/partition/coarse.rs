@@ -14,7 +14,9 @@
 //! 3, 6, 9, … (one in 8^k).
 
 use super::octree::Octree;
+use crate::field::constraints::Constraints;
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// One subsampled level.
 pub struct Level {
@@ -31,25 +33,28 @@ fn splitmix(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
-/// Levels 1, 2, … of `points` (constraint `i` belongs to data point `i mod boundary`), down to
-/// the first level 3k with at most `smallest` points, each with an octree over the cube
-/// (`centre`, `half`).
+/// Levels 1, 2, … of the constraints `c` (constraint `i` kept with its data point,
+/// [`Constraints::data_point`]), down to the first level 3k with at most `smallest` points, each
+/// with an octree over the cube (`centre`, `half`).
 pub fn levels(
-    points: &[DVec3],
-    boundary: usize,
+    c: &Constraints,
     smallest: usize,
     centre: DVec3,
     half: f64,
     max_per_leaf: usize,
 ) -> Vec<Level> {
-    let boundary = boundary.max(1) as u64;
+    let points = &c.points;
+    let hashes: Vec<u64> = (0..points.len())
+        .into_par_iter()
+        .map(|i| splitmix(c.data_point(i) as u64))
+        .collect();
     let mut out = Vec::new();
     let mut step = 1u64;
     let mut size = points.len();
     while (size > smallest || !out.len().is_multiple_of(3)) && step < 1 << 60 {
         step *= 2;
         let index: Vec<u32> = (0..points.len() as u32)
-            .filter(|&i| splitmix(i as u64 % boundary).is_multiple_of(step))
+            .filter(|&i| hashes[i as usize].is_multiple_of(step))
             .collect();
         let pts: Vec<DVec3> = index.iter().map(|&i| points[i as usize]).collect();
         let tree = Octree::new(&pts, centre, half, max_per_leaf);

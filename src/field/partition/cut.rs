@@ -86,6 +86,7 @@ impl PartitionSurface {
             values: kept(&c.values, &keep),
             offsets: kept(&c.offsets, &keep),
             boundary: keep[..c.boundary].iter().filter(|&&k| k).count(),
+            normal_of: vec![],
             merged: c.merged,
         }
     }

@@ -22,19 +22,41 @@ pub const NEAREST: usize = 8;
 /// Points a plane patch interpolates.
 pub const PLANE_POINTS: usize = 5;
 
-/// Whether `c` holds normal constraints: data points `0..boundary`, the normal constraint of
-/// point `j` at `boundary + j`, with its offset.
+/// Whether `c` holds normal constraints: data points `0..boundary`, then their normal
+/// constraints ([`Constraints::normal_of`]), with the data points' offsets.
 pub fn oriented(c: &Constraints) -> bool {
-    c.boundary > 0 && c.offsets.len() == c.boundary && c.points.len() >= 2 * c.boundary
+    c.boundary > 0
+        && c.offsets.len() == c.boundary
+        && !c.normal_of.is_empty()
+        && c.points.len() >= c.boundary + c.normal_of.len()
+}
+
+/// For each data point of `c`, the position of its normal constraint among the normal
+/// constraints (`u32::MAX` for those without one).
+pub fn normal_slots(c: &Constraints) -> Vec<u32> {
+    let mut slot = vec![u32::MAX; c.boundary];
+    for (k, &j) in c.normal_of.iter().enumerate() {
+        slot[j as usize] = k as u32;
+    }
+    slot
 }
 
 /// The points and values, a linear function of position, whose interpolant (with a linear
 /// polynomial) is the plane of the empty patch around `centre` with support `radius`. `c` must
-/// be [`oriented`], `tree` its octree.
-pub fn plane(c: &Constraints, tree: &Octree, centre: DVec3, radius: f64) -> (Vec<DVec3>, Vec<f64>) {
+/// be [`oriented`], `tree` its octree, `slots` its [`normal_slots`]. The data points that vote
+/// are those with a normal constraint.
+pub fn plane(
+    c: &Constraints,
+    slots: &[u32],
+    tree: &Octree,
+    centre: DVec3,
+    radius: f64,
+) -> (Vec<DVec3>, Vec<f64>) {
     let b = c.boundary;
-    // The 2 NEAREST nearest constraints hold about NEAREST data points (a normal constraint
-    // lies near its data point); more where inner constraints crowd them out.
+    let normals = c.normal_of.len();
+    // The 2 NEAREST nearest constraints hold about NEAREST data points with normal constraints
+    // when every data point has one (a normal constraint lies near its data point); more where
+    // inner constraints crowd them out or only some data points have one.
     let mut k = 2 * NEAREST;
     let mut data: Vec<usize> = Vec::with_capacity(k);
     while data.is_empty() {
@@ -42,8 +64,10 @@ pub fn plane(c: &Constraints, tree: &Octree, centre: DVec3, radius: f64) -> (Vec
         let reach = tree.kth_nearest_distance(&c.points, centre, k);
         tree.for_each_within(&c.points, centre, reach, |i| {
             let i = i as usize;
-            if i < 2 * b {
-                data.push(i % b);
+            if i < b && slots[i] != u32::MAX {
+                data.push(i);
+            } else if (b..b + normals).contains(&i) {
+                data.push(c.normal_of[i - b] as usize);
             }
         });
         k *= 2;
@@ -53,13 +77,14 @@ pub fn plane(c: &Constraints, tree: &Octree, centre: DVec3, radius: f64) -> (Vec
     data.dedup();
     data.truncate(NEAREST);
     let nearest = data[0];
-    let slope = |j: usize| c.values[b + j] / c.offsets[j];
+    let normal = |j: usize| b + slots[j] as usize;
+    let slope = |j: usize| c.values[normal(j)] / c.offsets[j];
     let vote: f64 = data
         .iter()
         .map(|&j| {
             let (q, n) = (
                 c.points[j],
-                (c.points[b + j] - c.points[j]).normalize_or_zero(),
+                (c.points[normal(j)] - c.points[j]).normalize_or_zero(),
             );
             slope(j).signum() * (centre - q).normalize_or_zero().dot(n)
         })

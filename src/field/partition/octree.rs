@@ -6,7 +6,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Depth at which leaves stop splitting whatever they hold (coincident points).
-const MAX_DEPTH: u32 = 24;
+pub const MAX_DEPTH: u32 = 24;
 
 /// One node: a cube, its children and the run of points it holds.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,6 +67,82 @@ fn octant(p: DVec3, c: DVec3) -> usize {
     (p.x >= c.x) as usize | ((p.y >= c.y) as usize) << 1 | ((p.z >= c.z) as usize) << 2
 }
 
+/// The nodes still to visit in a depth-first walk, without allocating: a walk holds at most 7
+/// siblings per level below the root's 1.
+struct NodeStack {
+    nodes: [u32; 8 * MAX_DEPTH as usize + 8],
+    len: usize,
+}
+
+impl NodeStack {
+    fn root() -> Self {
+        NodeStack {
+            nodes: [0; 8 * MAX_DEPTH as usize + 8],
+            len: 1,
+        }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, k: u32) {
+        self.nodes[self.len] = k;
+        self.len += 1;
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<u32> {
+        self.len = self.len.checked_sub(1)?;
+        Some(self.nodes[self.len])
+    }
+}
+
+/// The runs (`order` and its points) of the nodes `splitting`, whose runs are disjoint and
+/// increasing, each with its node's centre.
+fn disjoint_runs<'a>(
+    nodes: &[Node],
+    splitting: &[usize],
+    mut order: &'a mut [u32],
+    mut sorted: &'a mut [DVec3],
+) -> Vec<(DVec3, &'a mut [u32], &'a mut [DVec3])> {
+    let mut offset = 0;
+    let mut runs = Vec::with_capacity(splitting.len());
+    for &k in splitting {
+        let n = &nodes[k];
+        let (a, b) = (n.start as usize, n.end as usize);
+        let (_, o) = std::mem::take(&mut order).split_at_mut(a - offset);
+        let (run, o) = o.split_at_mut(b - a);
+        let (_, s) = std::mem::take(&mut sorted).split_at_mut(a - offset);
+        let (pts, s) = s.split_at_mut(b - a);
+        (order, sorted, offset) = (o, s, b);
+        runs.push((n.centre, run, pts));
+    }
+    runs
+}
+
+/// Sorts a node's run (indices and points) by octant of `centre`, stably; returns where each
+/// octant's run starts (and, at 8, the end).
+fn split_run(centre: DVec3, run: &mut [u32], pts: &mut [DVec3]) -> [usize; 9] {
+    let mut bounds = [0usize; 9];
+    let octants: Vec<u8> = pts.iter().map(|p| octant(*p, centre) as u8).collect();
+    for &o in &octants {
+        bounds[o as usize + 1] += 1;
+    }
+    for o in 0..8 {
+        bounds[o + 1] += bounds[o];
+    }
+    let mut fill = bounds;
+    let mut new_run = vec![0u32; run.len()];
+    let mut new_pts = vec![DVec3::ZERO; pts.len()];
+    for ((&o, &i), p) in octants.iter().zip(run.iter()).zip(pts.iter()) {
+        let slot = &mut fill[o as usize];
+        new_run[*slot] = i;
+        new_pts[*slot] = *p;
+        *slot += 1;
+    }
+    run.copy_from_slice(&new_run);
+    pts.copy_from_slice(&new_pts);
+    bounds
+}
+
 impl Octree {
     /// Splits the cube (`centre`, `half`) until each leaf holds at most `max_per_leaf` of
     /// `points` (all inside the cube).
@@ -92,40 +168,27 @@ impl Octree {
             end: points.len() as u32,
         }];
         let mut order: Vec<u32> = (0..points.len() as u32).collect();
-        let mut scratch = vec![0u32; points.len()];
+        let mut sorted: Vec<DVec3> = points.to_vec();
         let mut depth = vec![0u32];
-        // Level by level (the nodes of one level are consecutive): the decisions in parallel,
-        // the splits in node order.
+        // Level by level (the nodes of one level are consecutive, their runs disjoint and
+        // increasing): the decisions and the splits of the runs in parallel, the children in
+        // node order.
         let mut level = 0..1;
         while !level.is_empty() {
-            let decisions: Vec<bool> = nodes[level.clone()]
+            let splitting: Vec<usize> = nodes[level.clone()]
                 .par_iter()
                 .zip(&depth[level.clone()])
-                .map(|(n, &d)| d < MAX_DEPTH && split(n))
+                .zip(level.clone())
+                .filter_map(|((n, &d), k)| (d < MAX_DEPTH && split(n)).then_some(k))
+                .collect();
+            let runs = disjoint_runs(&nodes, &splitting, &mut order, &mut sorted);
+            let bounds: Vec<[usize; 9]> = runs
+                .into_par_iter()
+                .map(|(centre, run, pts)| split_run(centre, run, pts))
                 .collect();
             let next = nodes.len();
-            for (k, &yes) in level.clone().zip(&decisions) {
-                if !yes {
-                    continue;
-                }
+            for (&k, bounds) in splitting.iter().zip(bounds) {
                 let n = nodes[k];
-                let count = (n.end - n.start) as usize;
-                // Stable counting sort of the node's run by octant.
-                let run = &mut order[n.start as usize..n.end as usize];
-                let mut bounds = [0usize; 9];
-                for &i in run.iter() {
-                    bounds[octant(points[i as usize], n.centre) + 1] += 1;
-                }
-                for o in 0..8 {
-                    bounds[o + 1] += bounds[o];
-                }
-                let mut fill = bounds;
-                for &i in run.iter() {
-                    let o = octant(points[i as usize], n.centre);
-                    scratch[fill[o]] = i;
-                    fill[o] += 1;
-                }
-                run.copy_from_slice(&scratch[..count]);
                 let first = nodes.len() as u32;
                 nodes[k].children = first;
                 let h = 0.5 * n.half;
@@ -143,7 +206,6 @@ impl Octree {
             }
             level = next..nodes.len();
         }
-        let sorted = order.iter().map(|&i| points[i as usize]).collect();
         Octree {
             order,
             sorted,
@@ -230,7 +292,7 @@ impl Octree {
     /// Calls `visit(node)` for every leaf whose cube meets the closed ball (`c`, `r`).
     pub fn for_each_leaf_meeting(&self, c: DVec3, r: f64, mut visit: impl FnMut(u32)) {
         let r2 = r * r;
-        let mut stack = vec![0u32];
+        let mut stack = NodeStack::root();
         while let Some(k) = stack.pop() {
             let n = &self.nodes[k as usize];
             if n.distance_squared(c) > r2 {
@@ -240,7 +302,7 @@ impl Octree {
                 visit(k);
             } else {
                 // Reverse order so that children are visited in increasing order.
-                stack.extend((0..8).rev().map(|o| n.children + o));
+                (0..8).rev().for_each(|o| stack.push(n.children + o));
             }
         }
     }
@@ -249,7 +311,7 @@ impl Octree {
     /// widened by a millionth of the root's half side, so that a leaf a point of the box
     /// descends into is never left out by rounding of its corners).
     pub fn for_each_leaf_meeting_box(&self, lo: DVec3, hi: DVec3, mut visit: impl FnMut(u32)) {
-        let mut stack = vec![0u32];
+        let mut stack = NodeStack::root();
         while let Some(k) = stack.pop() {
             let n = &self.nodes[k as usize];
             if !self.meets_box(n, lo, hi) {
@@ -258,7 +320,7 @@ impl Octree {
             if n.is_leaf() {
                 visit(k);
             } else {
-                stack.extend((0..8).rev().map(|o| n.children + o));
+                (0..8).rev().for_each(|o| stack.push(n.children + o));
             }
         }
     }
@@ -279,7 +341,7 @@ impl Octree {
     fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
         let r2 = r * r;
         let mut count = 0;
-        let mut stack = vec![0u32];
+        let mut stack = NodeStack::root();
         while let Some(k) = stack.pop() {
             let n = &self.nodes[k as usize];
             if n.distance_squared(c) > r2 {
@@ -292,7 +354,7 @@ impl Octree {
                     count += ((p - c).length_squared() <= r2) as usize
                 });
             } else {
-                stack.extend((0..8).map(|o| n.children + o));
+                (0..8).for_each(|o| stack.push(n.children + o));
                 continue;
             }
             if count > limit {
@@ -346,6 +408,28 @@ impl Octree {
                 if (p - c).length_squared() <= r2 {
                     visit(i);
                 }
+            });
+        });
+    }
+
+    /// Calls `visit(i, k, points[i])` for every point `i` within `r` of `c`, with `k` its
+    /// position in `order` (`order[k] = i`), leaf by leaf.
+    pub fn for_each_within_ranked(
+        &self,
+        points: &[DVec3],
+        c: DVec3,
+        r: f64,
+        mut visit: impl FnMut(u32, u32, DVec3),
+    ) {
+        let r2 = r * r;
+        self.for_each_leaf_meeting(c, r, |k| {
+            let n = &self.nodes[k as usize];
+            let mut at = n.start;
+            self.for_each_point(points, n, |i, p| {
+                if (p - c).length_squared() <= r2 {
+                    visit(i, at, p);
+                }
+                at += 1;
             });
         });
     }

@@ -137,9 +137,21 @@ fn checked_nodes(nodes: Vec<Node>) -> Result<Vec<Node>> {
                 && (node.is_leaf()
                     || (node.children as usize > k && node.children as usize + 8 <= n))
         });
-    if ok {
-        Ok(nodes)
-    } else {
-        Err(bad_state("the octree's nodes do not form an octree"))
+    if !ok {
+        return Err(bad_state("the octree's nodes do not form an octree"));
     }
+    // Children come after their parent: one pass gives each node's depth (the deepest it is
+    // reached at), which the octree's walks bound.
+    let mut depth = vec![0u32; n];
+    for (k, node) in nodes.iter().enumerate() {
+        if !node.is_leaf() {
+            for c in node.children as usize..node.children as usize + 8 {
+                depth[c] = depth[c].max(depth[k] + 1);
+            }
+        }
+    }
+    if depth.iter().any(|&d| d > super::octree::MAX_DEPTH) {
+        return Err(bad_state("the octree is deeper than 24 levels"));
+    }
+    Ok(nodes)
 }

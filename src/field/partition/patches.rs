@@ -192,6 +192,12 @@ pub fn fit(
     settings: &PartitionSettings,
 ) -> Result<Vec<Patch>> {
     let rank = inverse(&tree.order);
+    let slots = empty::normal_slots(c);
+    let ranked_values: Vec<f64> = tree
+        .order
+        .par_iter()
+        .map(|&i| c.values[i as usize])
+        .collect();
     // The memory of all patches is checked before (see `check_memory`).
     let rbf_settings = rbf::FitSettings {
         memory_limit: u64::MAX,
@@ -208,7 +214,7 @@ pub fn fit(
             }
             let (centre, radius) = (s.centre, s.radius);
             if s.is_plane() {
-                let (pts, vals) = empty::plane(c, tree, centre, radius);
+                let (pts, vals) = empty::plane(c, &slots, tree, centre, radius);
                 let fit = PatchFit::fit(None, pts, vals, &rbf_settings, Par::Seq)?;
                 return Ok(Patch {
                     centre,
@@ -218,9 +224,11 @@ pub fn fit(
                     fit,
                 });
             }
-            let mut idx = Vec::with_capacity(s.size());
-            tree.for_each_within(&c.points, centre, radius, |i| idx.push(i));
-            let mut outside = Vec::new();
+            // The constraints inside (index, position in the tree's order, point), read from
+            // the tree's copy in leaf order; then those completing the system (index, point).
+            let mut own: Vec<(u32, u32, DVec3)> = Vec::with_capacity(s.inside);
+            tree.for_each_within_ranked(&c.points, centre, radius, |i, k, p| own.push((i, k, p)));
+            let mut outside: Vec<(u32, DVec3)> = Vec::new();
             if let Some((l, reach, _)) = s.extra {
                 let (pts, t, index): (&[DVec3], &Octree, Option<&[u32]>) = if l == usize::MAX {
                     (&c.points, tree, None)
@@ -229,19 +237,31 @@ pub fn fit(
                     (&lv.points, &lv.tree, Some(&lv.index))
                 };
                 t.for_each_within(pts, centre, reach, |i| {
-                    if (pts[i as usize] - centre).length_squared() > radius * radius {
-                        outside.push(index.map_or(i, |x| x[i as usize]));
+                    let p = pts[i as usize];
+                    if (p - centre).length_squared() > radius * radius {
+                        outside.push((index.map_or(i, |x| x[i as usize]), p));
                     }
                 });
             }
-            idx.sort_unstable();
-            outside.sort_unstable();
-            let inside = idx.len();
-            idx.extend_from_slice(&outside);
-            let size = idx.len();
-            let pts = idx.iter().map(|&i| c.points[i as usize]).collect();
-            let vals = idx.iter().map(|&i| c.values[i as usize]).collect();
-            let index = idx.iter().map(|&i| rank[i as usize]).collect();
+            own.sort_unstable_by_key(|e| e.0);
+            outside.sort_unstable_by_key(|e| e.0);
+            let inside = own.len();
+            let size = inside + outside.len();
+            let pts = own
+                .iter()
+                .map(|e| e.2)
+                .chain(outside.iter().map(|e| e.1))
+                .collect();
+            let vals = own
+                .iter()
+                .map(|e| ranked_values[e.1 as usize])
+                .chain(outside.iter().map(|e| c.values[e.0 as usize]))
+                .collect();
+            let index = own
+                .iter()
+                .map(|e| e.1)
+                .chain(outside.iter().map(|e| rank[e.0 as usize]))
+                .collect();
             let fit = PatchFit::fit(Some(index), pts, vals, &rbf_settings, Par::Seq)?;
             if let Some(t) = &token {
                 t.advance(inside as u64)?;

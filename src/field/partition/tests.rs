@@ -26,16 +26,9 @@ fn patch_at(s: &PartitionSurface, i: usize, x: DVec3) -> (f64, DVec3) {
     (v[0], g[0])
 }
 
-pub(super) fn torus_surface() -> PartitionSurface {
-    let (p, n) = torus_data(3000, 5);
-    PartitionSurface::fit(&p, &n, &Default::default(), &Default::default()).unwrap()
-}
-
-#[test]
-fn interpolates_every_constraint() {
-    let s = torus_surface();
+/// Asserts that `s` takes every constraint's value to 1e-9 of the largest; returns that.
+fn assert_interpolates(s: &PartitionSurface) -> f64 {
     let c = s.constraints();
-    assert!(s.patches().len() > 20, "{} patches", s.patches().len());
     let mut v = vec![0.0; c.points.len()];
     s.values(&c.points, &mut v);
     let scale = c.values.iter().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -45,11 +38,48 @@ fn interpolates_every_constraint() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(err <= 1e-9 * scale, "{err}");
+    scale
+}
+
+pub(super) fn torus_surface() -> PartitionSurface {
+    let (p, n) = torus_data(3000, 5);
+    PartitionSurface::fit(&p, &n, &Default::default(), &Default::default()).unwrap()
+}
+
+#[test]
+fn interpolates_every_constraint() {
+    let s = torus_surface();
+    assert!(s.patches().len() > 20, "{} patches", s.patches().len());
+    let scale = assert_interpolates(&s);
     assert!(s.residual() <= 1e-9 * scale);
     // Inside the tube negative, in the hole and far out positive.
     assert!(s.value(DVec3::new(0.6, 0.0, 0.0)) < 0.0);
     assert!(s.value(DVec3::ZERO) > 0.0);
     assert!(s.value(DVec3::new(0.0, 0.95, 0.3)) > 0.0);
+}
+
+#[test]
+fn thinned_normal_constraints_keep_interpolation_and_the_sign_of_space() {
+    let (p, n) = torus_data(20_000, 3);
+    let placement = constraints::ConstraintSettings {
+        normal_cell_over_spacing: Some(constraints::NORMAL_CELL_OVER_SPACING),
+        ..Default::default()
+    };
+    let s = PartitionSurface::fit(&p, &n, &placement, &Default::default()).unwrap();
+    let c = s.constraints();
+    assert!(c.normal_of.len() < p.len() / 3, "{}", c.normal_of.len());
+    assert_interpolates(&s);
+    let torus = |x: DVec3| DVec3::new(x.truncate().length() - 0.6, x.z, 0.0).length() - 0.25;
+    // The sign of the torus's distance wherever that distance exceeds the offset.
+    let d = c.offsets.iter().fold(0.0f64, |a, &o| a.max(o));
+    let grid = random_points(4000, -1.0, 1.0, 11);
+    let mut checked = 0;
+    for x in grid.iter().filter(|x| torus(**x).abs() > 2.0 * d) {
+        assert_eq!(s.value(*x).signum(), torus(*x).signum(), "at {x}");
+        checked += 1;
+    }
+    assert!(checked > 3000, "{checked}");
+    assert!(s.patches().iter().any(|p| p.inside == 0));
 }
 
 #[test]
