@@ -20,6 +20,7 @@ pub mod partition;
 pub mod rbf;
 pub mod reduction;
 pub mod saddle;
+pub mod small_dense;
 pub mod thin;
 pub mod voxels;
 

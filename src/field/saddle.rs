@@ -371,39 +371,43 @@ impl SaddleSolver {
         // QᵀAQ = A − V Zᵀ − Z Vᵀ with W = AV, S = Tᵀ(VᵀW)T, Z = WT − ½VS: one pass to read A
         // (W) and one to update it.
         // W = AV, with A symmetric and stored as its lower triangle L: W = LV + (L − D)ᵀV.
-        let mut wm = Mat::<f64>::zeros(n, 4);
-        let lower = MatRef::from_column_major_slice(&a, n, n);
+        let small = matches!(par, Par::Seq) && n <= super::cholesky::MAX_ORDER;
+        let mut wcols = vec![0.0; 4 * n];
         let vm = MatRef::from_column_major_slice(&v, n, 4);
         cancel::check()?;
-        tri::matmul(
-            wm.as_mut(),
-            BlockStructure::Rectangular,
-            Accum::Replace,
-            lower,
-            BlockStructure::TriangularLower,
-            vm,
-            BlockStructure::Rectangular,
-            1.0,
-            par,
-        );
-        tri::matmul(
-            wm.as_mut(),
-            BlockStructure::Rectangular,
-            Accum::Add,
-            lower.transpose(),
-            BlockStructure::StrictTriangularUpper,
-            vm,
-            BlockStructure::Rectangular,
-            1.0,
-            par,
-        );
-        let w: Vec<[f64; 4]> = (0..n)
-            .map(|q| std::array::from_fn(|k| wm[(q, k)]))
-            .collect();
+        if small {
+            super::small_dense::symmetric_times_four(&a, n, &v, &mut wcols);
+        } else {
+            let mut wm = MatMut::from_column_major_slice_mut(&mut wcols, n, 4);
+            let lower = MatRef::from_column_major_slice(&a, n, n);
+            tri::matmul(
+                wm.as_mut(),
+                BlockStructure::Rectangular,
+                Accum::Replace,
+                lower,
+                BlockStructure::TriangularLower,
+                vm,
+                BlockStructure::Rectangular,
+                1.0,
+                par,
+            );
+            tri::matmul(
+                wm.as_mut(),
+                BlockStructure::Rectangular,
+                Accum::Add,
+                lower.transpose(),
+                BlockStructure::StrictTriangularUpper,
+                vm,
+                BlockStructure::Rectangular,
+                1.0,
+                par,
+            );
+        }
+        let wcol = |k: usize| &wcols[k * n..(k + 1) * n];
         let mut m = [[0.0; 4]; 4];
         for i in 0..4 {
             for j in 0..4 {
-                m[i][j] = (0..n).map(|q| col(i)[q] * w[q][j]).sum();
+                m[i][j] = col(i).iter().zip(wcol(j)).map(|(x, y)| x * y).sum();
             }
         }
         let mul = |x: &[[f64; 4]; 4], y: &[[f64; 4]; 4]| {
@@ -425,26 +429,32 @@ impl SaddleSolver {
             o
         };
         let smat = mul(&tt, &mul(&m, &t));
-        let z: Vec<[f64; 4]> = (0..n)
-            .map(|q| {
-                let mut o = [0.0; 4];
-                for (j, oj) in o.iter_mut().enumerate() {
-                    let wt: f64 = (0..4).map(|k| w[q][k] * t[k][j]).sum();
-                    let vs: f64 = (0..4).map(|k| col(k)[q] * smat[k][j]).sum();
-                    *oj = wt - 0.5 * vs;
+        // left = [V Z] and right = [Z V] (n × 8, column-major), Z = WT − ½VS.
+        let mut left = vec![0.0; 8 * n];
+        left[..4 * n].copy_from_slice(&v);
+        for j in 0..4 {
+            let zj = &mut left[(4 + j) * n..(5 + j) * n];
+            for (k, (wk, vk)) in (0..4).map(|k| (wcol(k), col(k))).enumerate() {
+                let (tk, sk) = (t[k][j], -0.5 * smat[k][j]);
+                for ((z, w), v) in zj.iter_mut().zip(wk).zip(vk) {
+                    *z += w * tk + v * sk;
                 }
-                o
-            })
-            .collect();
+            }
+        }
+        let mut right = vec![0.0; 8 * n];
+        right[..4 * n].copy_from_slice(&left[4 * n..]);
+        right[4 * n..].copy_from_slice(&v);
         // The lower triangle of A − [V Z][Z V]ᵀ, the only part read afterwards.
-        let left = Mat::<f64>::from_fn(n, 8, |q, k| if k < 4 { vm[(q, k)] } else { z[q][k - 4] });
-        let right = Mat::<f64>::from_fn(n, 8, |q, k| if k < 4 { z[q][k] } else { vm[(q, k - 4)] });
-        subtract_lower(
-            MatMut::from_column_major_slice_mut(&mut a, n, n),
-            left.as_ref(),
-            right.as_ref(),
-            par,
-        )?;
+        if small {
+            super::small_dense::subtract_lower_rank8(&mut a, n, &left, &right);
+        } else {
+            subtract_lower(
+                MatMut::from_column_major_slice_mut(&mut a, n, n),
+                MatRef::from_column_major_slice(&left, n, 8),
+                MatRef::from_column_major_slice(&right, n, 8),
+                par,
+            )?;
+        }
         // The trailing block (rows and columns from 4 on) changes sign for sign < 0.
         if sign < 0.0 {
             for_columns(&mut a[4 * n..], n, par, |k, c| {
@@ -529,26 +539,15 @@ impl SaddleSolver {
                     y1[i] = (g[i] - s) / r[i][i];
                 }
                 // B₂₂ y₂ = (Qᵀf)[4..] − B₂₁ y₁, with B₂₁ = B₁₂ᵀ (the top rows' tail).
-                let m = n - 4;
-                let mut rhs = Mat::<f64>::zeros(m, 1);
-                for j in 0..m {
-                    let cj = &top[(j + 4) * 4..(j + 5) * 4];
-                    let b21y1: f64 = (0..4).map(|k| cj[k] * y1[k]).sum();
-                    rhs[(j, 0)] = sign * (qf[j + 4] - b21y1);
-                }
-                let lmat = MatRef::from_column_major_slice(l, n, n).submatrix(4, 4, m, m);
-                llt::solve::solve_in_place_with_conj(
-                    lmat,
-                    Conj::No,
-                    rhs.as_mut(),
-                    Par::Seq,
-                    MemStack::new(&mut []),
-                );
                 let mut y = vec![0.0; n];
                 y[..4].copy_from_slice(&y1);
-                for j in 0..m {
-                    y[j + 4] = rhs[(j, 0)];
+                for j in 4..n {
+                    let cj = &top[j * 4..(j + 1) * 4];
+                    let b21y1: f64 = (0..4).map(|k| cj[k] * y1[k]).sum();
+                    y[j] = sign * (qf[j] - b21y1);
                 }
+                // The factor of the trailing block starts at (4, 4).
+                super::small_dense::cholesky_solve(&l[4 * n + 4..], n, &mut y[4..]);
                 // R a = (Qᵀf)[..4] − B₁₁ y₁ − B₁₂ y₂ (back substitution).
                 let mut tv = [0.0; 4];
                 for (i, ti) in tv.iter_mut().enumerate() {

@@ -338,7 +338,7 @@ impl Octree {
 
     /// The number of `points` within the closed ball (`c`, `r`), or some number above `limit`
     /// once more than `limit` are found. Nodes inside the ball count whole.
-    fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
+    pub fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
         let r2 = r * r;
         let mut count = 0;
         let mut stack = NodeStack::root();
@@ -364,8 +364,8 @@ impl Octree {
         count
     }
 
-    /// Distance from `c` to its `k`-th nearest point of `points` (`k` ≥ 1, at most the number
-    /// of points).
+    /// Distance from `c` to its `k`-th nearest point of `points` (`k` ≥ 1; the farthest point
+    /// when there are fewer; infinite when there are none), visiting the nodes nearest first.
     pub fn kth_nearest_distance(&self, points: &[DVec3], c: DVec3, k: usize) -> f64 {
         use std::cmp::Reverse;
         use std::collections::BinaryHeap;
@@ -398,6 +398,48 @@ impl Octree {
         }
         best.peek()
             .map_or(f64::INFINITY, |&b| f64::from_bits(b).sqrt())
+    }
+
+    /// Distances from `c` to its `k`-th nearest point of `points` (as
+    /// [`Octree::kth_nearest_distance`]) and to its nearest. The points within `guess` of `c`
+    /// are gathered (their squared distances into `scratch`), in balls twice as wide until
+    /// they are at least `k`, and the `k`-th picked by selection: with a guess near the answer
+    /// this is one walk of the tree, cheaper than the nearest-first walk; with a guess far too
+    /// small or too large, many walks or many points.
+    pub fn nearest_distances(
+        &self,
+        points: &[DVec3],
+        c: DVec3,
+        k: usize,
+        guess: f64,
+        scratch: &mut Vec<f64>,
+    ) -> (f64, f64) {
+        let total = self.order.len();
+        let k = k.clamp(1, total.max(1));
+        let mut r = guess;
+        loop {
+            scratch.clear();
+            let r2 = r * r;
+            self.for_each_leaf_meeting(c, r, |leaf| {
+                self.for_each_point(points, &self.nodes[leaf as usize], |_, p| {
+                    let e = (p - c).length_squared();
+                    if e <= r2 {
+                        scratch.push(e);
+                    }
+                })
+            });
+            if scratch.len() >= k || scratch.len() == total {
+                break;
+            }
+            r = if r > 0.0 { 2.0 * r } else { self.nodes[0].half };
+        }
+        if scratch.is_empty() {
+            return (f64::INFINITY, f64::INFINITY);
+        }
+        let k = k.min(scratch.len());
+        let (before, kth, _) = scratch.select_nth_unstable_by(k - 1, f64::total_cmp);
+        let nearest = before.iter().fold(*kth, |a, &b| a.min(b));
+        (kth.sqrt(), nearest.sqrt())
     }
 
     /// Calls `visit(i)` for every point `points[i]` within the closed ball (`c`, `r`).
@@ -549,7 +591,22 @@ mod tests {
             d.sort_by(f64::total_cmp);
             for k in [1, 7, 64, 3000] {
                 assert_eq!(t.kth_nearest_distance(&pts, c, k), d[k - 1]);
+                // From guesses too small, right and too large: the same, and the nearest.
+                let mut scratch = Vec::new();
+                for guess in [0.0, 1e-3, d[k - 1], 10.0] {
+                    let got = t.nearest_distances(&pts, c, k, guess, &mut scratch);
+                    assert_eq!(got, (d[k - 1], d[0]), "k {k} guess {guess}");
+                }
             }
         }
+        // More than there are: the farthest; none: infinite.
+        let mut scratch = Vec::new();
+        let far = t.nearest_distances(&pts, DVec3::ZERO, pts.len() + 5, 0.1, &mut scratch);
+        assert_eq!(far.0, t.kth_nearest_distance(&pts, DVec3::ZERO, pts.len()));
+        let none = Octree::new(&[], DVec3::ZERO, 1.0, 8);
+        assert_eq!(
+            none.nearest_distances(&[], DVec3::ZERO, 3, 0.5, &mut scratch),
+            (f64::INFINITY, f64::INFINITY)
+        );
     }
 }

@@ -88,7 +88,7 @@ pub fn supports(
     let want = settings.min_points.min(points.len());
     tree.leaves
         .par_iter()
-        .map(|&k| {
+        .map_init(Vec::new, |scratch, &k| {
             let n = &tree.nodes[k as usize];
             let r = settings.overlap * n.half_diagonal();
             let inside = tree.count_within(points, n.centre, r);
@@ -104,9 +104,12 @@ pub fn supports(
             if (inside >= want && own >= SPARSE_LEAF) || (inside == 0 && planes) {
                 return s;
             }
-            // A ball reaching one support radius past the `want`-th nearest constraint.
-            let reach = tree.kth_nearest_distance(points, n.centre, want).max(r) + r;
-            let far = tree.kth_nearest_distance(points, n.centre, 1) > FAR_DATA * r;
+            // A ball reaching one support radius past the `want`-th nearest constraint, found
+            // from a guess that takes the constraints to spread over a surface.
+            let guess = r * (want as f64 / inside.max(1) as f64).sqrt().max(1.0) * 1.2;
+            let (kth, nearest) = tree.nearest_distances(points, n.centre, want, guess, scratch);
+            let reach = kth.max(r) + r;
+            let far = nearest > FAR_DATA * r;
             let budget = if inside == 0 {
                 settings.min_points / 2
             } else if far {
@@ -137,18 +140,18 @@ pub fn supports(
                 for (c, &l) in candidates.iter().enumerate() {
                     let level = &levels[l];
                     let last = c + 1 == candidates.len();
-                    // The level's constraints between the two balls must fit the budget.
-                    if !last
-                        && level.tree.more_within_than(
-                            &level.points,
-                            n.centre,
-                            reach,
-                            budget + level.tree.count_within(&level.points, n.centre, r),
-                        )
-                    {
+                    // The level's constraints between the two balls must fit the budget (the
+                    // count within `reach` is exact unless it exceeds the limit).
+                    let within_r = level.tree.count_within(&level.points, n.centre, r);
+                    let limit = if last { usize::MAX } else { budget + within_r };
+                    let within_reach =
+                        level
+                            .tree
+                            .count_within_up_to(&level.points, n.centre, reach, limit);
+                    if within_reach > limit {
                         continue;
                     }
-                    let m = count_outside(&level.points, &level.tree);
+                    let m = within_reach - within_r;
                     if inside + m >= 16 {
                         choice = (l, m);
                     } else if c > 0 {
