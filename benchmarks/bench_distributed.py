@@ -76,6 +76,14 @@ SPEEDUP_TARGET = 1.6
 OVERHEAD_TARGET = 0.25
 
 
+def cpu_seconds() -> float:
+    """CPU seconds (user and system) this process has used, all its threads."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def log(msg: str) -> None:
     print(f"[bench_distributed] {msg}", file=sys.stderr, flush=True)
 
@@ -153,13 +161,15 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
     out: dict = {"field": name, "setup": setup, "resolution": resolution, "tile": tile}
     if setup == "single":
         im.polygonize(field, bounds=BOX, resolution=16, method=method, **options)  # warm-up
-        times = []
+        times, cpu = [], []
         for _ in range(runs):
             mesh = None  # the peak is one run's: the last run's mesh is not kept during the next
-            t = time.perf_counter()
+            c, t = cpu_seconds(), time.perf_counter()
             mesh = im.polygonize(field, bounds=BOX, resolution=resolution, method=method, **options)
             times.append(time.perf_counter() - t)
-        out.update(times=times, triangles=len(mesh.faces), vertices=len(mesh.vertices), peak_mib=vmhwm_mib())
+            cpu.append(cpu_seconds() - c)
+        out.update(times=times, triangles=len(mesh.faces), vertices=len(mesh.vertices), peak_mib=vmhwm_mib(),
+                   client_cpu=cpu)
         return out
 
     import distributed
@@ -180,11 +190,12 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
         warm = run(16, 8)  # warm-up: the workers import implicitmesh
         if to_dir:
             shutil.rmtree(warm)
-        times, stream = [], None
+        times, stream, client_cpu, worker_cpu = [], None, [], []
         for i in range(runs):
             phases.reset()
             mesh = None  # as in the single setup
             last = i == runs - 1
+            before = (cpu_seconds(), client.run(cpu_seconds))
             t = time.perf_counter()
             if last:
                 with distributed.get_task_stream(client) as ts:
@@ -193,6 +204,9 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
             else:
                 mesh = run(resolution, tile)
             times.append(time.perf_counter() - t)
+            after = (cpu_seconds(), client.run(cpu_seconds))
+            client_cpu.append(after[0] - before[0])
+            worker_cpu.append(sum(after[1][w] - before[1][w] for w in before[1]))
             if to_dir and not last:
                 shutil.rmtree(mesh)
         cut_s, weld_s, welded = phases.cut_s, phases.weld_s, (phases.tile_vertices, phases.welded_vertices)
@@ -215,6 +229,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
             tile_seconds=compute, result_bytes=result_bytes, field_bytes=field_bytes,
             cut_s=cut_s, weld_s=weld_s, tile_vertices=welded[0], welded_vertices=welded[1],
             worker_peak_mib=sorted(peaks.values()), peak_mib=vmhwm_mib(),
+            client_cpu=client_cpu, worker_cpu=worker_cpu,
         )
     cluster.close()
     return out
@@ -302,7 +317,7 @@ def render(raw: dict) -> str:
         t = {s: statistics.median(c["times"]) if "times" in c else None for s, c in zip(SETUPS, cases)}
         for setup, c in zip(SETUPS, cases):
             if "error" in c or not c:
-                rows.append([name, setup, f"failed: {c.get('error', 'not run')}"] + [""] * 10)
+                rows.append([name, setup, f"failed: {c.get('error', 'not run')}"] + [""] * 11)
                 continue
             dask = setup != "single"
             rows.append([
@@ -316,14 +331,19 @@ def render(raw: dict) -> str:
                 _mean_max(c["field_bytes"], 1e-6) + " / " + _mean_max(c["result_bytes"], 1e-6) if dask else "",
                 f"{fmt_s(c['cut_s'])} / {fmt_s(c['weld_s'])}" if dask else "",
                 f"{c['welded_vertices']:,} of {c['tile_vertices']:,}" if dask else "",
+                _cpu(c),
                 (" / ".join(f"{m:,.0f}" for m in c["worker_peak_mib"]) + f"; client {c['peak_mib']:,.0f}") if dask
                 else f"{c['peak_mib']:,.0f}",
                 str(len(c["times"])),
             ])
         if all(t[s] for s in COMPARED) and single.get("triangles") == d1.get("triangles") == d2.get("triangles"):
             speedup, overhead = t["dask-1"] / t["dask-2"], t["dask-2"] / t["single"] - 1
+            bound = _bound(t["dask-1"], d2)
             checks.append(f"- {name}: 2 workers {speedup:.2f}× one (target ≥ {SPEEDUP_TARGET}×: "
-                          f"{'met' if speedup >= SPEEDUP_TARGET else 'not met'}); overhead of 2 workers against one "
+                          f"{'met' if speedup >= SPEEDUP_TARGET else 'not met'}"
+                          + (f"; the CPU that `dask-2`'s workers and client used, spread over two cores, allows at most {bound:.2f}×"
+                             if bound else "")
+                          + f"); overhead of 2 workers against one "
                           f"process {overhead:+.0%} (target ≤ {OVERHEAD_TARGET:.0%}: "
                           f"{'met' if overhead <= OVERHEAD_TARGET else 'not met'}).")
         elif all(t[s] for s in COMPARED):
@@ -345,7 +365,9 @@ def render(raw: dict) -> str:
         "and of its mesh (the arrays the client welds), mean / max over tasks. The workers share the client's machine, so "
         "gathered tiles pass through files in `/dev/shm` (`implicitmesh._tile_files`), not Dask's comms. Client: seconds cutting the "
         "field per tile and welding (the sum of the tiles' welds, each as it arrives, while the workers "
-        "compute others; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. Peak "
+        "compute others; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. "
+        "CPU: seconds of CPU (user and system, `getrusage`) of the workers (summed) and of the client's process (which "
+        "runs the `LocalCluster`'s scheduler too) during a run, medians; for `single`, its process's. Peak "
         "memory: VmHWM of each worker process and of the client process (MiB).",
         "",
         run_markdown(run),
@@ -354,11 +376,29 @@ def render(raw: dict) -> str:
         md_table(["field, size, lattice", "setup", "seconds", "speed-up vs dask-1", "overhead vs single",
                   "triangles", "tiles", "per tile: seconds (mean / max)",
                   "per tile: MB field / MB result (mean / max each)", "client: cut / weld (s)", "welded vertices",
-                  "peak MiB", "runs"], rows),
+                  "CPU s: workers / client", "peak MiB", "runs"], rows),
         "",
         *checks,
         "",
     ])
+
+
+def _cpu(c: dict) -> str:
+    """The median CPU seconds of a case's runs: workers / client, or the single process's."""
+    if "client_cpu" not in c:
+        return ""
+    if "worker_cpu" not in c:
+        return fmt_s(statistics.median(c["client_cpu"]))
+    return f"{fmt_s(statistics.median(c['worker_cpu']))} / {fmt_s(statistics.median(c['client_cpu']))}"
+
+
+def _bound(one_worker_s: float, two: dict) -> float | None:
+    """The most 2 workers can gain over one on 2 cores: one worker's seconds over the CPU
+    seconds the 2 workers and the client used (medians), shared by two cores."""
+    if "worker_cpu" not in two:
+        return None
+    used = statistics.median(two["worker_cpu"]) + statistics.median(two["client_cpu"])
+    return one_worker_s / (used / 2)
 
 
 def many_lines(cases: list[dict]) -> list[str]:
