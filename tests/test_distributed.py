@@ -431,6 +431,27 @@ def test_tiles_fit_where_the_whole_lattice_does_not(client):
     assert mesh.to_trimesh().is_watertight and genus_of(mesh.euler_number) == 0
 
 
+def test_a_welded_mesh_over_memory_limit_is_refused(client, blobs, tmp_path):
+    """Tiles each well within memory_limit whose welded mesh is not: the gathered run raises a
+    ValueError naming memory_limit and cancels every task; weld(DIR) of the same tiles too;
+    with the limit raised to the mesh's bytes, both give the one-machine mesh."""
+    whole = im.polygonize(blobs, bounds=BOX, resolution=96, method="sparse")
+    need = whole.vertices.nbytes + whole.normals.nbytes + whole.faces.nbytes
+    limit = need // 3
+    with pytest.raises(ValueError, match=r"memory_limit: the welded mesh .*\(output=DIR\)"):
+        imd.polygonize(blobs, bounds=BOX, resolution=96, client=client, tile=16, memory_limit=limit)
+    assert tasks_left(client) == 0
+    out = imd.polygonize(blobs, bounds=BOX, resolution=96, client=client, tile=16, output=tmp_path / "run",
+                         memory_limit=limit)
+    with pytest.raises(ValueError, match="memory_limit"):
+        imd.weld(out, memory_limit=limit)
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ValueError, match="memory_limit"):
+            imd.weld(out, memory_limit=bad)
+    assert_same_mesh(imd.weld(out, memory_limit=need), whole)
+    assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=96, client=client, tile=16, memory_limit=need), whole)
+
+
 def test_bad_arguments(client, blobs):
     for tile in (0, -3, 2.5, True, (4, 4), "8"):
         with pytest.raises(ValueError, match="tile"):

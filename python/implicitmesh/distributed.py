@@ -343,7 +343,8 @@ def polygonize(
         called with the number of tiles done.
     **options
         Passed to :func:`implicitmesh.polygonize` per tile: ``ambiguity``, ``normals``,
-        ``batch_size``, ``memory_limit`` (checked per tile), and the octree's ``start_level``,
+        ``batch_size``, ``memory_limit`` (bytes, default 8 GiB: checked per tile, and on the
+        client against the welded mesh as the tiles arrive), and the octree's ``start_level``,
         ``safety``, ``corner_test``. ``project=True`` moves the welded mesh's vertices onto the
         surface as :func:`implicitmesh.polygonize` does, on the client with the whole field
         (the tiles are welded by their lattice-edge vertices first); not with ``output``.
@@ -358,7 +359,9 @@ def polygonize(
     Raises
     ------
     ValueError
-        For a bad ``tile``, ``method`` or ``output``, and as :func:`implicitmesh.polygonize`.
+        For a bad ``tile``, ``method`` or ``output``, and as :func:`implicitmesh.polygonize`;
+        naming ``memory_limit`` when the welded mesh would exceed it (every task is then
+        cancelled: raise it, or pass ``output``).
     ImportError
         When Dask is not installed (the ``distributed`` extra).
     KeyboardInterrupt
@@ -432,7 +435,9 @@ def polygonize(
                 futures.append(submit(part, (lo, hi), scattered, len(windows)))
                 windows.append((lo, hi))
         stream = (
-            _core.StreamedWeld(len(futures), cells, origin, cell, bool(options.get("normals", True)))
+            _core.StreamedWeld(
+                len(futures), cells, origin, cell, bool(options.get("normals", True)), options.get("memory_limit")
+            )
             if output is None
             else None
         )
@@ -471,7 +476,12 @@ def polygonize(
     return Mesh(v, f, n, mesh.stats)
 
 
-def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], object] = False) -> Mesh:
+def weld(
+    directory: str | os.PathLike[str],
+    *,
+    progress: bool | Callable[[int], object] = False,
+    memory_limit: int | None = None,
+) -> Mesh:
     """Joins the tiles that :func:`polygonize` wrote with ``output=directory`` into one mesh
     (the mesh :func:`polygonize` returns without ``output``, array for array). The tiles are
     read and welded one at a time, so the memory needed is the welded mesh's and one tile's.
@@ -483,6 +493,8 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
     progress : bool or callable
         ``True``: show the tile vertices welded (a tqdm bar or a line on standard error); a
         callable is called with their number.
+    memory_limit : int, optional
+        Bytes the welded mesh may hold (default 8 GiB, as :func:`implicitmesh.polygonize`'s).
 
     Returns
     -------
@@ -494,17 +506,24 @@ def weld(directory: str | os.PathLike[str], *, progress: bool | Callable[[int], 
     ValueError
         When the directory has no manifest (the run did not finish), a tile is missing, or a
         tile has no edge keys (written by an older implicitmesh); naming ``tiles`` for tiles of
-        different fields or lattices.
+        different fields or lattices, and ``memory_limit`` when the welded mesh would exceed it
+        or it is not a positive integer.
     KeyboardInterrupt
         On Ctrl-C, between two steps of a tile.
     """
+    if memory_limit is not None and (
+        isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, np.integer)) or memory_limit <= 0
+    ):
+        raise ValueError(f"memory_limit: must be a positive integer, got {memory_limit!r}")
     directory = Path(directory)
     path = directory / MANIFEST
     if not path.is_file():
         raise ValueError(f"directory: no {MANIFEST} in {str(directory)!r} (a run that did not finish?)")
     manifest = json.loads(path.read_text())
     report, end = reporter(progress, "weld", sum(e["vertices"] for e in manifest["tiles"]), "vertices")
-    stream = _core.StreamedWeld(len(manifest["tiles"]), manifest["cells"], manifest["origin"], manifest["cell"])
+    stream = _core.StreamedWeld(
+        len(manifest["tiles"]), manifest["cells"], manifest["origin"], manifest["cell"], memory_limit=memory_limit
+    )
     done = 0
     try:
         # One tile in memory at a time besides the welded mesh.

@@ -102,7 +102,8 @@ const JOINED: Id = Id::MAX;
 /// The welded rows are written from the front of vectors reserved for an estimate of the
 /// whole (the rows so far per tile, times the tiles, plus a quarter) and not touched beyond
 /// the rows written (`memory::reserve_huge`); a vector short of room grows to a new
-/// estimate.
+/// estimate. A tile that would make the welded mesh's rows exceed the weld's memory limit
+/// ([`StreamedWeld::with_memory_limit`]) is refused before anything is written.
 #[derive(Debug, Default)]
 pub struct StreamedWeld {
     /// The mesh of the tiles added so far.
@@ -115,6 +116,8 @@ pub struct StreamedWeld {
     added: usize,
     /// Whether the tiles carry normals: given, or as the first tile with vertices does.
     normals: Option<bool>,
+    /// Bytes the welded mesh may hold (`None`: no limit).
+    memory_limit: Option<u64>,
 }
 
 impl StreamedWeld {
@@ -126,6 +129,21 @@ impl StreamedWeld {
             normals,
             ..Default::default()
         }
+    }
+
+    /// The weld with a limit of `bytes` on the welded mesh's rows (vertices, normals and
+    /// `int64` triangles): [`StreamedWeld::add`] refuses a tile that would take them over it.
+    pub fn with_memory_limit(self, bytes: u64) -> Self {
+        StreamedWeld {
+            memory_limit: Some(bytes),
+            ..self
+        }
+    }
+
+    /// Bytes of the welded mesh's rows with `vertices` vertices and `faces` triangles.
+    fn bytes(&self, vertices: usize, faces: usize) -> u64 {
+        let per_vertex = if self.normals == Some(true) { 48 } else { 24 };
+        vertices as u64 * per_vertex + faces as u64 * 24
     }
 
     /// Tiles added so far.
@@ -144,8 +162,9 @@ impl StreamedWeld {
     /// triangle index outside the tile's vertices, normals not one per vertex (also none where
     /// the weld has normals), boundary indices and keys that do not match (an index outside
     /// the tile, a key outside its window, a key twice in the tile), a vertex at other
-    /// coordinates than the earlier tile's vertex of its edge, or more than 2³² vertices in
-    /// all; the weld is then as it was before the call. Checks [`cancel::check`] between steps
+    /// coordinates than the earlier tile's vertex of its edge, more than 2³² vertices in all,
+    /// or a welded mesh over the memory limit (naming `memory_limit`); the weld is then as it
+    /// was before the call. Checks [`cancel::check`] between steps
     /// and reports the tile's vertices done.
     pub fn add(&mut self, tile: &Tile, lattice: &Lattice) -> Result<()> {
         let t = self.added;
@@ -177,6 +196,10 @@ impl StreamedWeld {
         let (index, new) = self.renumbered(t, tile)?;
         cancel::check()?;
         let kept = kept_per_chunk(&index, first);
+        self.check_memory(
+            first + kept.iter().sum::<usize>(),
+            self.welded.faces.len() + tile.faces.len(),
+        )?;
         let (tiles, added) = (self.tiles.max(t + 1) as f64, (t + 1) as f64);
         let estimate =
             |now: usize, more: usize| ((now + more) as f64 / added * tiles * SLACK) as usize;
@@ -196,6 +219,27 @@ impl StreamedWeld {
         self.ids.extend(new);
         self.added += 1;
         cancel::advance(nv as u64)
+    }
+
+    /// Errors when a welded mesh of `vertices` vertices and `faces` triangles would exceed the
+    /// memory limit.
+    fn check_memory(&self, vertices: usize, faces: usize) -> Result<()> {
+        let Some(limit) = self.memory_limit else {
+            return Ok(());
+        };
+        let bytes = self.bytes(vertices, faces);
+        if bytes <= limit {
+            return Ok(());
+        }
+        Err(Error::invalid(
+            "memory_limit",
+            format!(
+                "the welded mesh of the first {} tiles needs {} MiB, over the limit of {} MiB; raise memory_limit, or write the tiles to a directory (output=DIR) and weld them where there is room",
+                self.added + 1,
+                bytes.div_ceil(1 << 20),
+                limit >> 20
+            ),
+        ))
     }
 
     /// The welded mesh of the tiles added.
@@ -615,6 +659,54 @@ mod tests {
         }
         assert!(refused > 10);
         assert_eq!(stream.finish(), weld(&tiles, &lattice).unwrap());
+    }
+
+    /// A weld with a memory limit refuses the tile that would take the welded mesh's rows over
+    /// it, naming `memory_limit`, and is unchanged; the tiles before it are welded as without a
+    /// limit.
+    #[test]
+    fn a_streamed_weld_refuses_a_tile_over_its_memory_limit() {
+        let sphere = Sphere {
+            center: DVec3::new(0.03, -0.05, 0.02),
+            radius: 0.7,
+        };
+        let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 18).unwrap();
+        let settings = Settings::default();
+        let meshes = tile_meshes(&lattice, 6, |l| {
+            let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
+            (m, k)
+        });
+        let tiles = as_tiles(&meshes);
+        let whole = weld(&tiles, &lattice).unwrap();
+        let bytes = (whole.vertices.len() * 48 + whole.faces.len() * 24) as u64;
+        let mut unlimited = StreamedWeld::new(tiles.len(), None);
+        let mut stream = StreamedWeld::new(tiles.len(), None).with_memory_limit(bytes / 2);
+        let mut refused = None;
+        for (t, tile) in tiles.iter().enumerate() {
+            let before = (stream.added(), stream.vertices());
+            match stream.add(tile, &lattice) {
+                Ok(()) => unlimited.add(tile, &lattice).unwrap(),
+                Err(Error::InvalidArgument { name, reason }) => {
+                    assert_eq!(name, "memory_limit");
+                    assert!(reason.contains("output=DIR"), "{reason}");
+                    assert_eq!((stream.added(), stream.vertices()), before);
+                    refused = Some(t);
+                    break;
+                }
+                Err(e) => panic!("{e:?}"),
+            }
+        }
+        let t = refused.expect("half the whole mesh's bytes is reached before the last tile");
+        assert!(t > 0);
+        let (held, first) = (stream.finish(), unlimited.finish());
+        assert_eq!(held, first);
+        assert!((held.vertices.len() * 48 + held.faces.len() * 24) as u64 <= bytes / 2);
+        // The whole mesh within a limit of its bytes.
+        let mut exact = StreamedWeld::new(tiles.len(), None).with_memory_limit(bytes);
+        for tile in &tiles {
+            exact.add(tile, &lattice).unwrap();
+        }
+        assert_eq!(exact.finish(), whole);
     }
 
     /// Bad tiles are refused naming the argument at fault.

@@ -219,10 +219,12 @@ const TINY_TILE: usize = 1 << 12;
 /// (each tile can be freed once added); ``result()`` is the mesh :func:`weld_tiles` makes of
 /// the tiles added, array for array.
 ///
-/// ``StreamedWeld(tiles, cells, origin, cell, normals=None)``: ``tiles`` the number of tiles
-/// that will be added (for the estimate of the output's size), ``cells``, ``origin``,
-/// ``cell`` the whole lattice (as :func:`lattice` returns them), ``normals`` whether the tiles
-/// carry normals (None: as the first tile with vertices does).
+/// ``StreamedWeld(tiles, cells, origin, cell, normals=None, memory_limit=None)``: ``tiles`` the
+/// number of tiles that will be added (for the estimate of the output's size), ``cells``,
+/// ``origin``, ``cell`` the whole lattice (as :func:`lattice` returns them), ``normals`` whether
+/// the tiles carry normals (None: as the first tile with vertices does), ``memory_limit`` the
+/// bytes the welded mesh may hold (None: :func:`polygonize`'s default, 8 GiB); a tile that would
+/// take it over is refused with a ValueError naming ``memory_limit``.
 #[pyclass(name = "StreamedWeld", module = "implicitmesh._core")]
 pub struct PyStreamedWeld {
     lattice: Lattice,
@@ -233,17 +235,25 @@ pub struct PyStreamedWeld {
 #[pymethods]
 impl PyStreamedWeld {
     #[new]
-    #[pyo3(signature = (tiles, cells, origin, cell, normals=None))]
+    #[pyo3(signature = (tiles, cells, origin, cell, normals=None, memory_limit=None))]
     fn new(
         tiles: usize,
         cells: [u32; 3],
         origin: [f64; 3],
         cell: [f64; 3],
         normals: Option<bool>,
+        memory_limit: Option<u64>,
     ) -> PyResult<Self> {
+        if memory_limit == Some(0) {
+            return Err(value_error(
+                "memory_limit",
+                "must be a positive integer, got 0",
+            ));
+        }
+        let limit = memory_limit.unwrap_or(crate::polygonize::Settings::default().memory_limit);
         Ok(PyStreamedWeld {
             lattice: whole_lattice(cells, origin, cell)?,
-            weld: Some(StreamedWeld::new(tiles, normals)),
+            weld: Some(StreamedWeld::new(tiles, normals).with_memory_limit(limit)),
         })
     }
 
