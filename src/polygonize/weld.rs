@@ -623,20 +623,26 @@ mod tests {
         }
     }
 
-    /// A streamed weld told of one tile and given them all (its rows grow past every
-    /// estimate) makes the arrays of a weld told of all; a tile refused leaves it unchanged.
-    #[test]
-    fn a_streamed_weld_grows_past_its_estimate_and_survives_a_refused_tile() {
+    /// A sphere's dense tiles of `tile` cells on a lattice of 18³ cells over [-1, 1]³.
+    fn sphere_tiles(tile: u32) -> (Lattice, Vec<TileMesh>) {
         let sphere = Sphere {
             center: DVec3::new(0.03, -0.05, 0.02),
             radius: 0.7,
         };
         let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 18).unwrap();
         let settings = Settings::default();
-        let meshes = tile_meshes(&lattice, 4, |l| {
+        let meshes = tile_meshes(&lattice, tile, |l| {
             let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
             (m, k)
         });
+        (lattice, meshes)
+    }
+
+    /// A streamed weld told of one tile and given them all (its rows grow past every
+    /// estimate) makes the arrays of a weld told of all; a tile refused leaves it unchanged.
+    #[test]
+    fn a_streamed_weld_grows_past_its_estimate_and_survives_a_refused_tile() {
+        let (lattice, meshes) = sphere_tiles(4);
         let tiles = as_tiles(&meshes);
         let mut stream = StreamedWeld::new(1, None);
         let mut seen = std::collections::HashSet::new();
@@ -666,16 +672,7 @@ mod tests {
     /// limit.
     #[test]
     fn a_streamed_weld_refuses_a_tile_over_its_memory_limit() {
-        let sphere = Sphere {
-            center: DVec3::new(0.03, -0.05, 0.02),
-            radius: 0.7,
-        };
-        let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 18).unwrap();
-        let settings = Settings::default();
-        let meshes = tile_meshes(&lattice, 6, |l| {
-            let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
-            (m, k)
-        });
+        let (lattice, meshes) = sphere_tiles(6);
         let tiles = as_tiles(&meshes);
         let whole = weld(&tiles, &lattice).unwrap();
         let bytes = (whole.vertices.len() * 48 + whole.faces.len() * 24) as u64;
