@@ -23,7 +23,7 @@ import numpy as np
 from . import _core, _tile_files
 from ._progress import reporter
 from .mesh import Mesh
-from .polygonize import _check_common
+from .polygonize import _check_common, _check_positive
 
 __all__ = ["polygonize", "weld", "tiles", "cut_field", "TILE_METHODS"]
 
@@ -511,10 +511,8 @@ def weld(
     KeyboardInterrupt
         On Ctrl-C, between two steps of a tile.
     """
-    if memory_limit is not None and (
-        isinstance(memory_limit, bool) or not isinstance(memory_limit, (int, np.integer)) or memory_limit <= 0
-    ):
-        raise ValueError(f"memory_limit: must be a positive integer, got {memory_limit!r}")
+    if memory_limit is not None:
+        _check_positive("memory_limit", memory_limit)
     directory = Path(directory)
     path = directory / MANIFEST
     if not path.is_file():

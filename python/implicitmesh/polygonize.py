@@ -221,12 +221,16 @@ def _check_common(field, bounds, ambiguity, batch_size, memory_limit):
         ambiguity = ambiguity.value
     if not isinstance(ambiguity, str):
         raise ValueError(f"ambiguity: expected Ambiguity.SEPARATE/JOIN or a string, got {ambiguity!r}")
-    for name, value in (("batch_size", batch_size), ("memory_limit", memory_limit)):
-        if value is None and name == "memory_limit":
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
-            raise ValueError(f"{name}: must be a positive integer, got {value!r}")
+    _check_positive("batch_size", batch_size)
+    if memory_limit is not None:
+        _check_positive("memory_limit", memory_limit)
     return bounds, ambiguity
+
+
+def _check_positive(name: str, value) -> None:
+    """A ValueError naming ``name`` unless ``value`` is a positive integer."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+        raise ValueError(f"{name}: must be a positive integer, got {value!r}")
 
 
 class Tessellator:

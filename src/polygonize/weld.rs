@@ -140,12 +140,6 @@ impl StreamedWeld {
         }
     }
 
-    /// Bytes of the welded mesh's rows with `vertices` vertices and `faces` triangles.
-    fn bytes(&self, vertices: usize, faces: usize) -> u64 {
-        let per_vertex = if self.normals == Some(true) { 48 } else { 24 };
-        vertices as u64 * per_vertex + faces as u64 * 24
-    }
-
     /// Tiles added so far.
     pub fn added(&self) -> usize {
         self.added
@@ -164,8 +158,8 @@ impl StreamedWeld {
     /// the tile, a key outside its window, a key twice in the tile), a vertex at other
     /// coordinates than the earlier tile's vertex of its edge, more than 2³² vertices in all,
     /// or a welded mesh over the memory limit (naming `memory_limit`); the weld is then as it
-    /// was before the call. Checks [`cancel::check`] between steps
-    /// and reports the tile's vertices done.
+    /// was before the call. Checks [`cancel::check`] between steps and reports the tile's
+    /// vertices done.
     pub fn add(&mut self, tile: &Tile, lattice: &Lattice) -> Result<()> {
         let t = self.added;
         check(t, tile, lattice)?;
@@ -227,7 +221,8 @@ impl StreamedWeld {
         let Some(limit) = self.memory_limit else {
             return Ok(());
         };
-        let bytes = self.bytes(vertices, faces);
+        let per_vertex = if self.normals == Some(true) { 48 } else { 24 };
+        let bytes = vertices as u64 * per_vertex + faces as u64 * 24;
         if bytes <= limit {
             return Ok(());
         }
