@@ -101,26 +101,28 @@ def make_field(name: str, size: int):
 
 
 class Phases:
-    """Wraps ``_tile_fields`` and ``_add_tile`` of :mod:`implicitmesh.distributed` (the
-    gathered run's weld, one tile at a time as the tiles arrive) to count the client's seconds
-    cutting the field for the tiles and welding, and the vertices the weld joins (the tiles'
-    fields are cut before the first is submitted)."""
+    """Wraps ``_tile_fields`` and ``_weld_tile`` of :mod:`implicitmesh.distributed` (the
+    gathered run's weld, one tile at a time as the tiles arrive: in place, the client plans it
+    and the workers write the rows) to count the client's seconds cutting the field for the
+    tiles and welding, the vertices the weld joins and the bytes of each tile's mesh (the
+    tiles' fields are cut before the first is submitted)."""
 
     def __init__(self, imd):
-        self.cut, self.add = imd._tile_fields, imd._add_tile
+        self.cut, self.add = imd._tile_fields, imd._weld_tile
         self.reset()
         imd._tile_fields = self._cut
         phases = self
 
-        def add(weld, window, vertices, *rest):
+        def add(weld, entry, tile):
+            nv, nbytes = entry["vertices"], entry["bytes"]
             t, before = time.perf_counter(), weld.vertices
-            phases.add(weld, window, vertices, *rest)
+            phases.add(weld, entry, tile)
             phases.weld_s += time.perf_counter() - t
-            phases.tile_vertices += len(vertices)
-            phases.welded_vertices += len(vertices) - (weld.vertices - before)
-            phases.tile_bytes.append(sum(int(a.nbytes) for a in (vertices, *rest)))
+            phases.tile_vertices += nv
+            phases.welded_vertices += nv - (weld.vertices - before)
+            phases.tile_bytes.append(nbytes)
 
-        imd._add_tile = add
+        imd._weld_tile = add
 
     def reset(self) -> None:
         self.cut_s = self.weld_s = 0.0
@@ -362,10 +364,11 @@ def render(raw: dict) -> str:
         "at 16³; times are wall-clock medians of the runs column, cluster start-up excluded. "
         "Speed-up: `dask-1`'s time over this row's; overhead: this row's time over `single`'s, minus 1. "
         "Per tile: the task's compute seconds (Dask's task stream) and the megabytes of its field (pickled) "
-        "and of its mesh (the arrays the client welds), mean / max over tasks. The workers share the client's machine, so "
-        "gathered tiles pass through files in `/dev/shm` (`implicitmesh._tile_files`), not Dask's comms. Client: seconds cutting the "
-        "field per tile and welding (the sum of the tiles' welds, each as it arrives, while the workers "
-        "compute others; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. "
+        "and of its mesh, mean / max over tasks. The workers share the client's machine, so a gathered "
+        "run welds in place (`implicitmesh._weld_in_place`): the client plans the weld from each tile's counts and "
+        "boundary vertices, and the worker holding a tile writes its rows into the welded mesh's files in `/dev/shm`. "
+        "Client: seconds cutting the field per tile and welding (planning each tile as it arrives, and writing the "
+        "tiles under 1 MB itself; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. "
         "CPU: seconds of CPU (user and system, `getrusage`) of the workers (summed) and of the client's process (which "
         "runs the `LocalCluster`'s scheduler too) during a run, medians; for `single`, its process's. Peak "
         "memory: VmHWM of each worker process and of the client process (MiB).",

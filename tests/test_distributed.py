@@ -431,10 +431,16 @@ def test_tiles_fit_where_the_whole_lattice_does_not(client):
     assert mesh.to_trimesh().is_watertight and genus_of(mesh.euler_number) == 0
 
 
-def test_a_welded_mesh_over_memory_limit_is_refused(client, blobs, tmp_path):
-    """Tiles each well within memory_limit whose welded mesh is not: the gathered run raises a
-    ValueError naming memory_limit and cancels every task; weld(DIR) of the same tiles too;
-    with the limit raised to the mesh's bytes, both give the one-machine mesh."""
+@pytest.mark.parametrize("weld_in", ["client", "place"])
+def test_a_welded_mesh_over_memory_limit_is_refused(client, blobs, tmp_path, monkeypatch, weld_in):
+    """Tiles each well within memory_limit whose welded mesh is not: the gathered run (welded
+    in the client or in place) raises a ValueError naming memory_limit and cancels every task;
+    weld(DIR) of the same tiles too; with the limit raised to the mesh's bytes, both give the
+    one-machine mesh."""
+    from implicitmesh import _weld_in_place
+
+    monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if weld_in == "place" else 1 << 62)
+    monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
     whole = im.polygonize(blobs, bounds=BOX, resolution=96, method="sparse")
     need = whole.vertices.nbytes + whole.normals.nbytes + whole.faces.nbytes
     limit = need // 3
@@ -500,30 +506,37 @@ def test_ctrl_c_cancels_the_tasks(client, knot):
     assert tasks_left(client) == 0
 
 
-def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch):
+@pytest.mark.parametrize("weld_in", ["client", "place"])
+def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch, weld_in):
     """A Ctrl-C (SIGINT to the main thread) while the client welds the first tile that arrived
-    raises KeyboardInterrupt and cancels the tasks not done; the next run is whole."""
+    (in the client or in place) raises KeyboardInterrupt and cancels the tasks not done; the
+    next run is whole."""
     import _thread
 
+    from implicitmesh import _weld_in_place
+
+    monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if weld_in == "place" else 1 << 62)
+    monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
+
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    add = imd._add_tile
+    add = imd._weld_tile
     welds = []
 
-    def interrupted_add(stream, *tile):
-        welds.append(len(tile[1]))
+    def interrupted_add(weld, entry, tile):
+        welds.append(tile)
         _thread.interrupt_main()
-        add(stream, *tile)
+        add(weld, entry, tile)
         time.sleep(1.0)  # the signal is handled here at the latest
 
-    monkeypatch.setattr(imd, "_add_tile", interrupted_add)
+    monkeypatch.setattr(imd, "_weld_tile", interrupted_add)
     try:
         with pytest.raises(KeyboardInterrupt):
-            imd.polygonize(blobs, bounds=BOX, resolution=96, method="dense", client=client, tile=8)
+            imd.polygonize(blobs, bounds=BOX, resolution=96, method="dense", client=client, tile=8, memory_limit=1 << 28)
     finally:
         signal.signal(signal.SIGINT, previous)
     assert len(welds) == 1
     assert tasks_left(client) == 0
-    monkeypatch.setattr(imd, "_add_tile", add)
+    monkeypatch.setattr(imd, "_weld_tile", add)
     whole = im.polygonize(blobs, bounds=BOX, resolution=24, method="sparse")
     assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8), whole)
 
@@ -553,37 +566,109 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot):
     assert_same_mesh(tiled, whole)
 
 
-@pytest.mark.parametrize("transport", ["files", "comms", "files-unseen"])
-def test_tiles_reach_the_client_through_files_or_dask(client, blobs, monkeypatch, transport):
-    """Workers on the client's machine pass their tiles (here of any size) through files in the
-    run's directory (removed afterwards); without one ("comms"), or where the workers do not
-    see it ("files-unseen"), the tiles come through Dask: the same mesh each way."""
-    from implicitmesh import _tile_files
+@pytest.mark.parametrize("transport", ["in-place", "files", "comms", "files-unseen"])
+def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, monkeypatch, transport):
+    """Workers on the client's machine write their tiles (here of any size) into the welded
+    mesh's files in the run's directory ("in-place"), or, where it cannot hold the welded mesh,
+    pass them through files there ("files"); without one ("comms"), or where the workers do
+    not see it ("files-unseen"), the tiles come through Dask: the same arrays each way, bit for
+    bit, and the directory removed afterwards."""
+    from implicitmesh import _tile_files, _weld_in_place
 
     made, original = [], _tile_files.make_directory
 
     def make_directory():
-        d = {"files": original, "comms": lambda: None,
+        d = {"in-place": original, "files": original, "comms": lambda: None,
              "files-unseen": lambda: "/nonexistent/implicitmesh-tiles"}[transport]()
         made.append(d)
         return d
 
     monkeypatch.setattr(_tile_files, "make_directory", make_directory)
     monkeypatch.setattr(_tile_files, "MIN_BYTES", 0)
-    read = _tile_files.read
-    files_read = []
+    monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if transport == "in-place" else 1 << 62)
+    monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
+    read, write_rows, gathered = _tile_files.read, _weld_in_place.write_rows, imd._gathered_weld
+    files_read, client_writes = [], []
 
     def counted_read(directory, name):
         files_read.append(name)
         return read(directory, name)
 
+    def counted_write_rows(*args):
+        client_writes.append(len(args[1]))
+        return write_rows(*args)
+
     monkeypatch.setattr(_tile_files, "read", counted_read)
+    monkeypatch.setattr(_weld_in_place, "write_rows", counted_write_rows)
+    welds_in_place = []
+    monkeypatch.setattr(imd, "_gathered_weld", lambda *a: welds_in_place.append(a[2] is not None) or gathered(*a))
     whole = im.polygonize(blobs, bounds=BOX, resolution=40, method="sparse")
-    tiled = imd.polygonize(blobs, bounds=BOX, resolution=40, method="sparse", client=client, tile=15)
+    # A memory limit of 64 MiB: the welded mesh fits in a small /dev/shm too.
+    tiled = imd.polygonize(blobs, bounds=BOX, resolution=40, method="sparse", client=client, tile=15, memory_limit=1 << 26)
+    assert welds_in_place == [transport == "in-place"]
     assert_same_mesh(tiled, whole)
     assert len(files_read) == (tiled.stats["tiles"] if transport == "files" else 0)
+    # In place, every tile is written by a worker (none is under MIN_BYTES).
+    assert client_writes == []
     if made[0] is not None:
         assert not os.path.exists(made[0])
+    if transport == "in-place":
+        monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 1 << 62)
+        streamed = imd.polygonize(blobs, bounds=BOX, resolution=40, method="sparse", client=client, tile=15,
+                                  memory_limit=1 << 26)
+        for a, b in ((tiled.vertices, streamed.vertices), (tiled.faces, streamed.faces), (tiled.normals, streamed.normals)):
+            assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+        assert tiled.vertices.flags.writeable and tiled.stats == streamed.stats
+
+
+class _SyncClient:
+    """A stand-in for a Dask client that runs each task at once; tiles written by ``write_kept``
+    come back as rows, as from a worker on another machine."""
+
+    class Future:
+        def __init__(self, value):
+            self.value = value
+
+        def done(self):
+            return True
+
+        def result(self):
+            return self.value
+
+        def release(self):
+            self.value = None
+
+    def submit(self, fn, *args, **kwargs):
+        from implicitmesh import _weld_in_place
+
+        args = [a.value if isinstance(a, self.Future) else a for a in args]
+        if fn is _weld_in_place.write_kept:
+            v, f, n = (args[0][1][k] for k in ("v", "f", "n"))
+            return self.Future((v, f, n))
+        return self.Future(fn(*args))
+
+    def gather(self, futures):
+        return [f.result() for f in futures]
+
+
+def test_a_weld_in_place_writes_the_rows_a_worker_elsewhere_returns(blobs, tmp_path):
+    """Tiles whose workers cannot write the welded files (another machine) return their rows,
+    which the client writes: the arrays of the weld in the client's memory, bit for bit."""
+    from implicitmesh import _weld_in_place
+
+    cells, origin, cell = im._core.lattice(np.asarray(BOX, float), 30)
+    fake, kept = _SyncClient(), {}
+    weld = _weld_in_place.WeldInPlace(fake, str(tmp_path), kept, cells, origin, cell, True, None)
+    stream = im._core.StreamedWeld(0, cells, origin, cell, True)
+    for i, (lo, hi) in enumerate(imd.tiles(cells, (11, 11, 11))):
+        kept[i] = fake.submit(imd._run_tile, blobs, BOX, 30, (lo, hi), "dense", {}, None, _weld_in_place.KEEP)
+        entry = _weld_in_place.tile_entry(kept[i].value, 0 if i % 2 else 1 << 40)
+        a = kept[i].value[1]
+        stream.add([list(lo), list(hi)], a["v"], a["f"], a["n"], a["b"], a["k"])
+        weld.add(entry, i)
+    assert not kept
+    for a, b in zip(weld.result(), stream.result()):
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
 
 
 def test_tile_files_read_back_exactly_and_are_removed(tmp_path):

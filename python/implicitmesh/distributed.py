@@ -20,7 +20,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from . import _core, _tile_files
+from . import _core, _tile_files, _weld_in_place
 from ._progress import reporter
 from .mesh import Mesh
 from .polygonize import _check_common, _check_positive
@@ -39,6 +39,9 @@ MANIFEST = "manifest.json"
 #: Relative margin on a primitive's radius when cutting a blob field to a tile, far above
 #: rounding, so that no primitive adding a non-zero term at a point of the tile is left out.
 _RADIUS_MARGIN = 1e-6
+
+#: The welded mesh's memory limit when ``memory_limit`` is not given (the polygonizers').
+_DEFAULT_MEMORY_LIMIT = 8 << 30
 
 #: Statistics of the tiles that add up to the whole run's.
 _SUMMED = ("evaluations", "normal_evaluations", "lattice_points", "cells_visited", "cells_crossed", "cells_repaired")
@@ -180,15 +183,20 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     file of the gathered run's directory when ``local = (directory, min_bytes)`` is given, this
     worker can write there and the tile is large enough, see :mod:`implicitmesh._tile_files`),
     or with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the
-    manifest."""
+    manifest; with ``local`` ``_weld_in_place.KEEP``, returns its entry and its arrays, which
+    stay on the worker (see :mod:`implicitmesh._weld_in_place`)."""
     v, f, n, stats, b, k = _core.polygonize(
         field, bounds, resolution, method=method, window=window, boundary=True, **options
     )
     stats = {k: stats[k] for k in _SUMMED}
     entry = {"window": [list(window[0]), list(window[1])], "vertices": len(v), "faces": len(f), "stats": stats}
+    if output is None:
+        entry["bytes"] = sum(int(a.nbytes) for a in (v, f, n, b, k))
     name = "tile-{}-{}-{}".format(*window[0])
     if output is None:
         arrays = dict(v=v, f=f, n=n, b=b, k=k)
+        if local == _weld_in_place.KEEP:
+            return entry, arrays
         if local is not None and _tile_files.write(local, name, arrays):
             entry["local"] = name
         else:
@@ -203,26 +211,31 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     return entry
 
 
-def _submit_tile(client, args: tuple, part: Any, window, scattered: dict | None, i: int):
-    """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field;
-    ``args``: ``(bounds, resolution, method, options, output, local)``. With ``scattered``, a
-    partition fit's cut is scattered straight to a worker (its future kept in
+def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, scattered: dict | None, i: int):
+    """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field, and
+    returns the future of its manifest entry; ``args``: ``(bounds, resolution, method, options,
+    output, local)``. With ``kept`` (a weld in place), the tile's arrays stay on its worker
+    (their future in ``kept[i]``) and a second task there gives its entry. With ``scattered``,
+    a partition fit's cut is scattered straight to a worker (its future kept in
     ``scattered[i]``) instead of travelling inside the task through the scheduler, which a
     ``LocalCluster`` runs in the client's process."""
     if scattered is not None and isinstance(part, _core.VariationalSurface):
         part = scattered[i] = client.scatter(part, direct=True, hash=False)
-    return client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False)
+    tile = client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False)
+    if kept is None:
+        return tile
+    kept[i] = tile
+    return client.submit(_weld_in_place.tile_entry, tile, _tile_files.MIN_BYTES, pure=False)
 
 
 def _collect(
-    distributed, futures: list, scattered: dict, resend: Callable, stream: Any, local: str | None, report: Any
+    distributed, futures: list, scattered: dict, resend: Callable, weld: Any, report: Any
 ) -> list:
     """The tiles' manifest entries in window order (the order of ``futures``), each tile's mesh
-    added to ``stream`` (when given) as soon as those before it are, then freed; ``report``
+    added to ``weld`` (when given) as soon as those before it are, then freed; ``report``
     gets the tiles done. A tile whose scattered cut was lost with its worker (``scattered``
     holds the scattered cuts' futures by tile) comes back cancelled and is sent again with
-    ``resend(tile)``; ``futures`` gets the new futures. ``local``: the run's directory of tile
-    files (:mod:`implicitmesh._tile_files`)."""
+    ``resend(tile)``; ``futures`` gets the new futures."""
     place = {fut.key: i for i, fut in enumerate(futures)}
     arrived: dict[int, dict] = {}
     entries: list = []
@@ -245,28 +258,58 @@ def _collect(
         fut.release()
         while len(entries) in arrived:
             entry = arrived.pop(len(entries))
-            if stream is not None:
-                _weld_entry(stream, entry, local)
+            if weld is not None:
+                _weld_tile(weld, entry, len(entries))
             entries.append(entry)
         if report is not None:
             report(len(entries) + len(arrived))
     return entries
 
 
-def _weld_entry(stream: "_core.StreamedWeld", entry: dict, local: str | None) -> None:
-    """Welds the tile of a task's ``entry`` into ``stream``: its arrays, or the file it wrote in
-    the run's directory ``local`` (then deleted); the entry keeps its counts."""
-    if "local" in entry:
-        with _tile_files.read(local, entry.pop("local")) as a:
-            _add_tile(stream, entry["window"], *(a[k] for k in ("v", "f", "n", "b", "k")))
-    else:
-        _add_tile(stream, entry["window"], *(entry.pop(k) for k in ("v", "f", "n", "b", "k")))
+class _StreamedWeld:
+    """The weld of a gathered run in the client's memory (:class:`_core.StreamedWeld`), each
+    tile read from its entry or from the file its worker left in the run's directory
+    ``local``; the interface of :class:`implicitmesh._weld_in_place.WeldInPlace`."""
+
+    def __init__(self, stream: "_core.StreamedWeld", local: str | None):
+        self.stream, self.local = stream, local
+
+    def tasks(self) -> list:
+        return []
+
+    @property
+    def vertices(self) -> int:
+        return self.stream.vertices
+
+    def add(self, entry: dict, tile: int) -> None:
+        if "local" in entry:
+            with _tile_files.read(self.local, entry.pop("local")) as a:
+                self.stream.add(entry["window"], *(a[k] for k in ("v", "f", "n", "b", "k")))
+        else:
+            self.stream.add(entry["window"], *(entry.pop(k) for k in ("v", "f", "n", "b", "k")))
+
+    def result(self) -> tuple:
+        return self.stream.result()
 
 
-def _add_tile(stream: "_core.StreamedWeld", window, *arrays: np.ndarray) -> None:
-    """Welds the next tile (``window`` and its ``vertices, faces, normals, boundary, keys``)
-    into ``stream``."""
-    stream.add(window, *arrays)
+def _weld_tile(weld: Any, entry: dict, tile: int) -> None:
+    """Welds tile number ``tile`` (its task's manifest ``entry``) into ``weld``; the entry
+    keeps its counts."""
+    weld.add(entry, tile)
+
+
+def _gathered_weld(client, local: str | None, kept: dict | None, tiles: int, cells, origin, cell, options: dict) -> Any:
+    """The weld of a gathered run: in place in the run's directory (``kept``: the futures of
+    the tiles' arrays, see :mod:`implicitmesh._weld_in_place`), else in the client's memory."""
+    normals, limit = bool(options.get("normals", True)), options.get("memory_limit")
+    if kept is not None:
+        return _weld_in_place.WeldInPlace(client, local, kept, cells, origin, cell, normals, limit)
+    return _StreamedWeld(_core.StreamedWeld(tiles, cells, origin, cell, normals, limit), local)
+
+
+def _worker_threads(client) -> int:
+    """The threads of the client's workers, in all."""
+    return sum(client.nthreads().values())
 
 
 def _pickled(field: Any) -> Callable[[], Any]:
@@ -369,9 +412,14 @@ def polygonize(
 
     Notes
     -----
-    Without ``output``, workers on the client's machine hand their tiles over through files in a
-    directory the client makes for the run in ``/dev/shm`` (else the temporary directory) and
-    removes at its end; workers elsewhere, or that cannot write there, send them through Dask.
+    Without ``output``, the client makes a directory for the run in ``/dev/shm`` (else the
+    temporary directory) and removes it at its end. With tiles of at least 64³ cells, workers
+    with at least as many threads in all as the client's machine has cores, and room there for
+    ``memory_limit`` bytes, the welded mesh's arrays are files there, which the workers on the
+    client's machine write each tile into (the client only plans the weld), and the mesh's
+    arrays are those files mapped in memory (shared memory, freed with the arrays). Otherwise
+    the client welds, beside the workers: workers on its machine hand their tiles over through
+    files there, workers elsewhere, or that cannot write there, through Dask.
     """
     distributed = _import_distributed()
     tile3 = _check_tile(tile)
@@ -409,8 +457,11 @@ def polygonize(
         if not output.is_dir():
             raise ValueError(f"output: {str(output)!r} is not a directory")
     client, own = _get_client(client)
-    futures, shared, scattered = [], None, {}
+    futures, shared, scattered, welder, welded = [], None, {}, None, None
     local = _tile_files.make_directory() if output is None else None
+    limit = options.get("memory_limit") or _DEFAULT_MEMORY_LIMIT
+    in_place = output is None and _weld_in_place.usable(local, limit, int(np.prod(tile3)), _worker_threads(client))
+    kept: dict | None = {} if in_place else None
     report, end = reporter(progress, "tiles", None, "tiles")
     try:
         # Blob fields and partition fits are cut per tile; any other field is one task's result
@@ -426,30 +477,29 @@ def polygonize(
                 method,
                 options,
                 None if output is None else str(output),
-                None if local is None else (local, _tile_files.MIN_BYTES),
+                _weld_in_place.KEEP if in_place else None if local is None else (local, _tile_files.MIN_BYTES),
             ),
+            kept,
         )
         windows: list = []
         for (lo, hi), part in zip(tiles(cells, tile3), _tile_fields(field, shared, cells, origin, cell, tile3)):
             if part is not None:
                 futures.append(submit(part, (lo, hi), scattered, len(windows)))
                 windows.append((lo, hi))
-        stream = (
-            _core.StreamedWeld(
-                len(futures), cells, origin, cell, bool(options.get("normals", True)), options.get("memory_limit")
-            )
-            if output is None
-            else None
-        )
+        if output is None:
+            welder = _gathered_weld(client, local, kept, len(futures), cells, origin, cell, options)
 
         def resend(i: int):
             return submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
 
-        entries = _collect(distributed, futures, scattered, resend, stream, local, report)
+        entries = _collect(distributed, futures, scattered, resend, welder, report)
+        if welder is not None:
+            welded = welder.result()
     except BaseException:
         # Every task, done or not, and the shared field: a traceback that keeps this frame
         # must not keep their results on the workers.
-        client.cancel(futures + list(scattered.values()) + [f for f in (shared,) if f is not None])
+        more = list(scattered.values()) + list((kept or {}).values()) + ([] if welder is None else welder.tasks())
+        client.cancel(futures + more + [f for f in (shared,) if f is not None])
         raise
     finally:
         end()
@@ -463,7 +513,7 @@ def polygonize(
         tmp.write_text(json.dumps(manifest, indent=1))
         os.replace(tmp, output / MANIFEST)
         return output
-    v, f, n = stream.result()
+    v, f, n = welded
     mesh = Mesh(v, f, n, _stats(entries, info, len(v)))
     if not project:
         return mesh
@@ -535,7 +585,7 @@ def weld(
                         f"directory: tile {e['file']} has no edge keys (written by an older implicitmesh); "
                         "run polygonize again"
                     )
-                _add_tile(stream, e["window"], z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"])
+                stream.add(e["window"], z["vertices"], z["faces"], z["normals"], z["boundary"], z["keys"])
             done += e["vertices"]
             if report is not None:
                 report(done)

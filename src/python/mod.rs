@@ -48,6 +48,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(polygonize::project_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(weld::weld_tiles, m)?)?;
     m.add_class::<weld::PyStreamedWeld>()?;
+    m.add_class::<weld::PyWeldPlan>()?;
+    m.add_function(wrap_pyfunction!(weld::write_welded_tile, m)?)?;
     subdivision::register(m)?;
     Ok(())
 }

@@ -4,9 +4,13 @@ use super::convert::{check_rows_of_three, flat_faces, flatten_points, MeshBuffer
 use super::errors::value_error;
 use super::interrupt::run;
 use crate::lattice::{Lattice, MAX_CELLS_PER_AXIS};
-use crate::polygonize::weld::{weld, StreamedWeld, Tile, Welded};
+use crate::polygonize::weld::rows::{room, write as rows_write, Rows};
+use crate::polygonize::weld::{weld, Seams, StreamedWeld, Tile, TilePlan, WeldPlan, Welded};
 use glam::DVec3;
-use numpy::{PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray2,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
@@ -244,13 +248,7 @@ impl PyStreamedWeld {
         normals: Option<bool>,
         memory_limit: Option<u64>,
     ) -> PyResult<Self> {
-        if memory_limit == Some(0) {
-            return Err(value_error(
-                "memory_limit",
-                "must be a positive integer, got 0",
-            ));
-        }
-        let limit = memory_limit.unwrap_or(crate::polygonize::Settings::default().memory_limit);
+        let limit = limit_of(memory_limit)?;
         Ok(PyStreamedWeld {
             lattice: whole_lattice(cells, origin, cell)?,
             weld: Some(StreamedWeld::new(tiles, normals).with_memory_limit(limit)),
@@ -313,4 +311,225 @@ impl PyStreamedWeld {
         })?;
         welded_tuple(py, weld.finish())
     }
+}
+
+/// Where each tile's rows go in the welded mesh, from each tile's counts and boundary vertices
+/// alone: the bookkeeping of :class:`StreamedWeld`, for a tiled run whose workers write their
+/// tiles' rows into the welded arrays themselves (:func:`write_welded_tile`).
+///
+/// ``WeldPlan(cells, origin, cell, normals, memory_limit=None)``: ``cells``, ``origin``,
+/// ``cell`` the whole lattice (as :func:`lattice` returns them), ``normals`` whether the welded
+/// mesh has normals, ``memory_limit`` the bytes the welded mesh may hold (None: 8 GiB); a tile
+/// that would take it over is refused with a ValueError naming ``memory_limit``.
+#[pyclass(name = "WeldPlan", module = "implicitmesh._core")]
+pub struct PyWeldPlan {
+    lattice: Lattice,
+    plan: WeldPlan,
+}
+
+#[pymethods]
+impl PyWeldPlan {
+    #[new]
+    #[pyo3(signature = (cells, origin, cell, normals, memory_limit=None))]
+    fn new(
+        cells: [u32; 3],
+        origin: [f64; 3],
+        cell: [f64; 3],
+        normals: bool,
+        memory_limit: Option<u64>,
+    ) -> PyResult<Self> {
+        Ok(PyWeldPlan {
+            lattice: whole_lattice(cells, origin, cell)?,
+            plan: WeldPlan::new(Some(normals)).with_memory_limit(limit_of(memory_limit)?),
+        })
+    }
+
+    /// Adds the next tile: ``window`` its cells ``[[i0, j0, k0], [i1, j1, k1]]``, ``vertices``
+    /// and ``faces`` its counts, ``boundary`` (B,) uint32 and ``keys`` (B,) uint64 as
+    /// ``polygonize(..., window=window, boundary=True)`` returns them, ``positions`` (B, 3)
+    /// float64 the boundary vertices' positions.
+    ///
+    /// Returns ``(first_vertex, first_face, joined)``: the welded index of the tile's first
+    /// kept vertex (its kept vertices take the next, in order), the welded row of its first
+    /// triangle, and ``joined`` (J, 2) uint32, its vertices joined to an earlier tile's (index
+    /// in the tile, welded index), increasing. Raises ValueError naming the argument at fault
+    /// (the plan is then unchanged).
+    #[allow(clippy::too_many_arguments)]
+    fn add<'py>(
+        &mut self,
+        py: Python<'py>,
+        window: &Bound<'py, PyAny>,
+        vertices: usize,
+        faces: usize,
+        boundary: &Bound<'py, PyAny>,
+        keys: &Bound<'py, PyAny>,
+        positions: &Bound<'py, PyAny>,
+    ) -> PyResult<(usize, usize, Bound<'py, PyArray2<u32>>)> {
+        let window: [[u32; 3]; 2] = window
+            .extract()
+            .map_err(|_| value_error("window", "expected [[i0, j0, k0], [i1, j1, k1]] of cells"))?;
+        let boundary = column::<u32>(boundary, "uint32", "boundary")?;
+        let keys = column::<u64>(keys, "uint64", "keys")?;
+        let positions = rows::<f64>(positions, "float64", "positions")?;
+        let seams = Seams {
+            window,
+            vertices,
+            faces,
+            // A tile's normals are checked where its rows are written.
+            normals: self.plan.normals() == Some(true),
+            boundary: boundary.as_slice()?,
+            keys: keys.as_slice()?,
+            positions: bytemuck::cast_slice(positions.as_slice()?),
+        };
+        let plan = self.plan.add(&seams, &self.lattice)?;
+        let joined: Vec<[u32; 2]> = plan.joined.iter().map(|&(i, to)| [i, to]).collect();
+        let joined = numpy::ndarray::Array2::from_shape_vec(
+            (joined.len(), 2),
+            joined.into_iter().flatten().collect(),
+        )
+        .expect("two columns per joined vertex");
+        Ok((plan.first_vertex, plan.first_face, joined.into_pyarray(py)))
+    }
+
+    /// Tiles added so far.
+    #[getter]
+    fn added(&self) -> usize {
+        self.plan.added()
+    }
+
+    /// Welded vertices so far.
+    #[getter]
+    fn vertices(&self) -> usize {
+        self.plan.vertices()
+    }
+
+    /// Welded triangles so far.
+    #[getter]
+    fn faces(&self) -> usize {
+        self.plan.faces()
+    }
+}
+
+/// `memory_limit` as the weld takes it: None the polygonizers' default, 0 refused.
+fn limit_of(memory_limit: Option<u64>) -> PyResult<u64> {
+    if memory_limit == Some(0) {
+        return Err(value_error(
+            "memory_limit",
+            "must be a positive integer, got 0",
+        ));
+    }
+    Ok(memory_limit.unwrap_or(crate::polygonize::Settings::default().memory_limit))
+}
+
+/// A writable C-contiguous `(rows, 3)` array, borrowed.
+fn room_of<'py, T: numpy::Element>(
+    obj: &Bound<'py, PyAny>,
+    rows: usize,
+    name: &'static str,
+) -> PyResult<PyReadwriteArray2<'py, T>> {
+    let a: PyReadwriteArray2<'py, T> = obj.extract().map_err(|_| {
+        value_error(
+            name,
+            format!(
+                "expected a writable {} array, got {}",
+                std::any::type_name::<T>(),
+                obj.get_type()
+                    .name()
+                    .map_or_else(|_| "?".into(), |n| n.to_string())
+            ),
+        )
+    })?;
+    if a.shape() != [rows, 3] || !a.is_c_contiguous() {
+        return Err(value_error(
+            name,
+            format!(
+                "expected a C-contiguous ({rows}, 3) array, got shape {}",
+                shape(obj)
+            ),
+        ));
+    }
+    Ok(a)
+}
+
+/// Writes one tile's rows into the welded arrays where its :class:`WeldPlan` puts them:
+/// ``vertices`` (V, 3) float64, ``faces`` (F, 3) uint32 (other integer types are converted),
+/// ``normals`` (V, 3) or (0, 3) float64 the tile's arrays; ``first_vertex`` and ``joined``
+/// (J, 2) uint32 as :meth:`WeldPlan.add` returned them; ``out_vertices`` (V − J, 3) float64,
+/// ``out_faces`` (F, 3) int64 and ``out_normals`` (V − J, 3) float64 or None, writable
+/// C-contiguous arrays, the rows of the welded arrays from ``first_vertex`` and
+/// ``first_face`` on (memory maps of the welded mesh's files, in a tiled run). The GIL is
+/// released.
+///
+/// Raises ValueError naming the argument at fault.
+#[pyfunction]
+#[pyo3(signature = (vertices, faces, normals, first_vertex, joined, out_vertices, out_faces, out_normals=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn write_welded_tile<'py>(
+    py: Python<'py>,
+    vertices: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+    normals: &Bound<'py, PyAny>,
+    first_vertex: usize,
+    joined: &Bound<'py, PyAny>,
+    out_vertices: &Bound<'py, PyAny>,
+    out_faces: &Bound<'py, PyAny>,
+    out_normals: Option<&Bound<'py, PyAny>>,
+) -> PyResult<()> {
+    let v = rows::<f64>(vertices, "float64", "vertices")?;
+    let f = Faces::new(faces)?;
+    let n = rows::<f64>(normals, "float64", "normals")?;
+    let j = required(joined, "uint32", "joined")?;
+    let j: PyReadonlyArray2<'py, u32> = j
+        .extract()
+        .ok()
+        .filter(|a: &PyReadonlyArray2<'py, u32>| a.shape()[1] == 2)
+        .ok_or_else(|| {
+            value_error(
+                "joined",
+                format!("expected a (J, 2) array, got shape {}", shape(joined)),
+            )
+        })?;
+    let plan = TilePlan {
+        vertices: v.shape()[0],
+        faces: f.rows()?.len(),
+        first_vertex,
+        first_face: 0,
+        joined: j
+            .as_slice()?
+            .chunks_exact(2)
+            .map(|p| (p[0], p[1]))
+            .collect(),
+    };
+    if plan.joined.len() > plan.vertices {
+        return Err(value_error(
+            "joined",
+            format!(
+                "{} joined vertices of a tile of {}",
+                plan.joined.len(),
+                plan.vertices
+            ),
+        ));
+    }
+    let kept = plan.kept();
+    let mut ov = room_of::<f64>(out_vertices, kept, "out_vertices")?;
+    let mut of = room_of::<i64>(out_faces, plan.faces, "out_faces")?;
+    let mut on = out_normals
+        .map(|o| room_of::<f64>(o, kept, "out_normals"))
+        .transpose()?;
+    let vs: &[DVec3] = bytemuck::cast_slice(v.as_slice()?);
+    let ns: &[DVec3] = bytemuck::cast_slice(n.as_slice()?);
+    let fs = f.rows()?;
+    let out = Rows {
+        vertices: room(bytemuck::cast_slice_mut::<f64, DVec3>(ov.as_slice_mut()?)),
+        normals: match on.as_mut() {
+            Some(a) => Some(room(bytemuck::cast_slice_mut::<f64, DVec3>(
+                a.as_slice_mut()?,
+            ))),
+            None => None,
+        },
+        faces: room(bytemuck::cast_slice_mut::<i64, [i64; 3]>(
+            of.as_slice_mut()?,
+        )),
+    };
+    run(py, None, false, || rows_write(vs, ns, fs, &plan, out))
 }
