@@ -669,6 +669,12 @@ def test_a_weld_in_place_writes_the_rows_a_worker_elsewhere_returns(blobs, tmp_p
     assert not kept
     for a, b in zip(weld.result(), stream.result()):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+    # A worker that does not see the files, or cannot open them, returns the rows.
+    result = imd._run_tile(blobs, BOX, 30, ((0, 0, 0), (11, 11, 11)), "dense", {}, None, _weld_in_place.KEEP)
+    for where in (tmp_path / "elsewhere", tmp_path):
+        paths = {k: str(where / f"absent-{k}") for k in ("vertices", "faces", "normals")}
+        rows = _weld_in_place.write_kept(result, paths, 0, 0, np.zeros((0, 2), np.uint32))
+        assert rows is not None and rows[0] is result[1]["v"] and rows[1] is result[1]["f"]
 
 
 def test_tile_files_read_back_exactly_and_are_removed(tmp_path):

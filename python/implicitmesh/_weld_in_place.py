@@ -114,12 +114,16 @@ def tile_entry(result: tuple, min_bytes: int) -> dict:
 
 def write_kept(result: tuple, paths: dict[str, str], first_vertex: int, first_face: int, joined) -> tuple | None:
     """A task on the worker that holds a tile's ``(entry, arrays)``: writes its rows into the
-    welded arrays' files ``paths``; a worker that does not see them (another machine) returns
-    ``(vertices, faces, normals)`` for the client to write."""
+    welded arrays' files ``paths``; a worker that does not see them (another machine) or cannot
+    write them (another user, shared memory full) returns ``(vertices, faces, normals)`` for the
+    client to write."""
     a = result[1]
     if not os.path.isdir(os.path.dirname(paths["vertices"])):
         return a["v"], a["f"], a["n"]
-    write_rows(paths, a["v"], a["f"], a["n"], first_vertex, first_face, joined)
+    try:
+        write_rows(paths, a["v"], a["f"], a["n"], first_vertex, first_face, joined)
+    except OSError:
+        return a["v"], a["f"], a["n"]
     return None
 
 
