@@ -80,7 +80,10 @@ def _region(path: str, row: int, rows: int, dtype: Any) -> Iterator[np.ndarray]:
         yield view
     finally:
         del view
-        mapped.close()
+        try:
+            mapped.close()
+        except BufferError:  # a view of it is still referenced: it is unmapped with the last one
+            pass
 
 
 def write_rows(paths: dict[str, str], v, f, n, first_vertex: int, first_face: int, joined: np.ndarray) -> None:
