@@ -12,6 +12,10 @@
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
+/// The bytes a fit or a polygonization may estimate to need before it is refused, when no
+/// `memory_limit` is given (8 GiB).
+pub const DEFAULT_MEMORY_LIMIT: u64 = 8 << 30;
+
 /// An empty vector with room for `n` elements, whose pages are advised to be huge pages when
 /// it is large (at least 4 MiB). The pages are not touched here.
 pub fn with_capacity_huge<T>(n: usize) -> Vec<T> {

@@ -7,6 +7,8 @@ import numpy.typing as npt
 from typing_extensions import Unpack
 
 __version__: str
+#: Bytes a fit or a polygonization may estimate to need when no ``memory_limit`` is given (8 GiB).
+DEFAULT_MEMORY_LIMIT: int
 
 ArrayLike = npt.ArrayLike
 Kernel = Literal["triharmonic", "biharmonic", "thin_plate"]

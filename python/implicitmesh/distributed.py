@@ -40,9 +40,6 @@ MANIFEST = "manifest.json"
 #: rounding, so that no primitive adding a non-zero term at a point of the tile is left out.
 _RADIUS_MARGIN = 1e-6
 
-#: The welded mesh's memory limit when ``memory_limit`` is not given (the polygonizers').
-_DEFAULT_MEMORY_LIMIT = 8 << 30
-
 #: Statistics of the tiles that add up to the whole run's.
 _SUMMED = ("evaluations", "normal_evaluations", "lattice_points", "cells_visited", "cells_crossed", "cells_repaired")
 
@@ -459,7 +456,7 @@ def polygonize(
     client, own = _get_client(client)
     futures, shared, scattered, welder, welded = [], None, {}, None, None
     local = _tile_files.make_directory() if output is None else None
-    limit = options.get("memory_limit") or _DEFAULT_MEMORY_LIMIT
+    limit = options.get("memory_limit") or _core.DEFAULT_MEMORY_LIMIT
     in_place = output is None and _weld_in_place.usable(local, limit, int(np.prod(tile3)), _worker_threads(client))
     kept: dict | None = {} if in_place else None
     report, end = reporter(progress, "tiles", None, "tiles")

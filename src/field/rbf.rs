@@ -40,7 +40,7 @@ impl Default for FitSettings {
         FitSettings {
             kernel: Kernel::Triharmonic,
             smoothing: 0.0,
-            memory_limit: 8 << 30,
+            memory_limit: crate::memory::DEFAULT_MEMORY_LIMIT,
         }
     }
 }

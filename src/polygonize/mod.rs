@@ -47,7 +47,7 @@ impl Default for Settings {
             ambiguity: Ambiguity::Separate,
             normals: true,
             batch: 1 << 18,
-            memory_limit: 8 << 30,
+            memory_limit: crate::memory::DEFAULT_MEMORY_LIMIT,
             project: false,
         }
     }

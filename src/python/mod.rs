@@ -40,6 +40,7 @@ fn collect_free_memory() {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     crate::memory::set_release_hook(collect_free_memory);
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("DEFAULT_MEMORY_LIMIT", crate::memory::DEFAULT_MEMORY_LIMIT)?;
     m.add_class::<variational::PyVariationalSurface>()?;
     m.add_class::<blob::PyBlobField>()?;
     m.add_class::<polygonize::PyTessellator>()?;

@@ -418,7 +418,7 @@ fn limit_of(memory_limit: Option<u64>) -> PyResult<u64> {
             "must be a positive integer, got 0",
         ));
     }
-    Ok(memory_limit.unwrap_or(crate::polygonize::Settings::default().memory_limit))
+    Ok(memory_limit.unwrap_or(crate::memory::DEFAULT_MEMORY_LIMIT))
 }
 
 /// A writable C-contiguous `(rows, 3)` array, borrowed.

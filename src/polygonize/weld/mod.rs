@@ -21,7 +21,6 @@ use crate::cancel;
 use crate::error::{Error, Result};
 use crate::lattice::Lattice;
 use glam::DVec3;
-use rayon::prelude::*;
 
 /// One tile's mesh, as a polygonizer run on a window of the lattice makes it.
 #[derive(Clone, Copy, Debug)]
@@ -232,9 +231,8 @@ fn check(t: usize, tile: &Tile) -> Result<()> {
             ),
         ));
     }
-    let n = tile.vertices.len() as u32;
-    let outside = |c: &[[u32; 3]]| c.iter().flatten().find(|&&i| i >= n).copied();
-    if let Some(bad) = tile.faces.par_chunks(CHUNK).find_map_any(outside) {
+    let n = tile.vertices.len();
+    if let Some(bad) = rows::index_outside(tile.faces, n) {
         return Err(Error::invalid(
             "faces",
             format!("tile {t} has vertex index {bad}, outside its {n} vertices"),

@@ -108,8 +108,7 @@ pub fn write(
             ));
         }
     }
-    let outside = |c: &[[u32; 3]]| c.iter().flatten().find(|&&i| i as usize >= n).copied();
-    if let Some(bad) = faces.par_chunks(CHUNK).find_map_any(outside) {
+    if let Some(bad) = index_outside(faces, n) {
         return Err(Error::invalid(
             "faces",
             format!("vertex index {bad} is outside the tile's {n} vertices"),
@@ -124,6 +123,12 @@ pub fn write(
     }
     write_faces(out.faces, faces, &index);
     Ok(())
+}
+
+/// A triangle index of `faces` that is `n` or more (outside `n` vertices), if any.
+pub(super) fn index_outside(faces: &[[u32; 3]], n: usize) -> Option<u32> {
+    let outside = |c: &[[u32; 3]]| c.iter().flatten().find(|&&i| i as usize >= n).copied();
+    faces.par_chunks(CHUNK).find_map_any(outside)
 }
 
 /// How many vertices of each chunk of [`CHUNK`] vertices of a tile the weld keeps: those whose
