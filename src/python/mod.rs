@@ -19,7 +19,9 @@ use pyo3::prelude::*;
 /// included). The system allocator returns large buffers to the OS when they are freed, so the
 /// next call faults in fresh pages again; mimalloc 3 keeps freed memory for reuse by the next
 /// call and returns it to the OS after its default purge delay (`MIMALLOC_PURGE_DELAY` sets
-/// it).
+/// it). It is built without its own requests for transparent huge pages (`no_thp`): the fit's
+/// many short-lived buffers then fault in 4 KiB pages instead of zeroing whole 2 MiB pages
+/// after each purge (docs/variational.md, "Memory").
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
