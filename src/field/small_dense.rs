@@ -5,8 +5,8 @@
 //! in dispatch and packing than these loops do in flops.
 //!
 //! Sums run over fixed lanes of eight partial sums, added in one fixed order, so the
-//! results are the same bits on every instruction set; the loops are compiled for AVX-512 as
-//! well, and run so when the CPU has it.
+//! results are the same bits on every instruction set; the loops are compiled for AVX-512 and
+//! for AVX2 as well, and run so when the CPU has them.
 //!
 //! Matrices are column-major with leading dimension `ld`: entry (i, j) at `i + j·ld`.
 
@@ -15,23 +15,31 @@ const LANES: usize = 8;
 
 use crate::simd::Isa;
 
-/// Runs the function `$body` of the arguments, compiled for AVX-512 when `$isa` is AVX-512
-/// (which the CPU must have).
+/// Runs the function `$body` of the arguments, compiled for AVX-512 or AVX2 when `$isa` is
+/// one of them (which the CPU must have). The compiler does not fuse a multiplication and an
+/// addition into an FMA unless asked to, so every build computes the same bits.
 macro_rules! on_isa {
     ($isa:expr, fn($($arg:ident: $ty:ty),*) $body:block) => {{
         #[inline(always)]
         fn generic($($arg: $ty),*) $body
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx512f,avx2,fma")]
-        unsafe fn wide($($arg: $ty),*) {
+        unsafe fn avx512($($arg: $ty),*) {
+            generic($($arg),*)
+        }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn avx2($($arg: $ty),*) {
             generic($($arg),*)
         }
         match $isa {
             // SAFETY: `Isa::Avx512` is only detected (or listed as available) on CPUs with
-            // AVX-512F, AVX2 and FMA.
+            // AVX-512F, AVX2 and FMA, and `Isa::Avx2` on CPUs with AVX2 and FMA.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { wide($($arg),*) },
-            _ => generic($($arg),*),
+            Isa::Avx512 => unsafe { avx512($($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { avx2($($arg),*) },
+            Isa::Generic => generic($($arg),*),
         }
     }};
 }
