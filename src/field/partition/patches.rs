@@ -125,7 +125,8 @@ pub fn supports(
             let count_outside = |pts: &[DVec3], t: &Octree| {
                 t.count_within(pts, n.centre, reach) - t.count_within(pts, n.centre, r)
             };
-            let full = tree.count_within(points, n.centre, reach) - inside;
+            // Exact up to `budget`; more than `budget` when the ball holds more.
+            let full = tree.count_within_up_to(points, n.centre, reach, budget + inside) - inside;
             // The levels this patch may take its completion from (see `coarse`): every level
             // for a far patch or one with constraints inside, so that a near patch's completion
             // holds between half its budget and its budget (a level of one in 8^k can leave it
@@ -160,6 +161,10 @@ pub fn supports(
                     }
                     break;
                 }
+            }
+            if choice.0 == usize::MAX && full > budget {
+                // No level was chosen: the whole ball completes the system.
+                choice.1 = tree.count_within(points, n.centre, reach) - inside;
             }
             s.extra = Some((choice.0, reach, choice.1));
             s
