@@ -317,7 +317,9 @@ def largest_note(raw: dict) -> list[str]:
     if not run or not any(c["n"] == LARGEST for c in raw["cases"]):
         return []
     foreign = run["foreign_load"]
-    return [f"The {LARGEST:,}-point rows ran apart, {run['date']}, with `{run['command']}` (implicitmesh "
+    m = run["machine"]
+    cpu = m["cpu"] + (f" ({m['vector']})" if "vector" in m else "")
+    return [f"The {LARGEST:,}-point rows ran apart, {run['date']}, on {cpu}, with `{run['command']}` (implicitmesh "
             f"{run['machine'].get('implicitmesh', '?')}; other processes used "
             f"{foreign if foreign is None else round(foreign, 2)} cores on average), once each.", ""]
 

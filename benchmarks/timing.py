@@ -178,6 +178,24 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def vector_instructions() -> str:
+    """The vector instruction sets of this CPU that implicitmesh's kernels use ("AVX-512",
+    "AVX2 and FMA", or "no AVX2"), from /proc/cpuinfo ("unknown" elsewhere)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+                    if {"avx512f", "avx2", "fma"} <= flags:
+                        return "AVX-512"
+                    if {"avx2", "fma"} <= flags:
+                        return "AVX2 and FMA, no AVX-512"
+                    return "no AVX2"
+    except OSError:
+        pass
+    return "unknown"
+
+
 def openblas_threads() -> dict[str, int]:
     """Threads the OpenBLAS libraries bundled with numpy and scipy will use (read with ctypes, as
     threadpoolctl would; {} when the libraries are not found). Loads numpy."""
@@ -216,6 +234,7 @@ def machine_info(packages: Sequence[str] = ("numpy", "scipy")) -> dict[str, Any]
     """Facts about this machine and the Python stack, for a benchmark's header."""
     info: dict[str, Any] = {
         "cpu": cpu_model(),
+        "vector": vector_instructions(),
         "cores": os.cpu_count(),
         "affinity": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
         "python": platform.python_version(),
@@ -237,12 +256,13 @@ def machine_info(packages: Sequence[str] = ("numpy", "scipy")) -> dict[str, Any]
 def machine_markdown(info: dict[str, Any], extra: dict[str, str] | None = None) -> str:
     """A bullet list of :func:`machine_info` (plus ``extra`` lines)."""
     lines = [
-        f"- CPU: {info['cpu']}, {info['cores']} logical cores"
+        f"- CPU: {info['cpu']}" + (f" ({info['vector']})" if "vector" in info else "")
+        + f", {info['cores']} logical cores"
         + (f" ({info['affinity']} usable)" if info.get("affinity") not in (None, info["cores"]) else "")
         + (f", {info['memory_gib']} GiB RAM" if "memory_gib" in info else ""),
         f"- Python {info['python']} on {info['platform']}",
     ]
-    skip = {"cpu", "cores", "affinity", "python", "platform", "OPENBLAS_NUM_THREADS", "loadavg", "memory_gib"}
+    skip = {"cpu", "vector", "cores", "affinity", "python", "platform", "OPENBLAS_NUM_THREADS", "loadavg", "memory_gib"}
     versions = ", ".join(f"{k} {v}" for k, v in info.items() if k not in skip)
     if versions:
         lines.append(f"- {versions}")
