@@ -776,8 +776,11 @@ impl BlockTracking {
             };
             ws.sources.iter().map(pick).collect()
         };
+        // Each step writes a large buffer: Ctrl-C is checked between them.
+        let vertices = gather(&slices(false));
+        crate::cancel::check()?;
         let mut mesh = Mesh {
-            vertices: gather(&slices(false)),
+            vertices,
             normals: if normals {
                 gather(&slices(true))
             } else {
@@ -785,10 +788,12 @@ impl BlockTracking {
             },
             ..Default::default()
         };
+        crate::cancel::check()?;
         let (triangles, crossed) =
             triangulate_blocks::<I, true>(cases, &ws.active, Some(&ws.reach), &ws.amap, &grid)?;
         stats.cells_crossed = crossed;
         stats.add_time("triangulate", t);
+        crate::cancel::check()?;
         if normals {
             let t = Instant::now();
             let outputs: Vec<&BlockOutput> =
