@@ -225,12 +225,12 @@ def test_partition_options_change_the_patches_and_are_checked():
 
 
 def test_near_duplicates_from_overlapping_scans_are_merged():
-    # A second scan repeats 5 % of the points a millionth of the data's size away: without the
-    # merge the partition fit is refused as ill-conditioned.
+    # A second scan repeats 5 % of the points a ten-millionth of the data's size away: without
+    # the merge the partition fit is refused as ill-conditioned.
     rng = np.random.default_rng(7)
     p, n = im.shapes.fibonacci_sphere(10_000)
     again = rng.choice(len(p), 500, replace=False)
-    q = np.vstack([p, p[again] + 1e-6 * rng.normal(size=(500, 3))])
+    q = np.vstack([p, p[again] + 1e-7 * rng.normal(size=(500, 3))])
     m = np.vstack([n, n[again]])
     with pytest.warns(UserWarning, match="500 data points"):
         s = VariationalSurface.fit(q, m, method="partition")
@@ -241,6 +241,25 @@ def test_near_duplicates_from_overlapping_scans_are_merged():
     assert t.merged_points == 500
     with pytest.raises(ValueError, match="ill-conditioned"):
         VariationalSurface.fit(q, m, method="partition", merge_distance=0.0)
+
+
+def test_every_patch_sees_a_normal_constraint():
+    # Normal constraints 0.2 outside a sphere of radius 0.8 lie beyond the supports of the
+    # patches just inside it: a patch fitted to its data points alone, all of value 0, would be
+    # zero over its whole support, and so would the field deep inside the solid. Such patches
+    # are completed with constraints from a ball that reaches the normal constraints.
+    p, n = im.shapes.fibonacci_sphere(20_000)
+    s = VariationalSurface.fit(p, n, d=0.2, method="partition")
+    state = s.to_state()
+    weights, start = np.abs(state["patch_normalized_weights"]), state["patch_start"]
+    polynomial = np.abs(state["patch_normalized_polynomial"]).reshape(-1, 4).max(axis=1)
+    largest = np.array([weights[a:b].max(initial=0.0) for a, b in zip(start[:-1], start[1:])])
+    assert np.all((largest > 0) | (polynomial > 0))
+    assert np.abs(s.evaluate(p)).max() < 1e-9
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(100_000, 3))
+    inside = 0.8 * rng.uniform(0.3, 0.98, (len(u), 1)) * u / np.linalg.norm(u, axis=1, keepdims=True)
+    assert s.evaluate(inside).max() < 0
 
 
 def test_smoothing_partition_fit_approximates_noisy_points():

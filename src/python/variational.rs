@@ -397,7 +397,7 @@ impl PyVariationalSurface {
     ///     their system with constraints from further away; patches with no data in reach are
     ///     planes that carry the sign of space, or for :meth:`interpolate` complete with half as
     ///     many) and ``"overlap"`` (float, default
-    ///     1.25: a patch's radius over its leaf's half-diagonal). Smaller patches fit faster and
+    ///     1.15: a patch's radius over its leaf's half-diagonal). Smaller patches fit faster and
     ///     risk spurious surface away from sparse data.
     /// merge_distance : float, optional
     ///     Data points at most this far apart are merged into the one with the smallest index

@@ -38,11 +38,12 @@ use patches::Patch;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PartitionSettings {
     /// Leaves split until they hold at most this many constraints. With the defaults a patch's
-    /// support then holds about 60–85 constraints, and its completed system about 110–130
+    /// support then holds about 60–75 constraints, and its completed system about 105–125
     /// (10⁶ and 10⁵ points sampled on a mesh).
     pub max_per_leaf: usize,
     /// Support radius of a leaf's patch over the leaf's half-diagonal (> 1, so that the supports
-    /// overlap and each covers its leaf).
+    /// overlap and each covers its leaf). A patch's system grows with its square on a surface,
+    /// and its factorization with the cube of that.
     pub overlap: f64,
     /// Leaves also split until the ball of their patch holds at most this many constraints;
     /// completed systems (see [`patches`]) hold at most 3/2 of it.
@@ -59,7 +60,7 @@ impl Default for PartitionSettings {
     fn default() -> Self {
         PartitionSettings {
             max_per_leaf: 64,
-            overlap: 1.25,
+            overlap: 1.15,
             max_patch: 256,
             min_points: 128,
             fit: super::rbf::FitSettings::default(),
@@ -205,8 +206,11 @@ impl PartitionSurface {
         let (centre, half) = Self::cube(&c);
         let tree = Self::tree(&c, settings);
         let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf);
-        let planes = empty::oriented(&c);
-        let supports = patches::supports(&tree, &c.points, &levels, settings, planes);
+        let oriented = empty::oriented(&c).then(|| patches::Oriented {
+            first_off: c.boundary,
+            largest_offset: c.offsets.iter().copied().fold(0.0, f64::max),
+        });
+        let supports = patches::supports(&tree, &c.points, &levels, settings, oriented);
         let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
             + (c.points.len() * (48 + 24)) as u64

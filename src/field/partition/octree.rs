@@ -336,32 +336,69 @@ impl Octree {
         self.count_within_up_to(points, c, r, limit) > limit
     }
 
-    /// The number of `points` within the closed ball (`c`, `r`), or some number above `limit`
-    /// once more than `limit` are found. Nodes inside the ball count whole.
-    pub fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
-        let r2 = r * r;
-        let mut count = 0;
+    /// Walks the nodes meeting the closed ball (`c`, `r2` its squared radius) down to those
+    /// inside it (`visit(node, true)`) and the leaves it cuts (`visit(leaf, false)`); stops
+    /// when `visit` returns true.
+    fn walk_ball(&self, c: DVec3, r2: f64, mut visit: impl FnMut(&Node, bool) -> bool) {
         let mut stack = NodeStack::root();
         while let Some(k) = stack.pop() {
             let n = &self.nodes[k as usize];
             if n.distance_squared(c) > r2 {
                 continue;
             }
-            if n.farthest_squared(c) <= r2 {
+            let inside = n.farthest_squared(c) <= r2;
+            if inside || n.is_leaf() {
+                if visit(n, inside) {
+                    return;
+                }
+            } else {
+                (0..8).for_each(|o| stack.push(n.children + o));
+            }
+        }
+    }
+
+    /// The number of `points` within the closed ball (`c`, `r`), or some number above `limit`
+    /// once more than `limit` are found. Nodes inside the ball count whole.
+    pub fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
+        let r2 = r * r;
+        let mut count = 0;
+        self.walk_ball(c, r2, |n, inside| {
+            if inside {
                 count += (n.end - n.start) as usize;
-            } else if n.is_leaf() {
+            } else {
                 self.for_each_point(points, n, |_, p| {
                     count += ((p - c).length_squared() <= r2) as usize
                 });
-            } else {
-                (0..8).for_each(|o| stack.push(n.children + o));
-                continue;
             }
-            if count > limit {
-                return count;
-            }
-        }
+            count > limit
+        });
         count
+    }
+
+    /// Whether some point `i` of `points` within the closed ball (`c`, `r`) has `pred(i)`;
+    /// stops at the first.
+    pub fn any_within(
+        &self,
+        points: &[DVec3],
+        c: DVec3,
+        r: f64,
+        pred: impl Fn(u32) -> bool,
+    ) -> bool {
+        let r2 = r * r;
+        let mut found = false;
+        self.walk_ball(c, r2, |n, inside| {
+            if inside {
+                found = self.order[n.start as usize..n.end as usize]
+                    .iter()
+                    .any(|&i| pred(i));
+            } else {
+                self.for_each_point(points, n, |i, p| {
+                    found |= (p - c).length_squared() <= r2 && pred(i)
+                });
+            }
+            found
+        });
+        found
     }
 
     /// Distance from `c` to its `k`-th nearest point of `points` (`k` ≥ 1; the farthest point

@@ -1,7 +1,8 @@
 //! The patches of a partition-of-unity fit: one per octree leaf, a ball around the leaf's centre
 //! of radius `overlap` × the leaf's half-diagonal, fitted to **every** constraint inside the
 //! ball, so that every patch whose weight is non-zero at a constraint interpolates it. When the
-//! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], the
+//! ball holds fewer than `min_points` constraints, or the leaf fewer than [`SPARSE_LEAF`], or
+//! (in fits with normals) the ball holds data points but none of their normal constraints, the
 //! system is completed with constraints outside it, spread over a larger ball (see
 //! [`super::coarse`]): up to max(`max_patch` − inside, `max_patch` / 2) for a patch that sees the
 //! data only near the edge of its support ([`FAR_DATA`]), up to `max_patch` /
@@ -76,15 +77,28 @@ pub const NEAR_BUDGET_DIVISOR: usize = 4;
 /// (see [`super::coarse`]).
 pub const FAR_DATA: f64 = 0.95;
 
-/// The support of each leaf's patch; with `planes`, supports holding no constraint get no
-/// completion (their patch is a plane, see [`empty`]).
+/// How the constraints of a fit with normal constraints lie: the boundary constraints (value 0)
+/// are `0..first_off`, the others off the surface, at most `largest_offset` from their data
+/// point.
+#[derive(Clone, Copy, Debug)]
+pub struct Oriented {
+    pub first_off: usize,
+    pub largest_offset: f64,
+}
+
+/// The support of each leaf's patch. With `oriented` (fits with normal constraints), supports
+/// holding no constraint get no completion (their patch is a plane, see [`empty`]), and
+/// supports holding data points but no constraint off the surface are completed however many
+/// they hold (fitted to zeros alone, a patch would be zero everywhere), from a ball reaching at
+/// least the normal constraints of the data points inside.
 pub fn supports(
     tree: &Octree,
     points: &[DVec3],
     levels: &[Level],
     settings: &PartitionSettings,
-    planes: bool,
+    oriented: Option<Oriented>,
 ) -> Vec<Support> {
+    let planes = oriented.is_some();
     let want = settings.min_points.min(points.len());
     tree.leaves
         .par_iter()
@@ -101,14 +115,19 @@ pub fn supports(
             // Leaves with (almost) no constraints of their own see the data only at the edge
             // of their support: those are completed too, however many constraints it holds.
             let own = (n.end - n.start) as usize;
-            if (inside >= want && own >= SPARSE_LEAF) || (inside == 0 && planes) {
+            let off_surface =
+                |o: Oriented| tree.any_within(points, n.centre, r, |i| i as usize >= o.first_off);
+            if (inside >= want && own >= SPARSE_LEAF && oriented.is_none_or(off_surface))
+                || (inside == 0 && planes)
+            {
                 return s;
             }
-            // A ball reaching one support radius past the `want`-th nearest constraint, found
-            // from a guess that takes the constraints to spread over a surface.
+            // A ball reaching one support radius (or the largest offset of a normal
+            // constraint, when larger) past the `want`-th nearest constraint, found from a
+            // guess that takes the constraints to spread over a surface.
             let guess = r * (want as f64 / inside.max(1) as f64).sqrt().max(1.0) * 1.2;
             let (kth, nearest) = tree.nearest_distances(points, n.centre, want, guess, scratch);
-            let reach = kth.max(r) + r;
+            let reach = kth.max(r) + r.max(oriented.map_or(0.0, |o| o.largest_offset));
             let far = nearest > FAR_DATA * r;
             let budget = if inside == 0 {
                 settings.min_points / 2
