@@ -102,6 +102,7 @@ pub fn supports(
     let want = settings.min_points.min(points.len());
     tree.leaves
         .par_iter()
+        .with_max_len(SUPPORT_RUN)
         .map_init(Vec::new, |scratch, &k| {
             let n = &tree.nodes[k as usize];
             let r = settings.overlap * n.half_diagonal();
@@ -208,6 +209,14 @@ pub fn estimate_bytes(sizes: &[usize], threads: usize) -> u64 {
     kept + solving
 }
 
+/// Most patches one rayon job fits. Patches cost from a few microseconds (planes) to
+/// milliseconds (coarse levels), unevenly along the octree's order: short runs of them keep
+/// every thread busy to the end.
+const FIT_RUN: usize = 32;
+/// Most leaves one rayon job finds the support of, or patches the leaves of (their costs vary
+/// as unevenly).
+const SUPPORT_RUN: usize = 256;
+
 /// Fits one patch per support, in parallel; errors with the first failing patch's error (in
 /// leaf order). Each patch's centres are indices into the constraint points in the tree's
 /// order (`rank[i]` the position of constraint `i` in `tree.order`).
@@ -235,6 +244,7 @@ pub fn fit(
     let token = crate::cancel::current();
     let fitted: Vec<Result<Patch>> = supports
         .par_iter()
+        .with_max_len(FIT_RUN)
         .map(|s| {
             if let Some(t) = &token {
                 t.check()?;
@@ -319,6 +329,7 @@ pub fn inverse(order: &[u32]) -> Vec<u32> {
 pub fn cover(tree: &Octree, patches: &[Patch]) -> (Vec<u32>, Vec<u32>) {
     let per_patch: Vec<Vec<u32>> = patches
         .par_iter()
+        .with_max_len(SUPPORT_RUN)
         .map(|p| {
             let mut leaves = Vec::new();
             tree.for_each_leaf_meeting(p.centre, p.radius, |k| {
