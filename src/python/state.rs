@@ -116,7 +116,7 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
     d.set_item("format", FORMAT)?;
     match fitted {
         Fitted::Global(s) => {
-            let p = s.parts();
+            let p = py.detach(|| s.parts());
             d.set_item("method", "global")?;
             put_constraints(py, &d, &p.constraints)?;
             d.set_item("kernel", p.kernel.name())?;
@@ -136,7 +136,11 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
             d.set_item("factorization", p.factorization)?;
         }
         Fitted::Partition(s) => {
-            let p = s.parts();
+            let (p, flat) = py.detach(|| {
+                let mut p = s.parts();
+                let flat = FlatPatches::of(&std::mem::take(&mut p.patches));
+                (p, flat)
+            });
             d.set_item("method", "partition")?;
             put_constraints(py, &d, &p.constraints)?;
             let st = &p.settings;
@@ -148,7 +152,7 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
             d.set_item("max_patch", st.max_patch)?;
             d.set_item("min_points", st.min_points)?;
             d.set_item("residual", p.residual)?;
-            put_patches(py, &d, &p.patches)?;
+            flat.put(py, &d)?;
             if let Some(nodes) = &p.tree {
                 put_tree(py, &d, nodes)?;
             }
@@ -205,142 +209,195 @@ fn tree_of(d: &Bound<'_, PyDict>) -> PyResult<Option<Vec<Node>>> {
 /// The patches, flattened: per patch its ball, counts and fit's numbers; their weights one
 /// after another (`patch_start` says where each patch's begin), and so their centres: indices
 /// into the constraints (`patch_index`, uint32) for the patches `patch_shared` marks, normalised
-/// centres of their own (`patch_normalized_centers`) for the others.
-fn put_patches(py: Python<'_>, d: &Bound<'_, PyDict>, patches: &[PatchParts]) -> PyResult<()> {
-    let fits = || patches.iter().map(|q| &q.fit);
-    let flat = |f: &dyn Fn(&SurfaceParts) -> Vec<f64>| fits().flat_map(f).collect::<Vec<f64>>();
-    let mut start = vec![0usize];
-    for f in fits() {
-        start.push(start.last().unwrap() + f.normalized_weights.len());
-    }
-    d.set_item("patch_start", counts_to_py(py, start))?;
-    let centre = patches.iter().map(|q| q.centre).collect();
-    d.set_item("patch_centre", points_to_py(py, centre)?)?;
-    let radius = patches.iter().map(|q| q.radius).collect();
-    d.set_item("patch_radius", values_to_py(py, radius))?;
-    d.set_item(
-        "patch_inside",
-        counts_to_py(py, patches.iter().map(|q| q.inside)),
-    )?;
-    d.set_item(
-        "patch_size",
-        counts_to_py(py, patches.iter().map(|q| q.size)),
-    )?;
-    let nc = fits()
-        .flat_map(|f| f.normalized_centers.iter().copied())
-        .collect();
-    d.set_item("patch_normalized_centers", points_to_py(py, nc)?)?;
-    let shared = patches.iter().map(|q| !q.index.is_empty() as usize);
-    d.set_item("patch_shared", counts_to_py(py, shared))?;
-    let index: Vec<u32> = patches
-        .iter()
-        .flat_map(|q| q.index.iter().copied())
-        .collect();
-    d.set_item("patch_index", PyArray1::from_vec(py, index))?;
-    let nw = flat(&|f| f.normalized_weights.clone());
-    d.set_item("patch_normalized_weights", values_to_py(py, nw))?;
-    let np = flat(&|f| f.normalized_polynomial.to_vec());
-    d.set_item("patch_normalized_polynomial", values_to_py(py, np))?;
-    d.set_item(
-        "patch_polynomial",
-        values_to_py(py, flat(&|f| f.polynomial.to_vec())),
-    )?;
-    d.set_item(
-        "patch_shift",
-        values_to_py(py, flat(&|f| f.shift.to_array().to_vec())),
-    )?;
-    d.set_item("patch_scale", values_to_py(py, flat(&|f| vec![f.scale])))?;
-    d.set_item(
-        "patch_residual",
-        values_to_py(py, flat(&|f| vec![f.residual])),
-    )?;
-    let cholesky = fits().map(|f| (f.factorization == "cholesky") as usize);
-    d.set_item("patch_cholesky", counts_to_py(py, cholesky))
+/// centres of their own (`patch_normalized_centers`) for the others. Made and read without
+/// the GIL; only the conversions to and from numpy hold it.
+struct FlatPatches {
+    start: Vec<usize>,
+    centre: Vec<DVec3>,
+    radius: Vec<f64>,
+    inside: Vec<usize>,
+    size: Vec<usize>,
+    normalized_centers: Vec<DVec3>,
+    shared: Vec<usize>,
+    index: Vec<u32>,
+    normalized_weights: Vec<f64>,
+    normalized_polynomial: Vec<f64>,
+    polynomial: Vec<f64>,
+    shift: Vec<f64>,
+    scale: Vec<f64>,
+    residual: Vec<f64>,
+    cholesky: Vec<usize>,
 }
 
-fn patches_of(d: &Bound<'_, PyDict>, kernel: Kernel) -> PyResult<Vec<PatchParts>> {
-    let start = counts_of(d, "patch_start")?;
-    let centre = points_of(d, "patch_centre")?;
-    let radius = values_of(d, "patch_radius")?;
-    let inside = counts_of(d, "patch_inside")?;
-    let size = counts_of(d, "patch_size")?;
-    let nc = points_of(d, "patch_normalized_centers")?;
-    let nw = values_of(d, "patch_normalized_weights")?;
-    let np = values_of(d, "patch_normalized_polynomial")?;
-    let poly = values_of(d, "patch_polynomial")?;
-    let shift = values_of(d, "patch_shift")?;
-    let scale = values_of(d, "patch_scale")?;
-    let residual = values_of(d, "patch_residual")?;
-    let cholesky = counts_of(d, "patch_cholesky")?;
-    let n = centre.len();
-    // Format 1: every patch has centres of its own.
-    let (shared, index) = match d.get_item("patch_index")? {
-        Some(index) => (counts_of(d, "patch_shared")?, indices(&index)?),
-        None => (vec![0; n], vec![]),
-    };
-    let lengths_agree = start.len() == n + 1
-        && [
-            radius.len(),
-            inside.len(),
-            size.len(),
-            scale.len(),
-            residual.len(),
-        ]
-        .iter()
-        .chain(&[cholesky.len(), shared.len()])
-        .all(|&l| l == n)
-        && np.len() == 4 * n
-        && poly.len() == 4 * n
-        && shift.len() == 3 * n
-        && start.windows(2).all(|w| w[0] <= w[1])
-        && start[0] == 0
-        && start[n] == nw.len()
-        && (0..n).all(|k| shared[k] <= 1);
-    // The runs of centres of each patch: in `index` when shared, else in `nc`.
-    let (mut own_at, mut index_at) = (0, 0);
-    let mut runs = Vec::with_capacity(n);
-    for k in 0..n.min(start.len().saturating_sub(1)) {
-        let len = start[k + 1].saturating_sub(start[k]);
-        let at = if shared.get(k) == Some(&1) {
-            &mut index_at
-        } else {
-            &mut own_at
+impl FlatPatches {
+    fn of(patches: &[PatchParts]) -> Self {
+        let fits = || patches.iter().map(|q| &q.fit);
+        let flat = |f: &dyn Fn(&SurfaceParts) -> Vec<f64>| fits().flat_map(f).collect::<Vec<f64>>();
+        let mut start = vec![0usize];
+        for f in fits() {
+            start.push(start.last().unwrap() + f.normalized_weights.len());
+        }
+        FlatPatches {
+            start,
+            centre: patches.iter().map(|q| q.centre).collect(),
+            radius: patches.iter().map(|q| q.radius).collect(),
+            inside: patches.iter().map(|q| q.inside).collect(),
+            size: patches.iter().map(|q| q.size).collect(),
+            normalized_centers: fits()
+                .flat_map(|f| f.normalized_centers.iter().copied())
+                .collect(),
+            shared: patches
+                .iter()
+                .map(|q| !q.index.is_empty() as usize)
+                .collect(),
+            index: patches
+                .iter()
+                .flat_map(|q| q.index.iter().copied())
+                .collect(),
+            normalized_weights: fits()
+                .flat_map(|f| f.normalized_weights.iter().copied())
+                .collect(),
+            normalized_polynomial: flat(&|f| f.normalized_polynomial.to_vec()),
+            polynomial: flat(&|f| f.polynomial.to_vec()),
+            shift: flat(&|f| f.shift.to_array().to_vec()),
+            scale: fits().map(|f| f.scale).collect(),
+            residual: fits().map(|f| f.residual).collect(),
+            cholesky: fits()
+                .map(|f| (f.factorization == "cholesky") as usize)
+                .collect(),
+        }
+    }
+
+    fn put(self, py: Python<'_>, d: &Bound<'_, PyDict>) -> PyResult<()> {
+        d.set_item("patch_start", counts_to_py(py, self.start))?;
+        d.set_item("patch_centre", points_to_py(py, self.centre)?)?;
+        d.set_item("patch_radius", values_to_py(py, self.radius))?;
+        d.set_item("patch_inside", counts_to_py(py, self.inside))?;
+        d.set_item("patch_size", counts_to_py(py, self.size))?;
+        let nc = points_to_py(py, self.normalized_centers)?;
+        d.set_item("patch_normalized_centers", nc)?;
+        d.set_item("patch_shared", counts_to_py(py, self.shared))?;
+        d.set_item("patch_index", PyArray1::from_vec(py, self.index))?;
+        let nw = values_to_py(py, self.normalized_weights);
+        d.set_item("patch_normalized_weights", nw)?;
+        let np = values_to_py(py, self.normalized_polynomial);
+        d.set_item("patch_normalized_polynomial", np)?;
+        d.set_item("patch_polynomial", values_to_py(py, self.polynomial))?;
+        d.set_item("patch_shift", values_to_py(py, self.shift))?;
+        d.set_item("patch_scale", values_to_py(py, self.scale))?;
+        d.set_item("patch_residual", values_to_py(py, self.residual))?;
+        d.set_item("patch_cholesky", counts_to_py(py, self.cholesky))
+    }
+
+    fn read(d: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let centre = points_of(d, "patch_centre")?;
+        let n = centre.len();
+        // Format 1: every patch has centres of its own.
+        let (shared, index) = match d.get_item("patch_index")? {
+            Some(index) => (counts_of(d, "patch_shared")?, indices(&index)?),
+            None => (vec![0; n], vec![]),
         };
-        runs.push(*at..*at + len);
-        *at += len;
-    }
-    if !(lengths_agree && own_at == nc.len() && index_at == index.len()) {
-        return Err(bad("the patches' arrays differ in length"));
-    }
-    (0..n)
-        .map(|k| {
-            let (weights, centres) = (start[k]..start[k + 1], runs[k].clone());
-            let own = shared[k] == 0;
-            Ok(PatchParts {
-                centre: centre[k],
-                radius: radius[k],
-                inside: inside[k],
-                size: size[k],
-                fit: SurfaceParts {
-                    kernel,
-                    polynomial: four(poly[4 * k..4 * k + 4].to_vec(), "patch_polynomial")?,
-                    shift: DVec3::from_slice(&shift[3 * k..3 * k + 3]),
-                    scale: scale[k],
-                    normalized_centers: if own {
-                        nc[centres.clone()].to_vec()
-                    } else {
-                        vec![]
-                    },
-                    normalized_weights: nw[weights].to_vec(),
-                    normalized_polynomial: four(np[4 * k..4 * k + 4].to_vec(), "patch_polynomial")?,
-                    residual: residual[k],
-                    factorization: if cholesky[k] == 1 { "cholesky" } else { "lblt" }.into(),
-                    ..Default::default()
-                },
-                index: if own { vec![] } else { index[centres].to_vec() },
-            })
+        Ok(FlatPatches {
+            start: counts_of(d, "patch_start")?,
+            centre,
+            radius: values_of(d, "patch_radius")?,
+            inside: counts_of(d, "patch_inside")?,
+            size: counts_of(d, "patch_size")?,
+            normalized_centers: points_of(d, "patch_normalized_centers")?,
+            shared,
+            index,
+            normalized_weights: values_of(d, "patch_normalized_weights")?,
+            normalized_polynomial: values_of(d, "patch_normalized_polynomial")?,
+            polynomial: values_of(d, "patch_polynomial")?,
+            shift: values_of(d, "patch_shift")?,
+            scale: values_of(d, "patch_scale")?,
+            residual: values_of(d, "patch_residual")?,
+            cholesky: counts_of(d, "patch_cholesky")?,
         })
-        .collect()
+    }
+
+    /// The patches, when the arrays' lengths agree.
+    fn patches(self, kernel: Kernel) -> PyResult<Vec<PatchParts>> {
+        let f = self;
+        let n = f.centre.len();
+        let lengths_agree = f.start.len() == n + 1
+            && [
+                f.radius.len(),
+                f.inside.len(),
+                f.size.len(),
+                f.scale.len(),
+                f.residual.len(),
+            ]
+            .iter()
+            .chain(&[f.cholesky.len(), f.shared.len()])
+            .all(|&l| l == n)
+            && f.normalized_polynomial.len() == 4 * n
+            && f.polynomial.len() == 4 * n
+            && f.shift.len() == 3 * n
+            && f.start.windows(2).all(|w| w[0] <= w[1])
+            && f.start[0] == 0
+            && f.start[n] == f.normalized_weights.len()
+            && (0..n).all(|k| f.shared[k] <= 1);
+        if !lengths_agree {
+            return Err(bad("the patches' arrays differ in length"));
+        }
+        // The runs of centres of each patch: in `index` when shared, else in the normalised
+        // centres.
+        let (mut own_at, mut index_at) = (0, 0);
+        let mut runs = Vec::with_capacity(n);
+        for k in 0..n {
+            let len = f.start[k + 1] - f.start[k];
+            let at = if f.shared[k] == 1 {
+                &mut index_at
+            } else {
+                &mut own_at
+            };
+            runs.push(*at..*at + len);
+            *at += len;
+        }
+        if !(own_at == f.normalized_centers.len() && index_at == f.index.len()) {
+            return Err(bad("the patches' arrays differ in length"));
+        }
+        let four_at = |v: &[f64], k: usize| -> [f64; 4] { v[4 * k..4 * k + 4].try_into().unwrap() };
+        Ok((0..n)
+            .map(|k| {
+                let (weights, centres) = (f.start[k]..f.start[k + 1], runs[k].clone());
+                let own = f.shared[k] == 0;
+                PatchParts {
+                    centre: f.centre[k],
+                    radius: f.radius[k],
+                    inside: f.inside[k],
+                    size: f.size[k],
+                    fit: SurfaceParts {
+                        kernel,
+                        polynomial: four_at(&f.polynomial, k),
+                        shift: DVec3::from_slice(&f.shift[3 * k..3 * k + 3]),
+                        scale: f.scale[k],
+                        normalized_centers: if own {
+                            f.normalized_centers[centres.clone()].to_vec()
+                        } else {
+                            vec![]
+                        },
+                        normalized_weights: f.normalized_weights[weights].to_vec(),
+                        normalized_polynomial: four_at(&f.normalized_polynomial, k),
+                        residual: f.residual[k],
+                        factorization: if f.cholesky[k] == 1 {
+                            "cholesky"
+                        } else {
+                            "lblt"
+                        }
+                        .into(),
+                        ..Default::default()
+                    },
+                    index: if own {
+                        vec![]
+                    } else {
+                        f.index[centres].to_vec()
+                    },
+                }
+            })
+            .collect())
+    }
 }
 
 /// A uint32 array's numbers.
@@ -388,9 +445,8 @@ pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
                 residual,
                 factorization: number(d, "factorization")?,
             };
-            Ok(Fitted::Global(Arc::new(VariationalSurface::from_parts(
-                parts,
-            )?)))
+            let s = d.py().detach(|| VariationalSurface::from_parts(parts))?;
+            Ok(Fitted::Global(Arc::new(s)))
         }
         "partition" => {
             let settings = PartitionSettings {
@@ -404,14 +460,17 @@ pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
                     memory_limit: number(d, "memory_limit")?,
                 },
             };
-            let parts = PartitionParts {
-                settings,
-                constraints,
-                patches: patches_of(d, kernel)?,
-                residual,
-                tree: tree_of(d)?,
-            };
-            let s = PartitionSurface::from_parts(parts)?;
+            let (flat, tree) = (FlatPatches::read(d)?, tree_of(d)?);
+            let s = d.py().detach(|| {
+                let parts = PartitionParts {
+                    settings,
+                    constraints,
+                    patches: flat.patches(kernel)?,
+                    residual,
+                    tree,
+                };
+                PyResult::Ok(PartitionSurface::from_parts(parts)?)
+            })?;
             Ok(Fitted::Partition(Arc::new(s)))
         }
         other => Err(bad(format!("method {other:?}"))),

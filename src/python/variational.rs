@@ -852,7 +852,7 @@ impl PyVariationalSurface {
     /// The surface as seen from the box ``bounds`` ((2, 3) array_like): for a partition fit,
     /// only the patches that values and gradients in the box use (the same bits there); a
     /// global fit as it is. What :func:`implicitmesh.distributed.polygonize` sends each tile.
-    fn _cut(&self, bounds: &Bound<'_, PyAny>) -> PyResult<Self> {
+    fn _cut(&self, py: Python<'_>, bounds: &Bound<'_, PyAny>) -> PyResult<Self> {
         let b = super::convert::points(bounds, "bounds")?;
         if b.len() != 2 || !b.iter().all(|p| p.is_finite()) {
             return Err(value_error(
@@ -862,7 +862,9 @@ impl PyVariationalSurface {
         }
         let inner = match &self.inner {
             Fitted::Global(_) => self.inner.clone(),
-            Fitted::Partition(s) => Fitted::Partition(std::sync::Arc::new(s.cut(b[0], b[1]))),
+            Fitted::Partition(s) => {
+                Fitted::Partition(std::sync::Arc::new(py.detach(|| s.cut(b[0], b[1]))))
+            }
         };
         Ok(PyVariationalSurface {
             inner,
