@@ -281,6 +281,7 @@ pub fn place_capped(
     }
     let normals = unit_normals("normals", normals)?;
     let merge = duplicates::merge(points, check_merge_distance(settings.merge_distance)?);
+    crate::cancel::check()?;
     if merge.merged() > 0 {
         let points = merge.points(points);
         let normals = merge.normals(&normals);
@@ -317,6 +318,7 @@ fn place_distinct(
         ));
     }
     let ratio = w / d;
+    crate::cancel::check()?;
 
     let mut offsets = vec![d; points.len()];
     if settings.shrink {
@@ -348,6 +350,7 @@ fn place_distinct(
         }
     }
 
+    crate::cancel::check()?;
     let inner = if settings.thin_reach_over_d > 0.0 {
         let depths =
             thin::depths_behind(points, normals, settings.thin_reach_over_d * d, FACING_COS);
@@ -357,6 +360,7 @@ fn place_distinct(
         Vec::new()
     };
 
+    crate::cancel::check()?;
     let n = points.len();
     let normal_of = normal_points(points, settings)?;
     let ratio_at = |i: usize| match caps {

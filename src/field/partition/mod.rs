@@ -204,19 +204,23 @@ impl PartitionSurface {
 
     fn solve(c: Constraints, settings: &PartitionSettings) -> Result<Self> {
         let (centre, half) = Self::cube(&c);
+        crate::cancel::check()?;
         let tree = Self::tree(&c, settings);
+        crate::cancel::check()?;
         let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf);
         let oriented = empty::oriented(&c).then(|| patches::Oriented {
             first_off: c.boundary,
             largest_offset: c.offsets.iter().copied().fold(0.0, f64::max),
         });
-        let supports = patches::supports(&tree, &c.points, &levels, settings, oriented);
+        crate::cancel::check()?;
+        let supports = patches::supports(&tree, &c.points, &levels, settings, oriented)?;
         let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
             + (c.points.len() * (48 + 24)) as u64
             + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
         patches::check_memory(bytes, settings.fit.memory_limit)?;
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
+        crate::cancel::check()?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
         let (cover_start, cover) = patches::cover(&tree, &fitted);
         // The kept octree answers no more queries on points (evaluation only descends it): its

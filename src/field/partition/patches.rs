@@ -90,104 +90,113 @@ pub struct Oriented {
 /// holding no constraint get no completion (their patch is a plane, see [`empty`]), and
 /// supports holding data points but no constraint off the surface are completed however many
 /// they hold (fitted to zeros alone, a patch would be zero everywhere), from a ball reaching at
-/// least the normal constraints of the data points inside.
+/// least the normal constraints of the data points inside. Errors with
+/// [`crate::error::Error::Interrupted`] when the calling thread's token is set.
 pub fn supports(
     tree: &Octree,
     points: &[DVec3],
     levels: &[Level],
     settings: &PartitionSettings,
     oriented: Option<Oriented>,
-) -> Vec<Support> {
+) -> Result<Vec<Support>> {
     let planes = oriented.is_some();
     let want = settings.min_points.min(points.len());
+    let one = |scratch: &mut Vec<f64>, k: u32| -> Support {
+        let n = &tree.nodes[k as usize];
+        let r = settings.overlap * n.half_diagonal();
+        let inside = tree.count_within(points, n.centre, r);
+        let mut s = Support {
+            centre: n.centre,
+            radius: r,
+            inside,
+            extra: None,
+        };
+        // Leaves with (almost) no constraints of their own see the data only at the edge
+        // of their support: those are completed too, however many constraints it holds.
+        let own = (n.end - n.start) as usize;
+        let off_surface =
+            |o: Oriented| tree.any_within(points, n.centre, r, |i| i as usize >= o.first_off);
+        if (inside >= want && own >= SPARSE_LEAF && oriented.is_none_or(off_surface))
+            || (inside == 0 && planes)
+        {
+            return s;
+        }
+        // A ball reaching one support radius (or the largest offset of a normal
+        // constraint, when larger) past the `want`-th nearest constraint, found from a
+        // guess that takes the constraints to spread over a surface.
+        let guess = r * (want as f64 / inside.max(1) as f64).sqrt().max(1.0) * 1.2;
+        let (kth, nearest) = tree.nearest_distances(points, n.centre, want, guess, scratch);
+        let reach = kth.max(r) + r.max(oriented.map_or(0.0, |o| o.largest_offset));
+        let far = nearest > FAR_DATA * r;
+        let budget = if inside == 0 {
+            settings.min_points / 2
+        } else if far {
+            settings
+                .max_patch
+                .saturating_sub(inside)
+                .max(settings.max_patch / 2)
+        } else {
+            settings.max_patch / NEAR_BUDGET_DIVISOR
+        };
+        // The constraints between the two balls (the inner one's count is exact, so the
+        // difference counts those beyond `r` and within `reach`).
+        let count_outside = |pts: &[DVec3], t: &Octree| {
+            t.count_within(pts, n.centre, reach) - t.count_within(pts, n.centre, r)
+        };
+        // Exact up to `budget`; more than `budget` when the ball holds more.
+        let full = tree.count_within_up_to(points, n.centre, reach, budget + inside) - inside;
+        // The levels this patch may take its completion from (see `coarse`): every level
+        // for a far patch or one with constraints inside, so that a near patch's completion
+        // holds between half its budget and its budget (a level of one in 8^k can leave it
+        // a handful of constraints, too few to fit when its own lie in one plane); one in
+        // 8^k for the others.
+        let step = if far || inside > 0 { 1 } else { 3 };
+        let candidates: Vec<usize> = (step - 1..levels.len()).step_by(step).collect();
+        // The finest level whose share of the ball fits the budget; a finer one when that
+        // leaves too few constraints for a fit.
+        let mut choice = (usize::MAX, full);
+        if full > budget {
+            for (c, &l) in candidates.iter().enumerate() {
+                let level = &levels[l];
+                let last = c + 1 == candidates.len();
+                // The level's constraints between the two balls must fit the budget (the
+                // count within `reach` is exact unless it exceeds the limit).
+                let within_r = level.tree.count_within(&level.points, n.centre, r);
+                let limit = if last { usize::MAX } else { budget + within_r };
+                let within_reach =
+                    level
+                        .tree
+                        .count_within_up_to(&level.points, n.centre, reach, limit);
+                if within_reach > limit {
+                    continue;
+                }
+                let m = within_reach - within_r;
+                if inside + m >= 16 {
+                    choice = (l, m);
+                } else if c > 0 {
+                    let f = candidates[c - 1];
+                    choice = (f, count_outside(&levels[f].points, &levels[f].tree));
+                }
+                break;
+            }
+        }
+        if choice.0 == usize::MAX && full > budget {
+            // No level was chosen: the whole ball completes the system.
+            choice.1 = tree.count_within(points, n.centre, reach) - inside;
+        }
+        s.extra = Some((choice.0, reach, choice.1));
+        s
+    };
+    // The caller's token (rayon's threads do not see it): supports stop when it is set.
+    let token = crate::cancel::current();
     tree.leaves
         .par_iter()
         .with_max_len(SUPPORT_RUN)
         .map_init(Vec::new, |scratch, &k| {
-            let n = &tree.nodes[k as usize];
-            let r = settings.overlap * n.half_diagonal();
-            let inside = tree.count_within(points, n.centre, r);
-            let mut s = Support {
-                centre: n.centre,
-                radius: r,
-                inside,
-                extra: None,
-            };
-            // Leaves with (almost) no constraints of their own see the data only at the edge
-            // of their support: those are completed too, however many constraints it holds.
-            let own = (n.end - n.start) as usize;
-            let off_surface =
-                |o: Oriented| tree.any_within(points, n.centre, r, |i| i as usize >= o.first_off);
-            if (inside >= want && own >= SPARSE_LEAF && oriented.is_none_or(off_surface))
-                || (inside == 0 && planes)
-            {
-                return s;
+            if let Some(t) = &token {
+                t.check()?;
             }
-            // A ball reaching one support radius (or the largest offset of a normal
-            // constraint, when larger) past the `want`-th nearest constraint, found from a
-            // guess that takes the constraints to spread over a surface.
-            let guess = r * (want as f64 / inside.max(1) as f64).sqrt().max(1.0) * 1.2;
-            let (kth, nearest) = tree.nearest_distances(points, n.centre, want, guess, scratch);
-            let reach = kth.max(r) + r.max(oriented.map_or(0.0, |o| o.largest_offset));
-            let far = nearest > FAR_DATA * r;
-            let budget = if inside == 0 {
-                settings.min_points / 2
-            } else if far {
-                settings
-                    .max_patch
-                    .saturating_sub(inside)
-                    .max(settings.max_patch / 2)
-            } else {
-                settings.max_patch / NEAR_BUDGET_DIVISOR
-            };
-            // The constraints between the two balls (the inner one's count is exact, so the
-            // difference counts those beyond `r` and within `reach`).
-            let count_outside = |pts: &[DVec3], t: &Octree| {
-                t.count_within(pts, n.centre, reach) - t.count_within(pts, n.centre, r)
-            };
-            // Exact up to `budget`; more than `budget` when the ball holds more.
-            let full = tree.count_within_up_to(points, n.centre, reach, budget + inside) - inside;
-            // The levels this patch may take its completion from (see `coarse`): every level
-            // for a far patch or one with constraints inside, so that a near patch's completion
-            // holds between half its budget and its budget (a level of one in 8^k can leave it
-            // a handful of constraints, too few to fit when its own lie in one plane); one in
-            // 8^k for the others.
-            let step = if far || inside > 0 { 1 } else { 3 };
-            let candidates: Vec<usize> = (step - 1..levels.len()).step_by(step).collect();
-            // The finest level whose share of the ball fits the budget; a finer one when that
-            // leaves too few constraints for a fit.
-            let mut choice = (usize::MAX, full);
-            if full > budget {
-                for (c, &l) in candidates.iter().enumerate() {
-                    let level = &levels[l];
-                    let last = c + 1 == candidates.len();
-                    // The level's constraints between the two balls must fit the budget (the
-                    // count within `reach` is exact unless it exceeds the limit).
-                    let within_r = level.tree.count_within(&level.points, n.centre, r);
-                    let limit = if last { usize::MAX } else { budget + within_r };
-                    let within_reach =
-                        level
-                            .tree
-                            .count_within_up_to(&level.points, n.centre, reach, limit);
-                    if within_reach > limit {
-                        continue;
-                    }
-                    let m = within_reach - within_r;
-                    if inside + m >= 16 {
-                        choice = (l, m);
-                    } else if c > 0 {
-                        let f = candidates[c - 1];
-                        choice = (f, count_outside(&levels[f].points, &levels[f].tree));
-                    }
-                    break;
-                }
-            }
-            if choice.0 == usize::MAX && full > budget {
-                // No level was chosen: the whole ball completes the system.
-                choice.1 = tree.count_within(points, n.centre, reach) - inside;
-            }
-            s.extra = Some((choice.0, reach, choice.1));
-            s
+            Ok(one(scratch, k))
         })
         .collect()
 }

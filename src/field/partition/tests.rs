@@ -328,3 +328,28 @@ fn empty_patches_carry_the_sign_of_space() {
     }
     assert!(planes > 10, "{planes}");
 }
+
+#[test]
+fn a_set_token_stops_placement_and_supports_before_the_patches() {
+    let (p, n) = torus_data(3000, 5);
+    let stopped = crate::cancel::Token::new();
+    stopped.stop();
+    let interrupted = |r: Result<()>| matches!(r, Err(crate::error::Error::Interrupted));
+    // Placement, then the supports, each with the token set: neither gets to the patches.
+    let placed = crate::cancel::run_under(stopped.clone(), || {
+        constraints::place(&p, &n, &Default::default()).map(|_| ())
+    });
+    assert!(interrupted(placed));
+    let c = constraints::place(&p, &n, &Default::default()).unwrap();
+    let settings = PartitionSettings::default();
+    let (centre, half) = PartitionSurface::cube(&c);
+    let tree = PartitionSurface::tree(&c, &settings);
+    let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf);
+    let supports = |token: crate::cancel::Token| {
+        crate::cancel::run_under(token, || {
+            patches::supports(&tree, &c.points, &levels, &settings, None).map(|_| ())
+        })
+    };
+    assert!(interrupted(supports(stopped)));
+    assert!(supports(crate::cancel::Token::new()).is_ok());
+}
