@@ -35,14 +35,16 @@ fn splitmix(mut x: u64) -> u64 {
 
 /// Levels 1, 2, … of the constraints `c` (constraint `i` kept with its data point,
 /// [`Constraints::data_point`]), down to the first level 3k with at most `smallest` points, each
-/// with an octree over the cube (`centre`, `half`).
+/// with an octree over the cube (`centre`, `half`). Errors with
+/// [`crate::error::Error::Interrupted`] when the calling thread's token is set (checked per
+/// level).
 pub fn levels(
     c: &Constraints,
     smallest: usize,
     centre: DVec3,
     half: f64,
     max_per_leaf: usize,
-) -> Vec<Level> {
+) -> crate::error::Result<Vec<Level>> {
     let points = &c.points;
     let hashes: Vec<u64> = (0..points.len())
         .into_par_iter()
@@ -52,6 +54,7 @@ pub fn levels(
     let mut step = 1u64;
     let mut size = points.len();
     while (size > smallest || !out.len().is_multiple_of(3)) && step < 1 << 60 {
+        crate::cancel::check()?;
         step *= 2;
         let index: Vec<u32> = (0..points.len() as u32)
             .filter(|&i| hashes[i as usize].is_multiple_of(step))
@@ -65,5 +68,5 @@ pub fn levels(
             tree,
         });
     }
-    out
+    Ok(out)
 }

@@ -186,12 +186,15 @@ impl PartitionSurface {
     }
 
     /// The octree of the constraints: split until each leaf holds at most `max_per_leaf` and
-    /// the ball of its patch at most `max_patch` of them.
-    fn tree(c: &Constraints, settings: &PartitionSettings) -> Octree {
+    /// the ball of its patch at most `max_patch` of them. Errors with
+    /// [`Error::Interrupted`](crate::error::Error::Interrupted) when the calling thread's token
+    /// is set (checked between the two octrees it builds).
+    fn tree(c: &Constraints, settings: &PartitionSettings) -> Result<Octree> {
         let (centre, half) = Self::cube(c);
         // A first octree counts the constraints in the balls of the final one's nodes.
         let counts = Octree::new(&c.points, centre, half, settings.max_per_leaf);
-        Octree::build(&c.points, centre, half, |n| {
+        crate::cancel::check()?;
+        Ok(Octree::build(&c.points, centre, half, |n| {
             (n.end - n.start) as usize > settings.max_per_leaf
                 || counts.more_within_than(
                     &c.points,
@@ -199,15 +202,15 @@ impl PartitionSurface {
                     settings.overlap * n.half_diagonal(),
                     settings.max_patch,
                 )
-        })
+        }))
     }
 
     fn solve(c: Constraints, settings: &PartitionSettings) -> Result<Self> {
         let (centre, half) = Self::cube(&c);
         crate::cancel::check()?;
-        let tree = Self::tree(&c, settings);
+        let tree = Self::tree(&c, settings)?;
         crate::cancel::check()?;
-        let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf);
+        let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf)?;
         let oriented = empty::oriented(&c).then(|| patches::Oriented {
             first_off: c.boundary,
             largest_offset: c.offsets.iter().copied().fold(0.0, f64::max),

@@ -80,7 +80,7 @@ impl PartitionSurface {
         let cut = p.tree.is_some();
         let mut tree: Octree = match p.tree {
             Some(nodes) => Octree::from_nodes(checked_nodes(nodes)?),
-            None => Self::tree(c, &p.settings),
+            None => Self::tree(c, &p.settings)?,
         };
         // The patches index the constraints in the octree's order (a cut's octree has none).
         let centres = match cut {

@@ -330,7 +330,7 @@ fn empty_patches_carry_the_sign_of_space() {
 }
 
 #[test]
-fn a_set_token_stops_placement_and_supports_before_the_patches() {
+fn a_set_token_stops_every_stage_before_the_patches() {
     let (p, n) = torus_data(3000, 5);
     let stopped = crate::cancel::Token::new();
     stopped.stop();
@@ -343,13 +343,22 @@ fn a_set_token_stops_placement_and_supports_before_the_patches() {
     let c = constraints::place(&p, &n, &Default::default()).unwrap();
     let settings = PartitionSettings::default();
     let (centre, half) = PartitionSurface::cube(&c);
-    let tree = PartitionSurface::tree(&c, &settings);
-    let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf);
+    let tree = PartitionSurface::tree(&c, &settings).unwrap();
+    let levels =
+        coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf).unwrap();
     let supports = |token: crate::cancel::Token| {
         crate::cancel::run_under(token, || {
             patches::supports(&tree, &c.points, &levels, &settings, None).map(|_| ())
         })
     };
-    assert!(interrupted(supports(stopped)));
+    assert!(interrupted(supports(stopped.clone())));
+    // And the octree and the coarse levels, which come before the supports.
+    let (tree2, levels2) = crate::cancel::run_under(stopped, || {
+        (
+            PartitionSurface::tree(&c, &settings).map(|_| ()),
+            coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf).map(|_| ()),
+        )
+    });
+    assert!(interrupted(tree2) && interrupted(levels2));
     assert!(supports(crate::cancel::Token::new()).is_ok());
 }
