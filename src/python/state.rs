@@ -461,16 +461,17 @@ pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
                 },
             };
             let (flat, tree) = (FlatPatches::read(d)?, tree_of(d)?);
-            let s = d.py().detach(|| {
-                let parts = PartitionParts {
-                    settings,
-                    constraints,
-                    patches: flat.patches(kernel)?,
-                    residual,
-                    tree,
-                };
-                PyResult::Ok(PartitionSurface::from_parts(parts)?)
-            })?;
+            let py = d.py();
+            let patches = py.detach(|| flat.patches(kernel))?;
+            let parts = PartitionParts {
+                settings,
+                constraints,
+                patches,
+                residual,
+                tree,
+            };
+            // Building the surface (its octree, patches and cover) stops on Ctrl-C.
+            let s = super::interrupt::run(py, None, false, || PartitionSurface::from_parts(parts))?;
             Ok(Fitted::Partition(Arc::new(s)))
         }
         other => Err(bad(format!("method {other:?}"))),

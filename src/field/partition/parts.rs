@@ -64,7 +64,8 @@ impl PartitionSurface {
     }
 
     /// The surface [`PartitionSurface::parts`] gave: it evaluates to the same bits. Errors
-    /// (naming `state`) for parts no fit makes.
+    /// (naming `state`) for parts no fit makes, and with
+    /// [`Interrupted`](crate::error::Error::Interrupted) when the calling thread's token is set.
     pub fn from_parts(p: PartitionParts) -> Result<Self> {
         p.settings.check()?;
         let c = &p.constraints;
@@ -82,6 +83,7 @@ impl PartitionSurface {
             Some(nodes) => Octree::from_nodes(checked_nodes(nodes)?),
             None => Self::tree(c, &p.settings)?,
         };
+        crate::cancel::check()?;
         // The patches index the constraints in the octree's order (a cut's octree has none).
         let centres = match cut {
             true => c.points.clone(),
@@ -110,6 +112,7 @@ impl PartitionSurface {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
+        crate::cancel::check()?;
         let (cover_start, cover) = patches::cover(&tree, &patches);
         Ok(PartitionSurface {
             settings: p.settings,
