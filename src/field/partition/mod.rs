@@ -209,13 +209,11 @@ impl PartitionSurface {
         let (centre, half) = Self::cube(&c);
         crate::cancel::check()?;
         let tree = Self::tree(&c, settings)?;
-        crate::cancel::check()?;
         let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf)?;
         let oriented = empty::oriented(&c).then(|| patches::Oriented {
             first_off: c.boundary,
             largest_offset: c.offsets.iter().copied().fold(0.0, f64::max),
         });
-        crate::cancel::check()?;
         let supports = patches::supports(&tree, &c.points, &levels, settings, oriented)?;
         let sizes: Vec<usize> = supports.iter().map(|s| s.size()).collect();
         let bytes = patches::estimate_bytes(&sizes, rayon::current_num_threads())
