@@ -1,6 +1,7 @@
 //! numpy in, numpy out: conversions and shape checks. Inputs are converted with
 //! `numpy.asarray(x, dtype=float64)` (so lists, float32 and Fortran-ordered arrays are accepted)
-//! and copied row by row through a strided view, never reinterpreted in place.
+//! and copied row by row through a strided view; only the points of a fit ([`PointsArg`]) are
+//! read in place, when they are a C-contiguous, aligned float64 array.
 
 use super::errors::value_error;
 use glam::DVec3;
@@ -57,6 +58,43 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>
         .into_iter()
         .map(|r| DVec3::new(r[0], r[1], r[2]))
         .collect())
+}
+
+/// The (N, 3) points of a fit: read in place from a C-contiguous, aligned float64 numpy array
+/// (whose readonly borrow it holds), converted as [`points`] otherwise.
+pub enum PointsArg<'py> {
+    InPlace(PyReadonlyArray2<'py, f64>),
+    Copied(Vec<DVec3>),
+}
+
+impl PointsArg<'_> {
+    /// The points. Take them while holding the GIL: the array's layout was checked then.
+    pub fn as_slice(&self) -> &[DVec3] {
+        match self {
+            PointsArg::InPlace(a) => bytemuck::cast_slice(
+                a.as_slice()
+                    .expect("a C-contiguous array, checked when the argument was read"),
+            ),
+            PointsArg::Copied(p) => p,
+        }
+    }
+}
+
+/// [`points`], read in place when `obj` is a C-contiguous, aligned (N, 3) float64 array.
+pub fn points_arg<'py>(obj: &Bound<'py, PyAny>, name: &'static str) -> PyResult<PointsArg<'py>> {
+    if let Ok(a) = obj.cast::<numpy::PyArray2<f64>>() {
+        if let Ok(r) = a.try_readonly() {
+            // `as_slice` also takes Fortran order: C order is checked apart.
+            let fits = r.as_array().ncols() == 3
+                && r.as_array().is_standard_layout()
+                && r.as_slice()
+                    .is_ok_and(|s| bytemuck::try_cast_slice::<f64, DVec3>(s).is_ok());
+            if fits {
+                return Ok(PointsArg::InPlace(r));
+            }
+        }
+    }
+    Ok(PointsArg::Copied(points(obj, name)?))
 }
 
 /// A ValueError naming `name` unless the array `arr` has shape (N, 3).

@@ -1,7 +1,7 @@
 //! `VariationalSurface`: the Python class over the core's fitted surface.
 
 use super::convert::{
-    field_gradients, field_values, points, points_to_py, triangles, values, values_to_py,
+    field_gradients, field_values, points_arg, points_to_py, triangles, values, values_to_py,
 };
 use super::errors::value_error;
 use crate::error::Result;
@@ -366,7 +366,8 @@ impl PyVariationalSurface {
     /// points : (N, 3) float64
     ///     Points on the surface; N ≥ 4, not all in one plane. Points closer together than
     ///     ``merge_distance`` are merged (with a ``UserWarning``): the first keeps its position,
-    ///     the normals are summed.
+    ///     the normals are summed. C-contiguous float64 arrays (here and in ``normals``) are read
+    ///     in place, not copied: do not change them from another thread during the fit.
     /// normals : (N, 3) float64
     ///     Outward normals, any non-zero length (they are normalised).
     /// d : float, optional
@@ -457,8 +458,11 @@ impl PyVariationalSurface {
             partition_options,
             merge_distance,
         )?;
-        let p = self::points(points, "points")?;
-        let n = self::points(normals, "normals")?;
+        let (p, n) = (
+            points_arg(points, "points")?,
+            points_arg(normals, "normals")?,
+        );
+        let (p, n) = (p.as_slice(), n.as_slice());
         if n.len() != p.len() {
             return Err(value_error(
                 "normals",
@@ -473,12 +477,12 @@ impl PyVariationalSurface {
         if let Some(tolerance) = tolerance {
             let subset = |used: &[u32]| -> (Vec<DVec3>, Vec<DVec3>) {
                 let pick = |a: &[DVec3]| used.iter().map(|&i| a[i as usize]).collect();
-                (pick(&p), pick(&n))
+                (pick(p), pick(n))
             };
             return fit.run_within(
                 py,
                 tolerance,
-                &p,
+                p,
                 None,
                 2,
                 |used, s| {
@@ -494,8 +498,8 @@ impl PyVariationalSurface {
         fit.run(
             py,
             2 * p.len(),
-            |s| VariationalSurface::fit(&p, &n, &pl, s),
-            |s| PartitionSurface::fit(&p, &n, &pl, s),
+            |s| VariationalSurface::fit(p, n, &pl, s),
+            |s| PartitionSurface::fit(p, n, &pl, s),
         )
     }
 
@@ -546,14 +550,15 @@ impl PyVariationalSurface {
             partition_options,
             merge_distance,
         )?;
-        let v = points(vertices, "vertices")?;
+        let v = points_arg(vertices, "vertices")?;
+        let v = v.as_slice();
         let f = triangles(faces, "faces")?;
         let pl = placement(d, w, fit.merge_distance);
         fit.run(
             py,
             2 * v.len(),
-            |s| VariationalSurface::from_mesh(&v, &f, &pl, s),
-            |s| PartitionSurface::from_mesh(&v, &f, &pl, s),
+            |s| VariationalSurface::from_mesh(v, &f, &pl, s),
+            |s| PartitionSurface::from_mesh(v, &f, &pl, s),
         )
     }
 
@@ -596,7 +601,8 @@ impl PyVariationalSurface {
             partition_options,
             merge_distance,
         )?;
-        let p = self::points(points, "points")?;
+        let p = points_arg(points, "points")?;
+        let p = p.as_slice();
         let v = self::values(values, "values")?;
         let merge = fit.merge_distance;
         if let Some(tolerance) = tolerance {
@@ -619,7 +625,7 @@ impl PyVariationalSurface {
             return fit.run_within(
                 py,
                 tolerance,
-                &p,
+                p,
                 Some(&v),
                 1,
                 |used, s| {
@@ -635,8 +641,8 @@ impl PyVariationalSurface {
         fit.run(
             py,
             p.len(),
-            |s| VariationalSurface::interpolate(&p, &v, merge, s),
-            |s| PartitionSurface::interpolate(&p, &v, merge, s),
+            |s| VariationalSurface::interpolate(p, &v, merge, s),
+            |s| PartitionSurface::interpolate(p, &v, merge, s),
         )
     }
 
