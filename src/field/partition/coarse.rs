@@ -18,12 +18,32 @@ use crate::field::constraints::Constraints;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// One subsampled level.
+/// One subsampled level: its constraints' indices and an octree over their points (which
+/// keeps the only copy of them).
 pub struct Level {
     /// Indices of the kept constraints.
     pub index: Vec<u32>,
-    pub points: Vec<DVec3>,
-    pub tree: Octree,
+    tree: Octree,
+}
+
+impl Level {
+    /// Its constraints within the closed ball (`c`, `r`), counted up to `limit` (more than
+    /// `limit` when there are more).
+    pub fn count_within_up_to(&self, c: DVec3, r: f64, limit: usize) -> usize {
+        self.tree.count_within_up_to(&[], c, r, limit)
+    }
+
+    /// Its constraints within the closed ball (`c`, `r`).
+    pub fn count_within(&self, c: DVec3, r: f64) -> usize {
+        self.count_within_up_to(c, r, usize::MAX)
+    }
+
+    /// Calls `visit(i, p)` for each of its constraints within the closed ball (`c`, `r`), with
+    /// `i` the constraint's index and `p` its point.
+    pub fn for_each_within(&self, c: DVec3, r: f64, mut visit: impl FnMut(u32, DVec3)) {
+        self.tree
+            .for_each_within_ranked(&[], c, r, |i, _, p| visit(self.index[i as usize], p));
+    }
 }
 
 fn splitmix(mut x: u64) -> u64 {
@@ -62,11 +82,7 @@ pub fn levels(
         let pts: Vec<DVec3> = index.iter().map(|&i| points[i as usize]).collect();
         let tree = Octree::new(&pts, centre, half, max_per_leaf);
         size = pts.len();
-        out.push(Level {
-            index,
-            points: pts,
-            tree,
-        });
+        out.push(Level { index, tree });
     }
     Ok(out)
 }

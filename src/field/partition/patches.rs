@@ -6,7 +6,8 @@
 //! system is completed with constraints outside it, spread over a larger ball (see
 //! [`super::coarse`]): up to max(`max_patch` − inside, `max_patch` / 2) for a patch that sees the
 //! data only near the edge of its support ([`FAR_DATA`]), up to `max_patch` /
-//! [`NEAR_BUDGET_DIVISOR`] for the others. A patch with no constraint in its ball
+//! [`BLIND_BUDGET_DIVISOR`] for one whose ball holds data points but no normal constraint, up to
+//! `max_patch` / [`NEAR_BUDGET_DIVISOR`] for the others. A patch with no constraint in its ball
 //! only carries the field's sign away from the data: in fits with normal constraints it is a
 //! plane ([`super::empty`]), otherwise completed with up to `min_points` / 2.
 
@@ -69,7 +70,12 @@ pub const SPARSE_LEAF: usize = 16;
 /// `max_patch / NEAR_BUDGET_DIVISOR` constraints: their own constraints already carry the
 /// surface across most of the support, and the completion only has to keep the field's shape
 /// over the rest of it.
-pub const NEAR_BUDGET_DIVISOR: usize = 4;
+pub const NEAR_BUDGET_DIVISOR: usize = 8;
+
+/// Patches whose support holds data points but no constraint off the surface complete their
+/// system with at most `max_patch / BLIND_BUDGET_DIVISOR` constraints: the completion must
+/// bring the constraints off the surface that give the field its slope.
+pub const BLIND_BUDGET_DIVISOR: usize = 4;
 
 /// Patches whose nearest constraint lies further from their centre than this fraction of
 /// their radius see the data only near the edge of their support: they complete their system
@@ -116,9 +122,8 @@ pub fn supports(
         let own = (n.end - n.start) as usize;
         let off_surface =
             |o: Oriented| tree.any_within(points, n.centre, r, |i| i as usize >= o.first_off);
-        if (inside >= want && own >= SPARSE_LEAF && oriented.is_none_or(off_surface))
-            || (inside == 0 && planes)
-        {
+        let sees_off = inside == 0 || oriented.is_none_or(off_surface);
+        if (inside >= want && own >= SPARSE_LEAF && sees_off) || (inside == 0 && planes) {
             return s;
         }
         // A ball reaching one support radius (or the largest offset of a normal
@@ -135,13 +140,10 @@ pub fn supports(
                 .max_patch
                 .saturating_sub(inside)
                 .max(settings.max_patch / 2)
+        } else if !sees_off {
+            settings.max_patch / BLIND_BUDGET_DIVISOR
         } else {
             settings.max_patch / NEAR_BUDGET_DIVISOR
-        };
-        // The constraints between the two balls (the inner one's count is exact, so the
-        // difference counts those beyond `r` and within `reach`).
-        let count_outside = |pts: &[DVec3], t: &Octree| {
-            t.count_within(pts, n.centre, reach) - t.count_within(pts, n.centre, r)
         };
         // Exact up to `budget`; more than `budget` when the ball holds more.
         let full = tree.count_within_up_to(points, n.centre, reach, budget + inside) - inside;
@@ -161,12 +163,9 @@ pub fn supports(
                 let last = c + 1 == candidates.len();
                 // The level's constraints between the two balls must fit the budget (the
                 // count within `reach` is exact unless it exceeds the limit).
-                let within_r = level.tree.count_within(&level.points, n.centre, r);
+                let within_r = level.count_within(n.centre, r);
                 let limit = if last { usize::MAX } else { budget + within_r };
-                let within_reach =
-                    level
-                        .tree
-                        .count_within_up_to(&level.points, n.centre, reach, limit);
+                let within_reach = level.count_within_up_to(n.centre, reach, limit);
                 if within_reach > limit {
                     continue;
                 }
@@ -175,7 +174,10 @@ pub fn supports(
                     choice = (l, m);
                 } else if c > 0 {
                     let f = candidates[c - 1];
-                    choice = (f, count_outside(&levels[f].points, &levels[f].tree));
+                    // The level's constraints between the two balls.
+                    let level = &levels[f];
+                    let m = level.count_within(n.centre, reach) - level.count_within(n.centre, r);
+                    choice = (f, m);
                 }
                 break;
             }
@@ -276,18 +278,16 @@ pub fn fit(
             tree.for_each_within_ranked(&c.points, centre, radius, |i, k, p| own.push((i, k, p)));
             let mut outside: Vec<(u32, DVec3)> = Vec::new();
             if let Some((l, reach, _)) = s.extra {
-                let (pts, t, index): (&[DVec3], &Octree, Option<&[u32]>) = if l == usize::MAX {
-                    (&c.points, tree, None)
-                } else {
-                    let lv = &levels[l];
-                    (&lv.points, &lv.tree, Some(&lv.index))
-                };
-                t.for_each_within(pts, centre, reach, |i| {
-                    let p = pts[i as usize];
+                let mut visit = |i: u32, p: DVec3| {
                     if (p - centre).length_squared() > radius * radius {
-                        outside.push((index.map_or(i, |x| x[i as usize]), p));
+                        outside.push((i, p));
                     }
-                });
+                };
+                if l == usize::MAX {
+                    tree.for_each_within_ranked(&c.points, centre, reach, |i, _, p| visit(i, p));
+                } else {
+                    levels[l].for_each_within(centre, reach, visit);
+                }
             }
             own.sort_unstable_by_key(|e| e.0);
             outside.sort_unstable_by_key(|e| e.0);
