@@ -487,7 +487,7 @@ def test_without_dask_the_error_names_the_extra(monkeypatch, blobs):
         imd.polygonize(blobs, bounds=BOX, resolution=8)
 
 
-def tasks_left(client, wait: float = 5.0) -> int:
+def tasks_left(client, wait: float = 15.0) -> int:
     """The tasks the scheduler still holds, once it holds none or after ``wait`` seconds."""
     left = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
     end = time.monotonic() + wait

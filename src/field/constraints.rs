@@ -207,18 +207,10 @@ pub fn interpolation_data(
 /// Unit normals from `normals`, refusing non-finite or zero-length ones.
 pub fn unit_normals(name: &'static str, normals: &[DVec3]) -> Result<Vec<DVec3>> {
     check_finite_points(name, normals)?;
-    normals
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let l = n.length();
-            if l < 1e-300 {
-                Err(Error::invalid(name, format!("normal {i} has zero length")))
-            } else {
-                Ok(*n / l)
-            }
-        })
-        .collect()
+    if let Some(i) = normals.par_iter().position_first(|n| n.length() < 1e-300) {
+        return Err(Error::invalid(name, format!("normal {i} has zero length")));
+    }
+    Ok(normals.par_iter().map(|n| *n / n.length()).collect())
 }
 
 /// The default offset `d` is at most this many times the data's typical spacing (median
@@ -367,20 +359,23 @@ fn place_distinct(
         Some(c) if ratio > 0.0 => ratio.min(c[i]),
         _ => ratio,
     };
-    let total = n + normal_of.len() + inner.len();
-    let mut cpoints = Vec::with_capacity(total);
-    let mut values = Vec::with_capacity(total);
-    cpoints.extend_from_slice(points);
-    values.extend(std::iter::repeat_n(0.0, n));
-    for &i in &normal_of {
-        let i = i as usize;
-        cpoints.push(points[i] + normals[i] * offsets[i]);
-        values.push(ratio_at(i) * offsets[i]);
-    }
-    for (i, half_depth) in inner {
-        cpoints.push(points[i] - normals[i] * half_depth);
-        values.push(-ratio_at(i) * half_depth);
-    }
+    // The data points, their normal constraints, then the inner ones (written in parallel).
+    let cpoints: Vec<DVec3> = points
+        .par_iter()
+        .copied()
+        .chain(normal_of.par_iter().map(|&i| {
+            let i = i as usize;
+            points[i] + normals[i] * offsets[i]
+        }))
+        .chain(inner.par_iter().map(|&(i, h)| points[i] - normals[i] * h))
+        .collect();
+    let values: Vec<f64> = rayon::iter::repeat_n(0.0, n)
+        .chain(normal_of.par_iter().map(|&i| {
+            let i = i as usize;
+            ratio_at(i) * offsets[i]
+        }))
+        .chain(inner.par_iter().map(|&(i, h)| -ratio_at(i) * h))
+        .collect();
     Ok(Constraints {
         points: cpoints,
         values,

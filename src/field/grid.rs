@@ -8,6 +8,7 @@
 //! then visit one cell and its neighbours and test the distances.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Points binned into cubic cells.
 pub struct Grid<'a> {
@@ -66,21 +67,25 @@ impl<'a> Grid<'a> {
             let c = |k: usize| (((p[k] - lo[k]) / cell).floor() as usize).min(dims[k] - 1);
             c(0) + dims[0] * (c(1) + dims[1] * c(2))
         };
+        // Counting sort in place: `start[c + 1]` counts cell c, then (prefix sums) ends its
+        // run; the points, taken backwards, move each end down to its run's start, so that
+        // `start[c + 1]` is where cell c starts, and one shift down gives `start`.
         let mut start = vec![0u32; ncells + 1];
-        let keys: Vec<usize> = points.iter().map(|p| key(*p)).collect();
-        for &k in &keys {
-            start[k + 1] += 1;
+        for p in points {
+            start[key(*p) + 1] += 1;
         }
         for c in 0..ncells {
             start[c + 1] += start[c];
         }
-        let mut fill = start.clone();
         let mut order = vec![0u32; points.len()];
-        for (i, &k) in keys.iter().enumerate() {
-            order[fill[k] as usize] = i as u32;
-            fill[k] += 1;
+        for (i, p) in points.iter().enumerate().rev() {
+            let end = &mut start[key(*p) + 1];
+            *end -= 1;
+            order[*end as usize] = i as u32;
         }
-        let sorted = order.iter().map(|&i| points[i as usize]).collect();
+        start.copy_within(1.., 0);
+        start[ncells] = points.len() as u32;
+        let sorted = order.par_iter().map(|&i| points[i as usize]).collect();
         Grid {
             points,
             lo,

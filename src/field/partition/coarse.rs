@@ -77,9 +77,10 @@ pub fn levels(
         crate::cancel::check()?;
         step *= 2;
         let index: Vec<u32> = (0..points.len() as u32)
+            .into_par_iter()
             .filter(|&i| hashes[i as usize].is_multiple_of(step))
             .collect();
-        let pts: Vec<DVec3> = index.iter().map(|&i| points[i as usize]).collect();
+        let pts: Vec<DVec3> = index.par_iter().map(|&i| points[i as usize]).collect();
         let tree = Octree::new(&pts, centre, half, max_per_leaf);
         size = pts.len();
         out.push(Level { index, tree });

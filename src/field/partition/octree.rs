@@ -95,51 +95,68 @@ impl NodeStack {
     }
 }
 
-/// The runs (`order` and its points) of the nodes `splitting`, whose runs are disjoint and
-/// increasing, each with its node's centre.
+/// A node's run: its centre, its indices and points, and as much scratch space for each.
+type Run<'a> = (
+    DVec3,
+    &'a mut [u32],
+    &'a mut [DVec3],
+    &'a mut [u32],
+    &'a mut [DVec3],
+);
+
+/// The runs of the nodes `splitting` (whose runs are disjoint and increasing) in `order` and
+/// `sorted`, with the same ranges of the scratch `spare_order` and `spare_sorted`.
 fn disjoint_runs<'a>(
     nodes: &[Node],
     splitting: &[usize],
     mut order: &'a mut [u32],
     mut sorted: &'a mut [DVec3],
-) -> Vec<(DVec3, &'a mut [u32], &'a mut [DVec3])> {
+    mut spare_order: &'a mut [u32],
+    mut spare_sorted: &'a mut [DVec3],
+) -> Vec<Run<'a>> {
+    /// The `a..b` part of `*rest`, which starts at `offset`; `*rest` then starts at `b`.
+    fn take<'a, T>(rest: &mut &'a mut [T], offset: usize, a: usize, b: usize) -> &'a mut [T] {
+        let (_, r) = std::mem::take(rest).split_at_mut(a - offset);
+        let (run, r) = r.split_at_mut(b - a);
+        *rest = r;
+        run
+    }
     let mut offset = 0;
     let mut runs = Vec::with_capacity(splitting.len());
     for &k in splitting {
         let n = &nodes[k];
         let (a, b) = (n.start as usize, n.end as usize);
-        let (_, o) = std::mem::take(&mut order).split_at_mut(a - offset);
-        let (run, o) = o.split_at_mut(b - a);
-        let (_, s) = std::mem::take(&mut sorted).split_at_mut(a - offset);
-        let (pts, s) = s.split_at_mut(b - a);
-        (order, sorted, offset) = (o, s, b);
-        runs.push((n.centre, run, pts));
+        runs.push((
+            n.centre,
+            take(&mut order, offset, a, b),
+            take(&mut sorted, offset, a, b),
+            take(&mut spare_order, offset, a, b),
+            take(&mut spare_sorted, offset, a, b),
+        ));
+        offset = b;
     }
     runs
 }
 
-/// Sorts a node's run (indices and points) by octant of `centre`, stably; returns where each
-/// octant's run starts (and, at 8, the end).
-fn split_run(centre: DVec3, run: &mut [u32], pts: &mut [DVec3]) -> [usize; 9] {
+/// Sorts a node's run (indices and points) by octant of its centre, stably, through the
+/// run's scratch space; returns where each octant's run starts (and, at 8, the end).
+fn split_run((centre, run, pts, spare_run, spare_pts): Run<'_>) -> [usize; 9] {
     let mut bounds = [0usize; 9];
-    let octants: Vec<u8> = pts.iter().map(|p| octant(*p, centre) as u8).collect();
-    for &o in &octants {
-        bounds[o as usize + 1] += 1;
+    for p in pts.iter() {
+        bounds[octant(*p, centre) + 1] += 1;
     }
     for o in 0..8 {
         bounds[o + 1] += bounds[o];
     }
     let mut fill = bounds;
-    let mut new_run = vec![0u32; run.len()];
-    let mut new_pts = vec![DVec3::ZERO; pts.len()];
-    for ((&o, &i), p) in octants.iter().zip(run.iter()).zip(pts.iter()) {
-        let slot = &mut fill[o as usize];
-        new_run[*slot] = i;
-        new_pts[*slot] = *p;
+    for (&i, p) in run.iter().zip(pts.iter()) {
+        let slot = &mut fill[octant(*p, centre)];
+        spare_run[*slot] = i;
+        spare_pts[*slot] = *p;
         *slot += 1;
     }
-    run.copy_from_slice(&new_run);
-    pts.copy_from_slice(&new_pts);
+    run.copy_from_slice(spare_run);
+    pts.copy_from_slice(spare_pts);
     bounds
 }
 
@@ -167,8 +184,12 @@ impl Octree {
             start: 0,
             end: points.len() as u32,
         }];
-        let mut order: Vec<u32> = (0..points.len() as u32).collect();
-        let mut sorted: Vec<DVec3> = points.to_vec();
+        // Written in parallel, as is the scratch space of the splits (its pages are first
+        // touched by the root's split and reused by every level below).
+        let mut order: Vec<u32> = (0..points.len() as u32).into_par_iter().collect();
+        let mut sorted: Vec<DVec3> = points.par_iter().copied().collect();
+        let mut spare_order = vec![0u32; points.len()];
+        let mut spare_sorted = vec![DVec3::ZERO; points.len()];
         let mut depth = vec![0u32];
         // Level by level (the nodes of one level are consecutive, their runs disjoint and
         // increasing): the decisions and the splits of the runs in parallel, the children in
@@ -181,11 +202,15 @@ impl Octree {
                 .zip(level.clone())
                 .filter_map(|((n, &d), k)| (d < MAX_DEPTH && split(n)).then_some(k))
                 .collect();
-            let runs = disjoint_runs(&nodes, &splitting, &mut order, &mut sorted);
-            let bounds: Vec<[usize; 9]> = runs
-                .into_par_iter()
-                .map(|(centre, run, pts)| split_run(centre, run, pts))
-                .collect();
+            let runs = disjoint_runs(
+                &nodes,
+                &splitting,
+                &mut order,
+                &mut sorted,
+                &mut spare_order,
+                &mut spare_sorted,
+            );
+            let bounds: Vec<[usize; 9]> = runs.into_par_iter().map(split_run).collect();
             let next = nodes.len();
             for (&k, bounds) in splitting.iter().zip(bounds) {
                 let n = nodes[k];
