@@ -122,8 +122,8 @@ pub fn supports(
         let own = (n.end - n.start) as usize;
         let off_surface =
             |o: Oriented| tree.any_within(points, n.centre, r, |i| i as usize >= o.first_off);
-        let sees_off = inside == 0 || oriented.is_none_or(off_surface);
-        if (inside >= want && own >= SPARSE_LEAF && sees_off) || (inside == 0 && planes) {
+        let sees_off = || inside == 0 || oriented.is_none_or(off_surface);
+        if (inside >= want && own >= SPARSE_LEAF && sees_off()) || (inside == 0 && planes) {
             return s;
         }
         // A ball reaching one support radius (or the largest offset of a normal
@@ -140,7 +140,7 @@ pub fn supports(
                 .max_patch
                 .saturating_sub(inside)
                 .max(settings.max_patch / 2)
-        } else if !sees_off {
+        } else if !sees_off() {
             settings.max_patch / BLIND_BUDGET_DIVISOR
         } else {
             settings.max_patch / NEAR_BUDGET_DIVISOR
