@@ -184,8 +184,8 @@ impl Octree {
             start: 0,
             end: points.len() as u32,
         }];
-        // Written in parallel, as is the scratch space of the splits (its pages are first
-        // touched by the root's split and reused by every level below).
+        // Written in parallel. The splits' scratch space is first written by the root's
+        // split and reused by every level below.
         let mut order: Vec<u32> = (0..points.len() as u32).into_par_iter().collect();
         let mut sorted: Vec<DVec3> = points.par_iter().copied().collect();
         let mut spare_order = vec![0u32; points.len()];
