@@ -515,6 +515,7 @@ impl PyVariationalSurface {
     /// Parameters
     /// ----------
     /// vertices : (V, 3) float64
+    ///     Read in place when C-contiguous float64, as ``points`` in :meth:`fit`.
     /// faces : (F, 3) int
     ///     Vertex indices of each triangle.
     /// d, w, kernel, smoothing, memory_limit, method, progress, partition_options, merge_distance
@@ -567,6 +568,7 @@ impl PyVariationalSurface {
     /// Parameters
     /// ----------
     /// points : (N, 3) float64
+    ///     Read in place when C-contiguous float64, as in :meth:`fit`.
     /// values : (N,) float64
     /// kernel, smoothing, memory_limit, method, progress, partition_options, merge_distance, tolerance
     ///     As for :meth:`fit` (``"auto"``: global below 2000 points); merged points get the
