@@ -172,6 +172,78 @@ def test_a_partition_cut_ships_only_its_part(knot):
     assert np.mean(sizes[10]) < 0.7 * whole and np.mean(sizes[10]) < np.mean(sizes[20]) < whole
 
 
+def test_a_cut_file_reads_back_the_cut_bit_for_bit(knot, tmp_path):
+    """A partition cut written to a file (how the client hands cuts to workers on its machine)
+    loads as the same surface: the same bits at the tile's points, the same state; a process
+    that does not see the file gets CutFileMissing, which the client answers by sending the cut
+    through Dask."""
+    from implicitmesh import _cut_files
+
+    surface = knot[1]
+    lo, hi = np.array([-0.5, -0.2, 0.0]), np.array([0.1, 0.3, 0.4])
+    part = imd.cut_field(surface, lo, hi)
+    cut = _cut_files.write(str(tmp_path), 3, part)
+    assert isinstance(cut, _cut_files.CutFile) and os.path.isfile(cut.path)
+    import pickle
+
+    back = pickle.loads(pickle.dumps(cut)).load()
+    points = lo + (hi - lo) * np.random.default_rng(4).random((300, 3))
+    assert np.array_equal(back(points).view(np.uint64), surface(points).view(np.uint64))
+    assert np.array_equal(back.gradient(points).view(np.uint64), part.gradient(points).view(np.uint64))
+    a, b = part.to_state(), back.to_state()
+    assert a.keys() == b.keys()
+    for k in a:
+        assert np.array_equal(a[k], b[k]) if isinstance(a[k], np.ndarray) else a[k] == b[k]
+    _cut_files.remove(cut)
+    assert not os.path.exists(cut.path) and list(tmp_path.iterdir()) == []
+    with pytest.raises(_cut_files.CutFileMissing):
+        cut.load()
+    assert _cut_files.write(str(tmp_path / "missing"), 0, part) is None
+
+
+@pytest.mark.parametrize("route", ["files", "files-unseen", "scattered"])
+def test_partition_cuts_reach_the_workers_through_files_or_dask(client, knot, monkeypatch, route):
+    """Workers that see the run's directory read each tile's cut from a file there ("files"); a
+    worker that does not see its file has the cut sent again through Dask ("files-unseen"), as
+    do all tiles when the workers do not see the directory ("scattered"): the single machine's
+    mesh each way, and the run's directory removed afterwards."""
+    from implicitmesh import _cut_files, _tile_files
+
+    surface = knot[1]
+    made, original = [], _tile_files.make_directory
+
+    def make_directory():
+        made.append("/nonexistent/implicitmesh-tiles" if route == "scattered" else original())
+        return made[-1]
+
+    monkeypatch.setattr(_tile_files, "make_directory", make_directory)
+    write, sent = _cut_files.write, []
+
+    def counted_write(directory, tile, part):
+        cut = write(directory, tile, part)
+        if route == "files-unseen":
+            os.remove(cut.path)
+            cut = _cut_files.CutFile(os.path.join(directory, "elsewhere", f"cut-{tile}"))
+        sent.append(cut)
+        return cut
+
+    monkeypatch.setattr(_cut_files, "write", counted_write)
+    resent = []
+    collect = imd._collect
+
+    def counted_collect(distributed, futures, cuts, resend, weld, report):
+        return collect(distributed, futures, cuts, lambda i: resent.append(i) or resend(i), weld, report)
+
+    monkeypatch.setattr(imd, "_collect", counted_collect)
+    whole = im.polygonize(surface, resolution=40, method="octree")
+    tiled = imd.polygonize(surface, resolution=40, method="octree", client=client, tile=13)
+    assert_same_mesh(tiled, whole)
+    tiles = tiled.stats["tiles"]
+    assert len(sent) == (0 if route == "scattered" else tiles)
+    assert sorted(resent) == (list(range(tiles)) if route == "files-unseen" else [])
+    assert not os.path.exists(made[0])
+
+
 def test_tiles_get_the_primitives_cut_blobs_gives_them():
     """The primitives of every tile, found for all tiles at once, are those cut_blobs finds for
     the tile alone (uneven tiles, radii from a tenth of a tile to several tiles, centres outside
@@ -547,9 +619,16 @@ def test_the_current_client_is_the_default(client, blobs):
     assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=16, tile=7), whole)
 
 
-def test_a_worker_killed_mid_run_changes_nothing(client, knot):
-    """One worker process is killed when the first tile is done; Dask recomputes its tasks (and
-    the shared field) on the worker left and on the one its nanny restarts."""
+@pytest.mark.parametrize("cuts", ["files", "scattered"])
+def test_a_worker_killed_mid_run_changes_nothing(client, knot, monkeypatch, cuts):
+    """One worker process is killed when the first tile is done; Dask recomputes its tasks on
+    the worker left and on the one its nanny restarts, from the cuts' files, or, for cuts
+    scattered to the killed worker (workers that do not see the run's directory), from the
+    cuts the client sends again."""
+    if cuts == "scattered":
+        from implicitmesh import _tile_files
+
+        monkeypatch.setattr(_tile_files, "make_directory", lambda: None)
     surface = knot[1]
     whole = im.polygonize(surface, resolution=40, method="dense")
     pids = client.run(os.getpid)
@@ -561,9 +640,18 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot):
             os.kill(pid, signal.SIGKILL)
             killed.append(pid)
 
+    resent = []
+    collect = imd._collect
+
+    def counted_collect(distributed, futures, sent, resend, weld, report):
+        return collect(distributed, futures, sent, lambda i: resent.append(i) or resend(i), weld, report)
+
+    monkeypatch.setattr(imd, "_collect", counted_collect)
     tiled = imd.polygonize(surface, resolution=40, method="dense", client=client, tile=8, progress=kill_one)
     assert killed
     assert_same_mesh(tiled, whole)
+    # Files outlive the worker: no cut is sent again. Scattered cuts die with it.
+    assert (len(resent) > 0) == (cuts == "scattered")
 
 
 @pytest.mark.parametrize("transport", ["in-place", "files", "comms", "files-unseen"])

@@ -80,20 +80,30 @@ def write(local: tuple[str, int], name: str, arrays: dict[str, np.ndarray]) -> b
     directory, min_bytes = local
     if sum(a.nbytes for a in arrays.values()) < min_bytes or not os.path.isdir(directory):
         return False
-    path = os.path.join(directory, name)
+    try:
+        write_arrays(os.path.join(directory, name), [arrays[key] for key in ORDER])
+    except OSError:
+        return False
+    return True
+
+
+def write_arrays(path: str, arrays: list[np.ndarray]) -> None:
+    """Writes ``arrays`` to the file ``path`` in ``.npy`` format one after another (through
+    ``path.part``, renamed when complete: the file is whole or absent); each array's data is
+    aligned in the file when those before it hold whole multiples of 8 bytes. Raises OSError
+    when it cannot be written (nothing is left behind)."""
     tmp = path + ".part"
     try:
         with open(tmp, "wb") as fh:
-            for key in ORDER:
-                np.lib.format.write_array(fh, np.ascontiguousarray(arrays[key]), allow_pickle=False)
+            for a in arrays:
+                np.lib.format.write_array(fh, np.ascontiguousarray(a), allow_pickle=False)
         os.replace(tmp, path)
     except OSError:
         try:
             os.remove(tmp)
         except OSError:
             pass
-        return False
-    return True
+        raise
 
 
 @contextmanager
@@ -101,28 +111,39 @@ def read(directory: str, name: str) -> Iterator[dict[str, np.ndarray]]:
     """The tile arrays of ``directory/name``, read-only views of the file mapped in memory, valid
     inside the ``with`` block; the file is deleted afterwards."""
     path = os.path.join(directory, name)
+    try:
+        with mapped_arrays(path) as arrays:
+            yield dict(zip(ORDER, arrays))
+    finally:
+        os.remove(path)
+
+
+@contextmanager
+def mapped_arrays(path: str) -> Iterator[list[np.ndarray]]:
+    """The arrays :func:`write_arrays` wrote to ``path``, read-only views of the file mapped in
+    memory, valid inside the ``with`` block. Raises FileNotFoundError when there is no such
+    file."""
     with open(path, "rb") as fh:
         size = os.fstat(fh.fileno()).st_size
         populate = getattr(mmap, "MAP_POPULATE", 0)
         mapped = mmap.mmap(fh.fileno(), size, flags=mmap.MAP_SHARED | populate, prot=mmap.PROT_READ) if size else None
-        arrays = {}
-        for key in ORDER:
+        arrays = []
+        while fh.tell() < size:
             version = np.lib.format.read_magic(fh)
             header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
             shape, fortran, dtype = header(fh)
             count = int(np.prod(shape, dtype=np.int64))
             start = fh.tell()
             data = np.frombuffer(mapped, dtype=dtype, count=count, offset=start) if count else np.empty(0, dtype)
-            arrays[key] = data.reshape(shape, order="F" if fortran else "C")
+            arrays.append(data.reshape(shape, order="F" if fortran else "C"))
             fh.seek(start + count * dtype.itemsize)
     try:
         yield arrays
     finally:
         arrays.clear()
-        del data
+        data = None
         if mapped is not None:
             try:
                 mapped.close()
             except BufferError:  # a caller kept a view: the mapping goes with it
                 pass
-        os.remove(path)

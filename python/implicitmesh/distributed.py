@@ -20,7 +20,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from . import _core, _tile_files, _weld_in_place
+from . import _core, _cut_files, _tile_files, _weld_in_place
 from ._progress import reporter
 from .mesh import Mesh
 from .polygonize import _check_common, _check_positive
@@ -181,7 +181,10 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     worker can write there and the tile is large enough, see :mod:`implicitmesh._tile_files`),
     or with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the
     manifest; with ``local`` ``_weld_in_place.KEEP``, returns its entry and its arrays, which
-    stay on the worker (see :mod:`implicitmesh._weld_in_place`)."""
+    stay on the worker (see :mod:`implicitmesh._weld_in_place`). ``field`` may be a
+    :class:`implicitmesh._cut_files.CutFile`, read here."""
+    if isinstance(field, _cut_files.CutFile):
+        field = field.load()
     v, f, n, stats, b, k = _core.polygonize(
         field, bounds, resolution, method=method, window=window, boundary=True, **options
     )
@@ -208,16 +211,15 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     return entry
 
 
-def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, scattered: dict | None, i: int):
+def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, sent: "_SentCuts | None", i: int):
     """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field, and
     returns the future of its manifest entry; ``args``: ``(bounds, resolution, method, options,
     output, local)``. With ``kept`` (a weld in place), the tile's arrays stay on its worker
-    (their future in ``kept[i]``) and a second task there gives its entry. With ``scattered``,
-    a partition fit's cut is scattered straight to a worker (its future kept in
-    ``scattered[i]``) instead of travelling inside the task through the scheduler, which a
-    ``LocalCluster`` runs in the client's process."""
-    if scattered is not None and isinstance(part, _core.VariationalSurface):
-        part = scattered[i] = client.scatter(part, direct=True, hash=False)
+    (their future in ``kept[i]``) and a second task there gives its entry. With ``sent``, a
+    partition fit's cut goes to the workers as :class:`_SentCuts` sends it; otherwise inside the
+    task, through the scheduler."""
+    if sent is not None and isinstance(part, _core.VariationalSurface):
+        part = sent.send(part, i)
     tile = client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False)
     if kept is None:
         return tile
@@ -225,14 +227,61 @@ def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, scat
     return client.submit(_weld_in_place.tile_entry, tile, _tile_files.MIN_BYTES, pure=False)
 
 
-def _collect(
-    distributed, futures: list, scattered: dict, resend: Callable, weld: Any, report: Any
-) -> list:
+class _SentCuts:
+    """How the tiles' cuts of a partition fit reach the workers: through files in the run's
+    ``directory`` when every worker sees it (:mod:`implicitmesh._cut_files`), else scattered
+    straight to a worker instead of travelling inside the task through the scheduler, which a
+    ``LocalCluster`` runs in the client's process. A cut's file is removed when its tile is done,
+    unless ``keep_files`` (its tile's arrays stay on a worker, which Dask recomputes them on
+    if the worker dies)."""
+
+    def __init__(self, client, directory: str | None, keep_files: bool):
+        self.client, self.keep_files = client, keep_files
+        self.directory = directory if directory is not None and self._workers_see(directory) else None
+        self.scattered: dict[int, Any] = {}
+        self.files: dict[int, _cut_files.CutFile] = {}
+
+    def _workers_see(self, directory: str) -> bool:
+        seen = self.client.run(os.path.isdir, directory)
+        return bool(seen) and all(seen.values())
+
+    def send(self, part: "_core.VariationalSurface", i: int) -> Any:
+        """What tile ``i``'s task receives for ``part``."""
+        if self.directory is not None:
+            cut = _cut_files.write(self.directory, i, part)
+            if cut is not None:
+                self.files[i] = cut
+                return cut
+        future = self.scattered[i] = self.client.scatter(part, direct=True, hash=False)
+        return future
+
+    def lost(self, i: int, error: BaseException) -> bool:
+        """Whether tile ``i`` failed with ``error`` because its cut did not reach its worker
+        (its scattered cut lost with a worker: Dask does not recompute scattered data; or a
+        worker that does not see its file): it is then sent again inside its task."""
+        if isinstance(error, CancelledError) and self.scattered.pop(i, None) is not None:
+            return True
+        if isinstance(error, _cut_files.CutFileMissing) and i in self.files:
+            _cut_files.remove(self.files.pop(i))
+            return True
+        return False
+
+    def done(self, i: int) -> None:
+        """Tile ``i``'s result has arrived: its cut is no longer needed."""
+        self.scattered.pop(i, None)
+        if not self.keep_files and i in self.files:
+            _cut_files.remove(self.files.pop(i))
+
+    def futures(self) -> list:
+        return list(self.scattered.values())
+
+
+def _collect(distributed, futures: list, sent: _SentCuts | None, resend: Callable, weld: Any, report: Any) -> list:
     """The tiles' manifest entries in window order (the order of ``futures``), each tile's mesh
     added to ``weld`` (when given) as soon as those before it are, then freed; ``report``
-    gets the tiles done. A tile whose scattered cut was lost with its worker (``scattered``
-    holds the scattered cuts' futures by tile) comes back cancelled and is sent again with
-    ``resend(tile)``; ``futures`` gets the new futures."""
+    gets the tiles done. A tile whose cut did not reach its worker (``sent``, see
+    :meth:`_SentCuts.lost`) is sent again with ``resend(tile)``, its new future replacing the
+    old in ``futures``."""
     place = {fut.key: i for i, fut in enumerate(futures)}
     arrived: dict[int, dict] = {}
     entries: list = []
@@ -241,16 +290,18 @@ def _collect(
         i = place[fut.key]
         try:
             arrived[i] = fut.result()
-        except CancelledError:
-            if scattered.pop(i, None) is None:
+        except (CancelledError, _cut_files.CutFileMissing) as e:
+            if sent is None or not sent.lost(i, e):
                 raise
-            # Dask does not recompute scattered data: the cut goes again, inside the task.
-            again = resend(i)
-            futures.append(again)
+            # The failed task is dropped now: its exception's traceback, which holds this
+            # frame, would keep it on the scheduler until Python's cycle collector ran.
+            fut.release()
+            again = futures[i] = resend(i)
             place[again.key] = i
             pending.add(again)
             continue
-        scattered.pop(i, None)
+        if sent is not None:
+            sent.done(i)
         # The worker need not keep a result the client holds (nor spill it to disk).
         fut.release()
         while len(entries) in arrived:
@@ -416,7 +467,9 @@ def polygonize(
     client's machine write each tile into (the client only plans the weld), and the mesh's
     arrays are those files mapped in memory (shared memory, freed with the arrays). Otherwise
     the client welds, beside the workers: workers on its machine hand their tiles over through
-    files there, workers elsewhere, or that cannot write there, through Dask.
+    files there, workers elsewhere, or that cannot write there, through Dask. The tiles' cuts
+    of a partition fit reach the workers through files in that directory too when every worker
+    sees it (with or without ``output``), else through Dask.
     """
     distributed = _import_distributed()
     tile3 = _check_tile(tile)
@@ -454,8 +507,11 @@ def polygonize(
         if not output.is_dir():
             raise ValueError(f"output: {str(output)!r} is not a directory")
     client, own = _get_client(client)
-    futures, shared, scattered, welder, welded = [], None, {}, None, None
-    local = _tile_files.make_directory() if output is None else None
+    futures, shared, sent, welder, welded = [], None, None, None, None
+    cut = _cut_per_tile(field)
+    # The run's directory: for the tiles' meshes of a gathered run, and the cuts of a partition fit.
+    partition = cut and isinstance(field, _core.VariationalSurface)
+    local = _tile_files.make_directory() if output is None or partition else None
     limit = options.get("memory_limit") or _core.DEFAULT_MEMORY_LIMIT
     in_place = output is None and _weld_in_place.usable(local, limit, int(np.prod(tile3)), _worker_threads(client))
     kept: dict | None = {} if in_place else None
@@ -464,7 +520,8 @@ def polygonize(
         # Blob fields and partition fits are cut per tile; any other field is one task's result
         # that the tiles share (a task, not scattered data, so that Dask recomputes it if its
         # worker dies).
-        shared = None if _cut_per_tile(field) else client.submit(_pickled(field), pure=False)
+        shared = None if cut else client.submit(_pickled(field), pure=False)
+        sent = _SentCuts(client, local, in_place) if partition else None
         submit = functools.partial(
             _submit_tile,
             client,
@@ -481,7 +538,7 @@ def polygonize(
         windows: list = []
         for (lo, hi), part in zip(tiles(cells, tile3), _tile_fields(field, shared, cells, origin, cell, tile3)):
             if part is not None:
-                futures.append(submit(part, (lo, hi), scattered, len(windows)))
+                futures.append(submit(part, (lo, hi), sent, len(windows)))
                 windows.append((lo, hi))
         if output is None:
             welder = _gathered_weld(client, local, kept, len(futures), cells, origin, cell, options)
@@ -489,13 +546,13 @@ def polygonize(
         def resend(i: int):
             return submit(cut_field(field, *tile_box(origin, cell, *windows[i])), windows[i], None, i)
 
-        entries = _collect(distributed, futures, scattered, resend, welder, report)
+        entries = _collect(distributed, futures, sent, resend, welder, report)
         if welder is not None:
             welded = welder.result()
     except BaseException:
         # Every task, done or not, and the shared field: a traceback that keeps this frame
         # must not keep their results on the workers.
-        more = list(scattered.values()) + list((kept or {}).values()) + ([] if welder is None else welder.tasks())
+        more = ([] if sent is None else sent.futures()) + list((kept or {}).values()) + ([] if welder is None else welder.tasks())
         client.cancel(futures + more + [f for f in (shared,) if f is not None])
         raise
     finally:

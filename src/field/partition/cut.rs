@@ -20,20 +20,21 @@ impl PartitionSurface {
         // Points are clamped into the root cube before their leaf is looked up.
         let (clo, chi) = self.tree.cube();
         let (blo, bhi) = (lo.clamp(clo, chi), hi.clamp(clo, chi));
-        let mut keep = vec![false; self.patches.len()];
+        // The patches covering the leaves the box meets, in increasing order.
+        let mut seen = vec![false; self.patches.len()];
+        let mut ids: Vec<u32> = Vec::new();
         self.tree.for_each_leaf_meeting_box(blo, bhi, |k| {
             let l = self.tree.leaf_slot[k as usize] as usize;
-            let cover = &self.cover[self.cover_start[l] as usize..self.cover_start[l + 1] as usize];
-            for &i in cover {
-                keep[i as usize] = true;
+            for &i in &self.cover[self.cover_start[l] as usize..self.cover_start[l + 1] as usize] {
+                if !std::mem::replace(&mut seen[i as usize], true) {
+                    ids.push(i);
+                }
             }
         });
-        let mut patches: Vec<_> = self
-            .patches
+        ids.sort_unstable();
+        let mut patches: Vec<_> = ids
             .iter()
-            .zip(&keep)
-            .filter(|(_, &k)| k)
-            .map(|(p, _)| p.clone())
+            .map(|&i| self.patches[i as usize].clone())
             .collect();
         let constraints = self.constraints_indexed(&mut patches);
         let tree = self.tree.pruned_to_box(blo, bhi);
@@ -57,48 +58,47 @@ impl PartitionSurface {
     /// [`PartitionSurface::constraint_at`]).
     fn constraints_indexed(&self, patches: &mut [patches::Patch]) -> Constraints {
         let c = &self.constraints;
-        let mut keep = vec![false; c.points.len()];
+        // The positions (in the points the patches index) the patches use, each once, and
+        // then the new index of each: a map over all positions of which only those the cut
+        // uses are written (its zeroed pages cost nothing until then), so the work follows the
+        // cut, not the whole surface.
+        let mut new = vec![0u32; self.centres.len()];
+        let mut used: Vec<u32> = Vec::new();
         for p in patches.iter() {
             if let PatchCentres::Shared(index) = p.fit.centres() {
                 for &k in index {
-                    keep[self.constraint_at(k) as usize] = true;
+                    if std::mem::replace(&mut new[k as usize], 1) == 0 {
+                        used.push(k);
+                    }
                 }
             }
         }
-        if !keep[..c.boundary].contains(&true) {
-            keep[0] = true;
+        // The constraints at those positions in their order, with their positions.
+        let mut kept: Vec<(u32, u32)> = used.iter().map(|&k| (self.constraint_at(k), k)).collect();
+        kept.sort_unstable();
+        // At least one data point (the first), for the cut's bounds: it comes first.
+        let first = usize::from(kept.first().is_none_or(|e| e.0 as usize >= c.boundary));
+        for (next, &(_, k)) in kept.iter().enumerate() {
+            new[k as usize] = (first + next) as u32;
         }
-        // The new index of each kept constraint.
-        let mut renumber = vec![u32::MAX; c.points.len()];
-        let kept_at = renumber.iter_mut().zip(&keep).filter(|(_, &k)| k);
-        for (next, (r, _)) in kept_at.enumerate() {
-            *r = next as u32;
-        }
-        // The new index of the constraint at each position of the points the patches index.
-        let new: Vec<u32> = (0..self.centres.len() as u32)
-            .map(|k| renumber[self.constraint_at(k) as usize])
-            .collect();
         for p in patches.iter_mut() {
             p.fit.renumber(&new);
         }
+        let order = std::iter::repeat_n(0, first).chain(kept.iter().map(|e| e.0 as usize));
+        let order: Vec<usize> = order.collect();
         Constraints {
-            points: kept(&c.points, &keep),
-            values: kept(&c.values, &keep),
-            offsets: kept(&c.offsets, &keep),
-            boundary: keep[..c.boundary].iter().filter(|&&k| k).count(),
+            points: order.iter().map(|&i| c.points[i]).collect(),
+            values: order.iter().map(|&i| c.values[i]).collect(),
+            offsets: order
+                .iter()
+                .filter(|&&i| i < c.offsets.len())
+                .map(|&i| c.offsets[i])
+                .collect(),
+            boundary: order.iter().filter(|&&i| i < c.boundary).count(),
             normal_of: vec![],
             merged: c.merged,
         }
     }
-}
-
-/// The elements of `all` that `keep` marks, in their order.
-fn kept<T: Copy>(all: &[T], keep: &[bool]) -> Vec<T> {
-    all.iter()
-        .zip(keep)
-        .filter(|(_, &k)| k)
-        .map(|(x, _)| *x)
-        .collect()
 }
 
 #[cfg(test)]
