@@ -231,11 +231,18 @@ const SPACING_CAP_POINTS: usize = 10_000;
 /// large against the support leaves the field on the inner side of the data free to change
 /// sign (small bubbles and handles at 10⁶ points).
 pub fn default_offset(points: &[DVec3]) -> f64 {
+    let grid = (points.len() >= SPACING_CAP_POINTS).then(|| Grid::new(points, 0.0));
+    default_offset_on(points, grid.as_ref())
+}
+
+/// [`default_offset`], with the grid `Grid::new(points, 0.0)` when there are at least
+/// [`SPACING_CAP_POINTS`] points.
+fn default_offset_on(points: &[DVec3], grid: Option<&Grid>) -> f64 {
     let nominal = 0.0075 * largest_side(points);
-    if points.len() < SPACING_CAP_POINTS {
+    let Some(grid) = grid.filter(|_| points.len() >= SPACING_CAP_POINTS) else {
         return nominal;
-    }
-    let spacing = duplicates::typical_spacing(points, &Grid::new(points, 0.0));
+    };
+    let spacing = duplicates::typical_spacing(points, grid);
     if spacing > 0.0 {
         nominal.min(D_OVER_SPACING * spacing)
     } else {
@@ -292,7 +299,16 @@ fn place_distinct(
     settings: &ConstraintSettings,
     caps: Option<&[f64]>,
 ) -> Result<Constraints> {
-    let d = settings.d.unwrap_or_else(|| default_offset(points));
+    // The grid that finds the default offset's spacing, kept for the shrinking below when that
+    // needs the same cells.
+    let mut spacing_grid = (settings.d.is_none() && points.len() >= SPACING_CAP_POINTS)
+        .then(|| Grid::new(points, 0.0));
+    let d = settings
+        .d
+        .unwrap_or_else(|| default_offset_on(points, spacing_grid.as_ref()));
+    if !settings.shrink {
+        spacing_grid = None;
+    }
     if !(d.is_finite() && d > 0.0) {
         return Err(Error::invalid(
             "d",
@@ -317,7 +333,10 @@ fn place_distinct(
         // The points nearer than d_i to q_i + d_i n_i lie in the grid's cells within d_i of it
         // (searched with a radius a little larger, for the rounding of squared distances).
         // Points taken in the grid's order: each query reads the cells the one before read.
-        let grid = Grid::new(points, d);
+        let grid = match spacing_grid.take() {
+            Some(g) if g.is_grid_of(d) => g,
+            _ => Grid::new(points, d),
+        };
         let shrunk: Vec<f64> = grid
             .order()
             .par_iter()

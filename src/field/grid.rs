@@ -1,5 +1,5 @@
 //! A uniform grid over a point set, for fixed-radius neighbour queries: the points are sorted by
-//! cell (counting sort), so that the points of a cell are one contiguous run of indices, and
+//! cell (in parallel), so that the points of a cell are one contiguous run of indices, and
 //! queries read them from a copy in that order. Queries issued in [`Grid::order`] find their
 //! neighbours in memory the previous query read.
 //!
@@ -10,10 +10,44 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// Cells per parallel job when the cells' starts are found.
+const CELLS_PER_RUN: usize = 1 << 16;
+
+/// The side of the cells of a grid over `n` points whose bounding box has sides `extent`:
+/// `cell`, or larger when `cell` would give more than about eight cells per point (or is not
+/// positive and finite).
+fn cell_side(extent: DVec3, n: usize, cell: f64) -> f64 {
+    let max_cells = (8 * n).max(64) as f64;
+    let mut cell = if cell.is_finite() && cell > 0.0 {
+        cell
+    } else {
+        f64::INFINITY
+    };
+    let cells_for = |c: f64| -> f64 {
+        (0..3)
+            .map(|k| (extent[k] / c).floor() + 1.0)
+            .product::<f64>()
+    };
+    let largest = extent.max_element();
+    if !cell.is_finite() || cells_for(cell) > max_cells {
+        // Grow the cell until the grid is small enough (the ratio is applied per axis).
+        cell = if largest > 0.0 {
+            largest / max_cells.cbrt().floor().max(1.0)
+        } else {
+            1.0
+        };
+        while cells_for(cell) > max_cells {
+            cell *= 1.25;
+        }
+    }
+    cell
+}
+
 /// Points binned into cubic cells.
 pub struct Grid<'a> {
     points: &'a [DVec3],
     lo: DVec3,
+    extent: DVec3,
     cell: f64,
     dims: [usize; 3],
     /// `start[c]..start[c + 1]` indexes `order` for the points of cell `c`.
@@ -28,73 +62,71 @@ impl<'a> Grid<'a> {
     /// Bins `points` (finite) into cells of side at least `cell` (larger when `cell` would give
     /// more than about eight cells per point).
     pub fn new(points: &'a [DVec3], cell: f64) -> Self {
-        let (lo, hi) = points.iter().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-        );
+        let (lo, hi) = points
+            .par_iter()
+            .fold(
+                || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+            )
+            .reduce(
+                || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(a, b), (c, d)| (a.min(c), b.max(d)),
+            );
         let (lo, hi) = if points.is_empty() {
             (DVec3::ZERO, DVec3::ZERO)
         } else {
             (lo, hi)
         };
         let extent = (hi - lo).max(DVec3::splat(0.0));
-        let max_cells = (8 * points.len()).max(64) as f64;
-        let mut cell = if cell.is_finite() && cell > 0.0 {
-            cell
-        } else {
-            f64::INFINITY
-        };
-        let cells_for = |c: f64| -> f64 {
-            (0..3)
-                .map(|k| (extent[k] / c).floor() + 1.0)
-                .product::<f64>()
-        };
-        let largest = extent.max_element();
-        if !cell.is_finite() || cells_for(cell) > max_cells {
-            // Grow the cell until the grid is small enough (the ratio is applied per axis).
-            cell = if largest > 0.0 {
-                largest / max_cells.cbrt().floor().max(1.0)
-            } else {
-                1.0
-            };
-            while cells_for(cell) > max_cells {
-                cell *= 1.25;
-            }
-        }
+        let cell = cell_side(extent, points.len(), cell);
         let dims = [0, 1, 2].map(|k| (extent[k] / cell).floor() as usize + 1);
         let ncells = dims[0] * dims[1] * dims[2];
         let key = |p: DVec3| -> usize {
             let c = |k: usize| (((p[k] - lo[k]) / cell).floor() as usize).min(dims[k] - 1);
             c(0) + dims[0] * (c(1) + dims[1] * c(2))
         };
-        // Counting sort in place: `start[c + 1]` counts cell c, then (prefix sums) ends its
-        // run; the points, taken backwards, move each end down to its run's start, so that
-        // `start[c + 1]` is where cell c starts, and one shift down gives `start`.
+        // The points sorted by (cell, index), in parallel: one key of both per point.
+        let mut keyed: Vec<u64> = points
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| ((key(*p) as u64) << 32) | i as u64)
+            .collect();
+        keyed.par_sort_unstable();
+        let order: Vec<u32> = keyed.par_iter().map(|&k| k as u32).collect();
+        // `start[c]`: the points in cells before c, found for runs of cells in parallel (each
+        // run's first from a binary search, the rest by walking the sorted keys).
         let mut start = vec![0u32; ncells + 1];
-        for p in points {
-            start[key(*p) + 1] += 1;
-        }
-        for c in 0..ncells {
-            start[c + 1] += start[c];
-        }
-        let mut order = vec![0u32; points.len()];
-        for (i, p) in points.iter().enumerate().rev() {
-            let end = &mut start[key(*p) + 1];
-            *end -= 1;
-            order[*end as usize] = i as u32;
-        }
-        start.copy_within(1.., 0);
-        start[ncells] = points.len() as u32;
+        start
+            .par_chunks_mut(CELLS_PER_RUN)
+            .enumerate()
+            .for_each(|(r, run)| {
+                let c0 = (r * CELLS_PER_RUN) as u64;
+                let mut at = keyed.partition_point(|&k| k >> 32 < c0);
+                for (c, s) in (c0..).zip(run.iter_mut()) {
+                    while at < keyed.len() && keyed[at] >> 32 < c {
+                        at += 1;
+                    }
+                    *s = at as u32;
+                }
+            });
+        drop(keyed);
         let sorted = order.par_iter().map(|&i| points[i as usize]).collect();
         Grid {
             points,
             lo,
+            extent,
             cell,
             dims,
             start,
             order,
             sorted,
         }
+    }
+
+    /// Whether `Grid::new(points, cell)` over this grid's points gives this grid (the same
+    /// cells).
+    pub fn is_grid_of(&self, cell: f64) -> bool {
+        cell_side(self.extent, self.points.len(), cell) == self.cell
     }
 
     /// The point indices sorted by cell (increasing within a cell): queries around the points
@@ -214,6 +246,35 @@ mod tests {
             }
         }
         assert!(Grid::new(&[], 0.1).within(DVec3::ZERO, 1.0).is_empty());
+    }
+
+    /// Cells hold their points in increasing order, cell after cell (z, then y, then x), as a
+    /// sequential counting sort puts them; and a grid knows the cell sides that give it.
+    #[test]
+    fn points_are_sorted_by_cell_then_index() {
+        let pts = random_points(3000, -1.0, 1.0, 4);
+        for cell in [0.0, 0.03, 0.3, 5.0] {
+            let g = Grid::new(&pts, cell);
+            let key = |i: u32| {
+                let p = pts[i as usize];
+                let c =
+                    |k: usize| (((p[k] - g.lo[k]) / g.cell).floor() as usize).min(g.dims[k] - 1);
+                c(0) + g.dims[0] * (c(1) + g.dims[1] * c(2))
+            };
+            let mut want: Vec<u32> = (0..pts.len() as u32).collect();
+            want.sort_by_key(|&i| (key(i), i));
+            assert_eq!(g.order, want);
+            for (c, w) in g.start.windows(2).enumerate() {
+                assert!(g.order[w[0] as usize..w[1] as usize]
+                    .iter()
+                    .all(|&i| key(i) == c));
+            }
+            assert_eq!(*g.start.last().unwrap() as usize, pts.len());
+            assert!(g.is_grid_of(cell));
+        }
+        // Any cell side below the capped one gives the capped grid; a larger one another grid.
+        let capped = Grid::new(&pts, 0.0);
+        assert!(capped.is_grid_of(1e-9) && !capped.is_grid_of(0.5));
     }
 
     #[test]
