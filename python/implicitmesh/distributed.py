@@ -242,7 +242,10 @@ class _SentCuts:
         self.files: dict[int, _cut_files.CutFile] = {}
 
     def _workers_see(self, directory: str) -> bool:
-        seen = self.client.run(os.path.isdir, directory)
+        try:
+            seen = self.client.run(os.path.isdir, directory)
+        except Exception:  # a worker lost during the call: the cuts go through Dask
+            return False
         return bool(seen) and all(seen.values())
 
     def send(self, part: "_core.VariationalSurface", i: int) -> Any:

@@ -84,8 +84,9 @@ impl PartitionSurface {
         for p in patches.iter_mut() {
             p.fit.renumber(&new);
         }
-        let order = std::iter::repeat_n(0, first).chain(kept.iter().map(|e| e.0 as usize));
-        let order: Vec<usize> = order.collect();
+        let order: Vec<usize> = std::iter::repeat_n(0, first)
+            .chain(kept.iter().map(|e| e.0 as usize))
+            .collect();
         Constraints {
             points: order.iter().map(|&i| c.points[i]).collect(),
             values: order.iter().map(|&i| c.values[i]).collect(),
