@@ -9,7 +9,8 @@ polygonization. A worker that does not see the directory (another machine), or c
 file (shared memory full), returns the arrays as usual.
 
 The file holds the arrays in ``.npy`` format one after another, the 8-byte ones first so that
-every array's data is aligned.
+every array's data is aligned (:func:`write_arrays`, :func:`mapped_arrays`; a partition fit's
+tile cuts travel the same way to the workers, see :mod:`implicitmesh._cut_files`).
 """
 
 from __future__ import annotations
