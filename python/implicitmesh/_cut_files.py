@@ -62,7 +62,7 @@ def write(directory: str, tile: int, surface: "_core.VariationalSurface") -> Cut
     path = os.path.join(directory, f"cut-{tile}")
     try:
         _tile_files.write_arrays(path, [arrays[k] for k in names] + [np.frombuffer(json.dumps(header).encode(), np.uint8)])
-    except (OSError, TypeError, ValueError):
+    except OSError:
         return None
     return CutFile(path)
 

@@ -255,8 +255,8 @@ class _SentCuts:
             if cut is not None:
                 self.files[i] = cut
                 return cut
-        future = self.scattered[i] = self.client.scatter(part, direct=True, hash=False)
-        return future
+        self.scattered[i] = self.client.scatter(part, direct=True, hash=False)
+        return self.scattered[i]
 
     def lost(self, i: int, error: BaseException) -> bool:
         """Whether tile ``i`` failed with ``error`` because its cut did not reach its worker
