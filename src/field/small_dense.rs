@@ -2,7 +2,8 @@
 //! solved one per rayon task, see [`super::saddle`]): a symmetric matrix stored as its lower
 //! triangle times four columns, a rank-8 update of a lower triangle, and the two triangular
 //! solves with a Cholesky factor. At these sizes a call to a general matrix library costs more
-//! in dispatch and packing than these loops do in flops.
+//! in dispatch and packing than these loops do in flops. The product and the update take two
+//! columns per pass over the rows, so that each row's loads serve both columns.
 //!
 //! Sums run over fixed lanes of eight partial sums, added in one fixed order, so the
 //! results are the same bits on every instruction set; the loops are compiled for AVX-512 and
@@ -80,32 +81,67 @@ fn symmetric_times_four_on(isa: Isa, a: &[f64], n: usize, v: &[f64], w: &mut [f6
         let (w0, rest) = w.split_at_mut(n);
         let (w1, rest) = rest.split_at_mut(n);
         let (w2, w3) = rest.split_at_mut(n);
-        let vk = |k: usize| &v[k * n..(k + 1) * n];
-        for j in 0..n {
-            // Column j at and below the diagonal: A[i, j] for i in j..n.
-            let col = &a[j * n + j..(j + 1) * n];
-            let m = col.len();
-            // Row i > j of W gains A[i, j] V[j, k] (and row j its diagonal term) ...
-            let s = [vk(0)[j], vk(1)[j], vk(2)[j], vk(3)[j]];
-            let (x0, x1, x2, x3) = (
-                &mut w0[j..j + m],
-                &mut w1[j..j + m],
-                &mut w2[j..j + m],
-                &mut w3[j..j + m],
-            );
-            for i in 0..m {
-                let c = col[i];
-                x0[i] += c * s[0];
-                x1[i] += c * s[1];
-                x2[i] += c * s[2];
-                x3[i] += c * s[3];
+        let mut w = [w0, w1, w2, w3];
+        let v: [&[f64]; 4] = std::array::from_fn(|k| &v[k * n..(k + 1) * n]);
+        // Columns j and j + 1 at once: one pass over the rows below both adds their terms
+        // to those rows of W and gathers the rows' terms of W's rows j and j + 1.
+        let mut j = 0;
+        while j + 1 < n {
+            let c0 = &a[j * n + j..(j + 1) * n];
+            let c1 = &a[(j + 1) * n + j + 1..(j + 2) * n];
+            let s0: [f64; 4] = std::array::from_fn(|k| v[k][j]);
+            let s1: [f64; 4] = std::array::from_fn(|k| v[k][j + 1]);
+            // The 2 × 2 diagonal block.
+            for k in 0..4 {
+                w[k][j] += c0[0] * s0[k] + c0[1] * s1[k];
+                w[k][j + 1] += c0[1] * s0[k] + c1[0] * s1[k];
             }
-            // ... and row j gains Σ_{i > j} A[i, j] V[i, k].
-            let below = &col[1..];
-            w0[j] += dot(below, &vk(0)[j + 1..]);
-            w1[j] += dot(below, &vk(1)[j + 1..]);
-            w2[j] += dot(below, &vk(2)[j + 1..]);
-            w3[j] += dot(below, &vk(3)[j + 1..]);
+            // Rows j + 2.. : A[i, j] and A[i, j + 1].
+            let (x0, x1) = (&c0[2..], &c1[1..]);
+            let m = x0.len();
+            let below = j + 2;
+            let full = m / LANES * LANES;
+            let mut d0 = [[0.0f64; LANES]; 4];
+            let mut d1 = [[0.0f64; LANES]; 4];
+            {
+                let [wa, wb, wc, wd] = &mut w;
+                let (wa, wb) = (&mut wa[below..below + m], &mut wb[below..below + m]);
+                let (wc, wd) = (&mut wc[below..below + m], &mut wd[below..below + m]);
+                let vr: [&[f64]; 4] = std::array::from_fn(|k| &v[k][below..below + m]);
+                for t in (0..full).step_by(LANES) {
+                    let a0: [f64; LANES] = x0[t..t + LANES].try_into().unwrap();
+                    let a1: [f64; LANES] = x1[t..t + LANES].try_into().unwrap();
+                    for (k, wk) in [&mut *wa, &mut *wb, &mut *wc, &mut *wd].into_iter().enumerate() {
+                        let vk: [f64; LANES] = vr[k][t..t + LANES].try_into().unwrap();
+                        let wk: &mut [f64; LANES] = (&mut wk[t..t + LANES]).try_into().unwrap();
+                        for l in 0..LANES {
+                            wk[l] += a0[l] * s0[k] + a1[l] * s1[k];
+                            d0[k][l] += a0[l] * vk[l];
+                            d1[k][l] += a1[l] * vk[l];
+                        }
+                    }
+                }
+            }
+            for k in 0..4 {
+                let (wk, vk) = (&mut w[k][below..below + m], &v[k][below..below + m]);
+                let (sk0, sk1) = (s0[k], s1[k]);
+                let mut e0 = d0[k].iter().sum::<f64>();
+                let mut e1 = d1[k].iter().sum::<f64>();
+                for i in full..m {
+                    let (a0, a1, vi) = (x0[i], x1[i], vk[i]);
+                    wk[i] += a0 * sk0 + a1 * sk1;
+                    e0 += a0 * vi;
+                    e1 += a1 * vi;
+                }
+                w[k][j] += e0;
+                w[k][j + 1] += e1;
+            }
+            j += 2;
+        }
+        if j < n {
+            for k in 0..4 {
+                w[k][j] += a[j * n + j] * v[k][j];
+            }
         }
     })
 }
@@ -119,22 +155,42 @@ pub fn subtract_lower_rank8(a: &mut [f64], n: usize, left: &[f64], right: &[f64]
 fn subtract_lower_rank8_on(isa: Isa, a: &mut [f64], n: usize, left: &[f64], right: &[f64]) {
     assert!(a.len() >= n * n && left.len() >= 8 * n && right.len() >= 8 * n);
     on_isa!(isa, fn(a: &mut [f64], n: usize, left: &[f64], right: &[f64]) {
-        for j in 0..n {
-            let r: [f64; 8] = std::array::from_fn(|k| right[k * n + j]);
-            let col = &mut a[j * n + j..(j + 1) * n];
-            let m = col.len();
-            let l: [&[f64]; 8] = std::array::from_fn(|k| &left[k * n + j..k * n + j + m]);
-            for i in 0..m {
-                let mut s = l[0][i] * r[0];
-                s += l[1][i] * r[1];
-                s += l[2][i] * r[2];
-                s += l[3][i] * r[3];
-                s += l[4][i] * r[4];
-                s += l[5][i] * r[5];
-                s += l[6][i] * r[6];
-                s += l[7][i] * r[7];
-                col[i] -= s;
+        let l: [&[f64]; 8] = std::array::from_fn(|k| &left[k * n..(k + 1) * n]);
+        // Σ_k L[i, k] R[j, k], in increasing k.
+        let term = |i: usize, r: &[f64; 8]| {
+            let mut s = l[0][i] * r[0];
+            for k in 1..8 {
+                s += l[k][i] * r[k];
             }
+            s
+        };
+        // Columns j and j + 1 at once: each row's eight entries of L are read once for both.
+        let mut j = 0;
+        while j < n {
+            let r0: [f64; 8] = std::array::from_fn(|k| right[k * n + j]);
+            if j + 1 == n {
+                a[j * n + j] -= term(j, &r0);
+                break;
+            }
+            let r1: [f64; 8] = std::array::from_fn(|k| right[k * n + j + 1]);
+            let (first, second) = a[j * n..(j + 2) * n].split_at_mut(n);
+            first[j] -= term(j, &r0);
+            // Rows j + 1.. of both columns.
+            let (c0, c1) = (&mut first[j + 1..], &mut second[j + 1..]);
+            let m = c0.len();
+            let lr: [&[f64]; 8] = std::array::from_fn(|k| &l[k][j + 1..j + 1 + m]);
+            for i in 0..m {
+                let x: [f64; 8] = std::array::from_fn(|k| lr[k][i]);
+                let mut s0 = x[0] * r0[0];
+                let mut s1 = x[0] * r1[0];
+                for k in 1..8 {
+                    s0 += x[k] * r0[k];
+                    s1 += x[k] * r1[k];
+                }
+                c0[i] -= s0;
+                c1[i] -= s1;
+            }
+            j += 2;
         }
     })
 }
