@@ -191,17 +191,17 @@ impl PartitionSurface {
     /// is set (checked between the two octrees it builds).
     fn tree(c: &Constraints, settings: &PartitionSettings) -> Result<Octree> {
         let (centre, half) = Self::cube(c);
-        // A first octree counts the constraints in the balls of the final one's nodes.
+        // A first octree counts the constraints in the balls of the final one's nodes, which
+        // splits it further where a ball holds too many.
         let counts = Octree::new(&c.points, centre, half, settings.max_per_leaf);
         crate::cancel::check()?;
-        Ok(Octree::build(&c.points, centre, half, |n| {
-            (n.end - n.start) as usize > settings.max_per_leaf
-                || counts.more_within_than(
-                    &c.points,
-                    n.centre,
-                    settings.overlap * n.half_diagonal(),
-                    settings.max_patch,
-                )
+        Ok(counts.refined(|counts, n| {
+            counts.more_within_than(
+                &c.points,
+                n.centre,
+                settings.overlap * n.half_diagonal(),
+                settings.max_patch,
+            )
         }))
     }
 

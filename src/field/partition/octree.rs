@@ -138,6 +138,56 @@ fn disjoint_runs<'a>(
     runs
 }
 
+/// The runs of the nodes `splitting` (whose runs are disjoint and increasing) in `order` and
+/// `sorted`.
+fn disjoint_runs_in_place<'a>(
+    nodes: &[Node],
+    splitting: &[usize],
+    mut order: &'a mut [u32],
+    mut sorted: &'a mut [DVec3],
+) -> Vec<(DVec3, &'a mut [u32], &'a mut [DVec3])> {
+    let mut offset = 0;
+    let mut runs = Vec::with_capacity(splitting.len());
+    for &k in splitting {
+        let n = &nodes[k];
+        let (a, b) = (n.start as usize, n.end as usize);
+        let (_, rest) = std::mem::take(&mut order).split_at_mut(a - offset);
+        let (run, rest) = rest.split_at_mut(b - a);
+        order = rest;
+        let (_, rest) = std::mem::take(&mut sorted).split_at_mut(a - offset);
+        let (pts, rest) = rest.split_at_mut(b - a);
+        sorted = rest;
+        runs.push((n.centre, run, pts));
+        offset = b;
+    }
+    runs
+}
+
+/// [`split_run`] through `scratch` (grown to the run's length), for the short runs of
+/// [`Octree::refined`].
+fn split_run_in_place(
+    (centre, run, pts): (DVec3, &mut [u32], &mut [DVec3]),
+    scratch: &mut Vec<(u32, DVec3)>,
+) -> [usize; 9] {
+    scratch.clear();
+    scratch.extend(run.iter().copied().zip(pts.iter().copied()));
+    let mut bounds = [0usize; 9];
+    for p in pts.iter() {
+        bounds[octant(*p, centre) + 1] += 1;
+    }
+    for o in 0..8 {
+        bounds[o + 1] += bounds[o];
+    }
+    let mut fill = bounds;
+    for &(i, p) in scratch.iter() {
+        let slot = &mut fill[octant(p, centre)];
+        run[*slot] = i;
+        pts[*slot] = p;
+        *slot += 1;
+    }
+    bounds
+}
+
 /// Sorts a node's run (indices and points) by octant of its centre, stably, through the
 /// run's scratch space; returns where each octant's run starts (and, at 8, the end).
 fn split_run((centre, run, pts, spare_run, spare_pts): Run<'_>) -> [usize; 9] {
@@ -234,6 +284,87 @@ impl Octree {
         Octree {
             order,
             sorted,
+            ..Octree::from_nodes(nodes)
+        }
+    }
+
+    /// This octree split further: a node is split where this one is, and a leaf of it (or a
+    /// node below one) where `split(self, node)` says so (and the depth is below 24). The
+    /// result is the tree [`Octree::build`] gives for that rule, node for node. `split` sees
+    /// this tree while its points are sorted further within its leaves, which changes no
+    /// query's answer. The points are sorted in place: no copy of them is made.
+    pub fn refined(mut self, split: impl Fn(&Octree, &Node) -> bool + Sync) -> Octree {
+        let mut nodes = vec![self.nodes[0]];
+        nodes[0].children = 0;
+        let mut depth = vec![0u32];
+        // The node of `self` each node stands for (`u32::MAX` below a leaf of `self`).
+        let mut from = vec![0u32];
+        let mut level = 0..1;
+        while !level.is_empty() {
+            let here = &self;
+            let splitting: Vec<usize> = level
+                .clone()
+                .into_par_iter()
+                .filter(|&k| {
+                    let mirror = from[k] != u32::MAX && !here.nodes[from[k] as usize].is_leaf();
+                    mirror || (depth[k] < MAX_DEPTH && split(here, &nodes[k]))
+                })
+                .collect();
+            // The runs of the nodes split below the leaves of `self`, each sorted by octant
+            // (those `self` splits are sorted already).
+            let fresh: Vec<usize> = splitting
+                .iter()
+                .copied()
+                .filter(|&k| from[k] == u32::MAX || self.nodes[from[k] as usize].is_leaf())
+                .collect();
+            let runs = disjoint_runs_in_place(&nodes, &fresh, &mut self.order, &mut self.sorted);
+            let bounds: Vec<[usize; 9]> = runs
+                .into_par_iter()
+                .map_init(Vec::new, |scratch, run| split_run_in_place(run, scratch))
+                .collect();
+            let mut fresh_bounds = bounds.into_iter();
+            let next = nodes.len();
+            for &k in &splitting {
+                let n = nodes[k];
+                let first = nodes.len() as u32;
+                nodes[k].children = first;
+                let h = 0.5 * n.half;
+                // The node of `self` this one stands for, when `self` splits it.
+                let mirror = (from[k] != u32::MAX)
+                    .then(|| self.nodes[from[k] as usize])
+                    .filter(|m| !m.is_leaf());
+                let b = match mirror {
+                    None => fresh_bounds.next().expect("a fresh split has its bounds"),
+                    Some(_) => [0; 9],
+                };
+                for o in 0..8 {
+                    let sign = |bit: usize| if o >> bit & 1 == 1 { h } else { -h };
+                    let centre = n.centre + DVec3::new(sign(0), sign(1), sign(2));
+                    let (start, end, source) = match mirror {
+                        Some(m) => {
+                            let c = m.children + o as u32;
+                            let child = &self.nodes[c as usize];
+                            debug_assert_eq!((child.centre, child.half), (centre, h));
+                            (child.start, child.end, c)
+                        }
+                        None => (n.start + b[o] as u32, n.start + b[o + 1] as u32, u32::MAX),
+                    };
+                    nodes.push(Node {
+                        centre,
+                        half: h,
+                        children: 0,
+                        start,
+                        end,
+                    });
+                    depth.push(depth[k] + 1);
+                    from.push(source);
+                }
+            }
+            level = next..nodes.len();
+        }
+        Octree {
+            order: std::mem::take(&mut self.order),
+            sorted: std::mem::take(&mut self.sorted),
             ..Octree::from_nodes(nodes)
         }
     }
@@ -593,6 +724,32 @@ mod tests {
             ]);
         for p in inside {
             assert!(in_box.contains(&t.leaf_of(p)), "{p}");
+        }
+    }
+
+    /// Splitting a tree further gives the tree built at once with both rules, node for node,
+    /// with the same order of points.
+    #[test]
+    fn a_refined_tree_is_the_tree_built_with_both_rules() {
+        let mut pts = random_points(4000, -0.9, 0.9, 5);
+        // A dense cluster, and coincident points that stop at the largest depth.
+        pts.extend(random_points(600, 0.2, 0.21, 6));
+        pts.extend(std::iter::repeat_n(DVec3::new(-0.3, 0.4, 0.1), 80));
+        for (per_leaf, limit) in [(40usize, 120usize), (16, 30), (200, 1000)] {
+            let coarse = Octree::new(&pts, DVec3::ZERO, 1.0, per_leaf);
+            let wanted = |t: &Octree, n: &Node| {
+                t.more_within_than(&pts, n.centre, 1.2 * n.half_diagonal(), limit)
+            };
+            let once = Octree::build(&pts, DVec3::ZERO, 1.0, |n| {
+                (n.end - n.start) as usize > per_leaf || wanted(&coarse, n)
+            });
+            let refined = coarse.clone().refined(wanted);
+            assert!(refined.nodes.len() > coarse.nodes.len(), "{per_leaf}");
+            assert_eq!(refined.nodes, once.nodes);
+            assert_eq!(refined.order, once.order);
+            assert_eq!(refined.sorted, once.sorted);
+            assert_eq!(refined.leaves, once.leaves);
+            assert_eq!(refined.leaf_slot, once.leaf_slot);
         }
     }
 
