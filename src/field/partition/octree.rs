@@ -163,6 +163,19 @@ fn disjoint_runs_in_place<'a>(
     runs
 }
 
+/// Where each octant's run starts among `pts` sorted stably by octant of `centre` (and, at 8,
+/// the end).
+fn octant_bounds(pts: &[DVec3], centre: DVec3) -> [usize; 9] {
+    let mut bounds = [0usize; 9];
+    for p in pts.iter() {
+        bounds[octant(*p, centre) + 1] += 1;
+    }
+    for o in 0..8 {
+        bounds[o + 1] += bounds[o];
+    }
+    bounds
+}
+
 /// [`split_run`] through `scratch` (grown to the run's length), for the short runs of
 /// [`Octree::refined`].
 fn split_run_in_place(
@@ -171,13 +184,7 @@ fn split_run_in_place(
 ) -> [usize; 9] {
     scratch.clear();
     scratch.extend(run.iter().copied().zip(pts.iter().copied()));
-    let mut bounds = [0usize; 9];
-    for p in pts.iter() {
-        bounds[octant(*p, centre) + 1] += 1;
-    }
-    for o in 0..8 {
-        bounds[o + 1] += bounds[o];
-    }
+    let bounds = octant_bounds(pts, centre);
     let mut fill = bounds;
     for &(i, p) in scratch.iter() {
         let slot = &mut fill[octant(p, centre)];
@@ -191,13 +198,7 @@ fn split_run_in_place(
 /// Sorts a node's run (indices and points) by octant of its centre, stably, through the
 /// run's scratch space; returns where each octant's run starts (and, at 8, the end).
 fn split_run((centre, run, pts, spare_run, spare_pts): Run<'_>) -> [usize; 9] {
-    let mut bounds = [0usize; 9];
-    for p in pts.iter() {
-        bounds[octant(*p, centre) + 1] += 1;
-    }
-    for o in 0..8 {
-        bounds[o + 1] += bounds[o];
-    }
+    let bounds = octant_bounds(pts, centre);
     let mut fill = bounds;
     for (&i, p) in run.iter().zip(pts.iter()) {
         let slot = &mut fill[octant(*p, centre)];
