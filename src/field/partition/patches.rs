@@ -15,12 +15,13 @@ use super::coarse::Level;
 use super::empty;
 use super::octree::Octree;
 use super::PartitionSettings;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::field::constraints::Constraints;
 use crate::field::rbf::{self, PatchFit, VariationalSurface};
 use faer::Par;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::Mutex;
 
 /// One fitted patch.
 #[derive(Clone, Debug)]
@@ -253,75 +254,98 @@ pub fn fit(
     // The caller's token (rayon's threads do not see it): patches stop when it is set, and
     // count the constraints they fitted.
     let token = crate::cancel::current();
-    let fitted: Vec<Result<Patch>> = supports
-        .par_iter()
-        .with_max_len(FIT_RUN)
-        .map(|s| {
-            if let Some(t) = &token {
-                t.check()?;
-            }
-            let (centre, radius) = (s.centre, s.radius);
-            if s.is_plane() {
-                let (pts, vals) = empty::plane(c, &slots, tree, centre, radius);
-                let fit = PatchFit::fit(None, pts, vals, &rbf_settings, Par::Seq)?;
-                return Ok(Patch {
-                    centre,
-                    radius,
-                    inside: 0,
-                    size: empty::PLANE_POINTS,
-                    fit,
-                });
-            }
-            // The constraints inside (index, position in the tree's order, point), read from
-            // the tree's copy in leaf order; then those completing the system (index, point).
-            let mut own: Vec<(u32, u32, DVec3)> = Vec::with_capacity(s.inside);
-            tree.for_each_within_ranked(&c.points, centre, radius, |i, k, p| own.push((i, k, p)));
-            let mut outside: Vec<(u32, DVec3)> = Vec::new();
-            if let Some((l, reach, _)) = s.extra {
-                let mut visit = |i: u32, p: DVec3| {
-                    if (p - centre).length_squared() > radius * radius {
-                        outside.push((i, p));
-                    }
-                };
-                if l == usize::MAX {
-                    tree.for_each_within_ranked(&c.points, centre, reach, |i, _, p| visit(i, p));
-                } else {
-                    levels[l].for_each_within(centre, reach, visit);
-                }
-            }
-            own.sort_unstable_by_key(|e| e.0);
-            outside.sort_unstable_by_key(|e| e.0);
-            let inside = own.len();
-            let size = inside + outside.len();
-            let pts = own
-                .iter()
-                .map(|e| e.2)
-                .chain(outside.iter().map(|e| e.1))
-                .collect();
-            let vals = own
-                .iter()
-                .map(|e| ranked_values[e.1 as usize])
-                .chain(outside.iter().map(|e| c.values[e.0 as usize]))
-                .collect();
-            let index = own
-                .iter()
-                .map(|e| e.1)
-                .chain(outside.iter().map(|e| rank[e.0 as usize]))
-                .collect();
-            let fit = PatchFit::fit(Some(index), pts, vals, &rbf_settings, Par::Seq)?;
-            if let Some(t) = &token {
-                t.advance(inside as u64)?;
-            }
-            Ok(Patch {
+    let one = |s: &Support| -> Result<Patch> {
+        if let Some(t) = &token {
+            t.check()?;
+        }
+        let (centre, radius) = (s.centre, s.radius);
+        if s.is_plane() {
+            let (pts, vals) = empty::plane(c, &slots, tree, centre, radius);
+            let fit = PatchFit::fit(None, pts, vals, &rbf_settings, Par::Seq)?;
+            return Ok(Patch {
                 centre,
                 radius,
-                inside,
-                size,
+                inside: 0,
+                size: empty::PLANE_POINTS,
                 fit,
-            })
+            });
+        }
+        // The constraints inside (index, position in the tree's order, point), read from
+        // the tree's copy in leaf order; then those completing the system (index, point).
+        let mut own: Vec<(u32, u32, DVec3)> = Vec::with_capacity(s.inside);
+        tree.for_each_within_ranked(&c.points, centre, radius, |i, k, p| own.push((i, k, p)));
+        let mut outside: Vec<(u32, DVec3)> = Vec::new();
+        if let Some((l, reach, _)) = s.extra {
+            let mut visit = |i: u32, p: DVec3| {
+                if (p - centre).length_squared() > radius * radius {
+                    outside.push((i, p));
+                }
+            };
+            if l == usize::MAX {
+                tree.for_each_within_ranked(&c.points, centre, reach, |i, _, p| visit(i, p));
+            } else {
+                levels[l].for_each_within(centre, reach, visit);
+            }
+        }
+        own.sort_unstable_by_key(|e| e.0);
+        outside.sort_unstable_by_key(|e| e.0);
+        let inside = own.len();
+        let size = inside + outside.len();
+        let pts = own
+            .iter()
+            .map(|e| e.2)
+            .chain(outside.iter().map(|e| e.1))
+            .collect();
+        let vals = own
+            .iter()
+            .map(|e| ranked_values[e.1 as usize])
+            .chain(outside.iter().map(|e| c.values[e.0 as usize]))
+            .collect();
+        let index = own
+            .iter()
+            .map(|e| e.1)
+            .chain(outside.iter().map(|e| rank[e.0 as usize]))
+            .collect();
+        let fit = PatchFit::fit(Some(index), pts, vals, &rbf_settings, Par::Seq)?;
+        if let Some(t) = &token {
+            t.advance(inside as u64)?;
+        }
+        Ok(Patch {
+            centre,
+            radius,
+            inside,
+            size,
+            fit,
+        })
+    };
+    // The first failing patch (in leaf order) and its error; a failed patch is `None`.
+    let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
+    let fitted: Vec<Option<Patch>> = supports
+        .par_iter()
+        .enumerate()
+        .with_max_len(FIT_RUN)
+        .map(|(k, s)| {
+            one(s)
+                .map_err(|e| {
+                    let mut first = failure.lock().unwrap_or_else(|p| p.into_inner());
+                    if first.as_ref().is_none_or(|(j, _)| k < *j) {
+                        *first = Some((k, e));
+                    }
+                })
+                .ok()
         })
         .collect();
-    fitted.into_iter().collect()
+    if let Some((_, e)) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        return Err(e);
+    }
+    Ok(into_patches(fitted))
+}
+
+/// The patches of `fitted`, all fitted, in the memory of `fitted` (`Option<Patch>` has the
+/// layout of `Patch`, and collecting through `filter_map` reuses it).
+#[allow(clippy::filter_map_identity)]
+pub(super) fn into_patches(fitted: Vec<Option<Patch>>) -> Vec<Patch> {
+    fitted.into_iter().filter_map(|p| p).collect()
 }
 
 /// The inverse of the permutation `order`: `inverse(order)[order[k]] = k`.
