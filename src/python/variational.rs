@@ -16,6 +16,7 @@ use numpy::PyArray1;
 use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::borrow::Cow;
 use std::sync::Arc;
 
 /// Constraints (2 per data point for `fit` and `from_mesh`) from which `method="auto"` fits a
@@ -39,10 +40,17 @@ impl Fitted {
             Fitted::Partition(s) => s.as_ref(),
         }
     }
-    pub fn constraints(&self) -> &Constraints {
+    /// The constraints (for a partition fit, its points gathered into the constraints' order).
+    pub fn constraints(&self) -> Cow<'_, Constraints> {
         match self {
-            Fitted::Global(s) => s.constraints(),
+            Fitted::Global(s) => Cow::Borrowed(s.constraints()),
             Fitted::Partition(s) => s.constraints(),
+        }
+    }
+    fn constraint_count(&self) -> usize {
+        match self {
+            Fitted::Global(s) => s.constraints().points.len(),
+            Fitted::Partition(s) => s.constraint_count(),
         }
     }
     fn kernel(&self) -> Kernel {
@@ -60,7 +68,7 @@ impl Fitted {
     fn merged(&self) -> usize {
         match self {
             Fitted::Global(s) => s.constraints().merged,
-            Fitted::Partition(s) => s.constraints().merged,
+            Fitted::Partition(s) => s.merged(),
         }
     }
     fn data_bounding_box(&self) -> (DVec3, DVec3) {
@@ -695,7 +703,11 @@ impl PyVariationalSurface {
     /// For a partition fit, the centres of all patches together: the constraint points.
     #[getter]
     fn centers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        points_to_py(py, self.inner.constraints().points.clone())
+        let points = match &self.inner {
+            Fitted::Global(s) => s.constraints().points.clone(),
+            Fitted::Partition(s) => s.constraint_points().into_owned(),
+        };
+        points_to_py(py, points)
     }
 
     /// (M,) float64: the weights λ_j. Global fits only: a partition fit has one set of weights
@@ -892,7 +904,7 @@ impl PyVariationalSurface {
     }
 
     fn __len__(&self) -> usize {
-        self.inner.constraints().points.len()
+        self.inner.constraint_count()
     }
 
     fn __repr__(&self) -> String {
@@ -904,7 +916,7 @@ impl PyVariationalSurface {
             "VariationalSurface(method={:?}, kernel={:?}, centers={}{patches}, residual={:.2e})",
             self.inner.method(),
             self.inner.kernel().name(),
-            self.inner.constraints().points.len(),
+            self.inner.constraint_count(),
             self.inner.residual()
         )
     }

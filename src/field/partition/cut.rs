@@ -5,6 +5,7 @@
 //! constraints the kept patches' centres are, renumbered.
 
 use super::{patches, Constraints, PartitionSurface};
+use crate::field::constraints::bounding_box;
 use crate::field::rbf::PatchCentres;
 use glam::DVec3;
 
@@ -42,6 +43,7 @@ impl PartitionSurface {
         PartitionSurface {
             settings: self.settings,
             centres: constraints.points.clone(),
+            data_box: bounding_box(&constraints.points[..constraints.boundary]),
             constraints,
             tree,
             cut: true,
@@ -50,6 +52,16 @@ impl PartitionSurface {
             cover,
             residual: self.residual,
         }
+    }
+
+    /// Constraint `i`'s point (a search of the octree's order for a whole surface, which keeps
+    /// its points in that order only).
+    fn constraint_point(&self, i: u32) -> DVec3 {
+        if self.constraints.points.len() == self.centres.len() {
+            return self.constraints.points[i as usize];
+        }
+        let k = self.tree.order.iter().position(|&j| j == i);
+        self.centres[k.expect("every constraint has a position")]
     }
 
     /// The constraints the centres of `patches` are, in their order (data points first, as in
@@ -87,8 +99,15 @@ impl PartitionSurface {
         let order: Vec<usize> = std::iter::repeat_n(0, first)
             .chain(kept.iter().map(|e| e.0 as usize))
             .collect();
+        // The points, from the patches' copy: at the positions kept, and the first data
+        // point's wherever it is.
+        let first_point = (first == 1).then(|| self.constraint_point(0));
+        let points = first_point
+            .into_iter()
+            .chain(kept.iter().map(|e| self.centres[e.1 as usize]))
+            .collect();
         Constraints {
-            points: order.iter().map(|&i| c.points[i]).collect(),
+            points,
             values: order.iter().map(|&i| c.values[i]).collect(),
             offsets: order
                 .iter()
@@ -117,8 +136,9 @@ mod tests {
         assert!(cut.patches.len() < s.patches.len() && !cut.patches.is_empty());
         assert!(cut.tree.nodes.len() < s.tree.nodes.len());
         let c = &cut.constraints;
-        assert!(c.points.len() < s.constraints.points.len() && c.boundary > 0);
-        assert!(c.points.iter().all(|p| s.constraints.points.contains(p)));
+        let all = s.constraint_points();
+        assert!(c.points.len() < all.len() && c.boundary > 0);
+        assert!(c.points.iter().all(|p| all.contains(p)));
         // Its parts carry its octree: the surface they give is the same, bit for bit.
         let cut = PartitionSurface::from_parts(cut.parts()).unwrap();
         let points: Vec<DVec3> = random_points(2000, 0.0, 1.0, 11)

@@ -43,15 +43,22 @@ pub fn normal_slots(c: &Constraints) -> Vec<u32> {
 
 /// The points and values, a linear function of position, whose interpolant (with a linear
 /// polynomial) is the plane of the empty patch around `centre` with support `radius`. `c` must
-/// be [`oriented`], `tree` its octree, `slots` its [`normal_slots`]. The data points that vote
-/// are those with a normal constraint.
+/// be [`oriented`] (its points are not read: they are read from the copy of `tree`, its octree,
+/// which must have one, through `rank`, the position of each constraint in the tree's order),
+/// `slots` its [`normal_slots`]. The data points that vote are those with a normal constraint.
 pub fn plane(
     c: &Constraints,
     slots: &[u32],
     tree: &Octree,
+    rank: &[u32],
     centre: DVec3,
     radius: f64,
 ) -> (Vec<DVec3>, Vec<f64>) {
+    assert!(
+        tree.has_copy(),
+        "the octree reads its own copy of the points"
+    );
+    let point = |j: usize| tree.point_at(rank[j] as usize);
     let b = c.boundary;
     let normals = c.normal_of.len();
     // The 2 NEAREST nearest constraints hold about NEAREST data points with normal constraints
@@ -60,9 +67,9 @@ pub fn plane(
     let mut k = 2 * NEAREST;
     let mut data: Vec<usize> = Vec::with_capacity(k);
     while data.is_empty() {
-        k = k.min(c.points.len());
-        let reach = tree.kth_nearest_distance(&c.points, centre, k);
-        tree.for_each_within(&c.points, centre, reach, |i| {
+        k = k.min(c.values.len());
+        let reach = tree.kth_nearest_distance(&[], centre, k);
+        tree.for_each_within(&[], centre, reach, |i| {
             let i = i as usize;
             if i < b && slots[i] != u32::MAX {
                 data.push(i);
@@ -72,7 +79,7 @@ pub fn plane(
         });
         k *= 2;
     }
-    let distance = |j: usize| (c.points[j] - centre).length();
+    let distance = |j: usize| (point(j) - centre).length();
     data.sort_unstable_by(|&a, &e| distance(a).total_cmp(&distance(e)).then(a.cmp(&e)));
     data.dedup();
     data.truncate(NEAREST);
@@ -82,15 +89,12 @@ pub fn plane(
     let vote: f64 = data
         .iter()
         .map(|&j| {
-            let (q, n) = (
-                c.points[j],
-                (c.points[normal(j)] - c.points[j]).normalize_or_zero(),
-            );
+            let (q, n) = (point(j), (point(normal(j)) - point(j)).normalize_or_zero());
             slope(j).signum() * (centre - q).normalize_or_zero().dot(n)
         })
         .sum();
     let side = if vote < 0.0 { -1.0 } else { 1.0 };
-    let q = c.points[nearest];
+    let q = point(nearest);
     let u = (centre - q).normalize_or_zero();
     let gradient = u * (side * slope(nearest).abs());
     // A tetrahedron around the centre and the centre: the interpolant of linear values at

@@ -33,6 +33,7 @@ use crate::error::{Error, Result};
 use glam::DVec3;
 use octree::Octree;
 use patches::Patch;
+use std::borrow::Cow;
 
 /// How a partition-of-unity surface is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -115,7 +116,11 @@ impl PartitionSettings {
 #[derive(Clone, Debug)]
 pub struct PartitionSurface {
     settings: PartitionSettings,
+    /// The constraints; for a whole surface without their points, which `centres` holds in
+    /// the octree's order (see [`PartitionSurface::constraint_points`]).
     constraints: Constraints,
+    /// The bounding box of the data points.
+    data_box: (DVec3, DVec3),
     tree: Octree,
     /// Whether this is a [`PartitionSurface::cut`], whose octree is not built from its
     /// constraints (and so is part of its [`PartitionSurface::parts`]).
@@ -220,6 +225,10 @@ impl PartitionSurface {
             + (c.points.len() * (48 + 24)) as u64
             + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
         patches::check_memory(bytes, settings.fit.memory_limit)?;
+        // From here on the points are read from the octree's copy.
+        let data_box = bounding_box(&c.points[..c.boundary]);
+        let mut c = c;
+        drop(std::mem::take(&mut c.points));
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
         crate::cancel::check()?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
@@ -231,6 +240,7 @@ impl PartitionSurface {
         Ok(PartitionSurface {
             settings: *settings,
             constraints: c,
+            data_box,
             tree,
             cut: false,
             patches: fitted,
@@ -249,9 +259,35 @@ impl PartitionSurface {
     pub fn kernel(&self) -> Kernel {
         self.settings.fit.kernel
     }
-    /// The constraints the surface interpolates.
-    pub fn constraints(&self) -> &Constraints {
-        &self.constraints
+    /// The constraints the surface interpolates (for a whole surface, their points gathered
+    /// from the octree's order, in which the surface keeps them).
+    pub fn constraints(&self) -> Cow<'_, Constraints> {
+        match self.constraint_points() {
+            Cow::Borrowed(_) => Cow::Borrowed(&self.constraints),
+            Cow::Owned(points) => Cow::Owned(Constraints {
+                points,
+                ..self.constraints.clone()
+            }),
+        }
+    }
+    /// The constraint points, in the constraints' order.
+    pub fn constraint_points(&self) -> Cow<'_, [DVec3]> {
+        if self.constraints.points.len() == self.centres.len() {
+            return Cow::Borrowed(&self.constraints.points);
+        }
+        let mut points = vec![DVec3::ZERO; self.centres.len()];
+        for (&i, p) in self.tree.order.iter().zip(&self.centres) {
+            points[i as usize] = *p;
+        }
+        Cow::Owned(points)
+    }
+    /// The number of constraints.
+    pub fn constraint_count(&self) -> usize {
+        self.constraints.values.len()
+    }
+    /// The number of data points merged into others before the fit.
+    pub fn merged(&self) -> usize {
+        self.constraints.merged
     }
     /// Largest |f_i(c) − v| over the patches and their constraints, as measured after each
     /// patch's fit (the blend's error at a constraint is at most this).
@@ -276,7 +312,7 @@ impl PartitionSurface {
     }
     /// Bounding box of the boundary constraints (the data points).
     pub fn data_bounding_box(&self) -> (DVec3, DVec3) {
-        bounding_box(&self.constraints.points[..self.constraints.boundary])
+        self.data_box
     }
     /// The normalised blending weights w_i(x) / Σ w_i(x) of the patches whose support holds
     /// `x`, in increasing patch order (empty where no support reaches).

@@ -686,6 +686,17 @@ impl Octree {
         }
     }
 
+    /// The point at position `k` of `order`, read from the tree's copy (which it must have).
+    pub fn point_at(&self, k: usize) -> DVec3 {
+        self.sorted[k]
+    }
+
+    /// Whether the queries read the points from the tree's own copy (the `points` they are
+    /// given are then not read).
+    pub fn has_copy(&self) -> bool {
+        self.sorted.len() == self.order.len()
+    }
+
     /// Frees the tree's copy of its points (the queries then read `points` through `order`).
     pub fn release_copy(&mut self) {
         self.take_copy();

@@ -6,7 +6,7 @@
 use super::octree::Node;
 use super::{patches, Octree, PartitionSettings, PartitionSurface, Patch};
 use crate::error::Result;
-use crate::field::constraints::Constraints;
+use crate::field::constraints::{bounding_box, Constraints};
 use crate::field::rbf::{bad_state, PatchFit, SurfaceParts};
 use glam::DVec3;
 
@@ -41,7 +41,7 @@ impl PartitionSurface {
     pub fn parts(&self) -> PartitionParts {
         PartitionParts {
             settings: self.settings,
-            constraints: self.constraints.clone(),
+            constraints: self.constraints().into_owned(),
             patches: self
                 .patches
                 .iter()
@@ -114,9 +114,19 @@ impl PartitionSurface {
             .collect::<Result<Vec<_>>>()?;
         crate::cancel::check()?;
         let (cover_start, cover) = patches::cover(&tree, &patches);
+        // A whole surface keeps its points only in the octree's order (`centres`).
+        let data_box = bounding_box(&c.points[..c.boundary]);
+        let constraints = match cut {
+            true => p.constraints,
+            false => Constraints {
+                points: Vec::new(),
+                ..p.constraints
+            },
+        };
         Ok(PartitionSurface {
             settings: p.settings,
-            constraints: p.constraints,
+            constraints,
+            data_box,
             tree,
             cut,
             patches,

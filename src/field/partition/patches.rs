@@ -231,7 +231,8 @@ const SUPPORT_RUN: usize = 256;
 
 /// Fits one patch per support, in parallel; errors with the first failing patch's error (in
 /// leaf order). Each patch's centres are indices into the constraint points in the tree's
-/// order (`rank[i]` the position of constraint `i` in `tree.order`).
+/// order (`rank[i]` the position of constraint `i` in `tree.order`). The points are read from
+/// the tree's copy (which it must have), not from `c`, whose `points` may be empty.
 pub fn fit(
     tree: &Octree,
     c: &Constraints,
@@ -239,6 +240,10 @@ pub fn fit(
     supports: &[Support],
     settings: &PartitionSettings,
 ) -> Result<Vec<Patch>> {
+    assert!(
+        tree.has_copy(),
+        "the octree reads its own copy of the points"
+    );
     let rank = inverse(&tree.order);
     let slots = empty::normal_slots(c);
     let ranked_values: Vec<f64> = tree
@@ -260,7 +265,7 @@ pub fn fit(
         }
         let (centre, radius) = (s.centre, s.radius);
         if s.is_plane() {
-            let (pts, vals) = empty::plane(c, &slots, tree, centre, radius);
+            let (pts, vals) = empty::plane(c, &slots, tree, &rank, centre, radius);
             let fit = PatchFit::fit(None, pts, vals, &rbf_settings, Par::Seq)?;
             return Ok(Patch {
                 centre,
@@ -273,7 +278,7 @@ pub fn fit(
         // The constraints inside (index, position in the tree's order, point), read from
         // the tree's copy in leaf order; then those completing the system (index, point).
         let mut own: Vec<(u32, u32, DVec3)> = Vec::with_capacity(s.inside);
-        tree.for_each_within_ranked(&c.points, centre, radius, |i, k, p| own.push((i, k, p)));
+        tree.for_each_within_ranked(&[], centre, radius, |i, k, p| own.push((i, k, p)));
         let mut outside: Vec<(u32, DVec3)> = Vec::new();
         if let Some((l, reach, _)) = s.extra {
             let mut visit = |i: u32, p: DVec3| {
@@ -282,7 +287,7 @@ pub fn fit(
                 }
             };
             if l == usize::MAX {
-                tree.for_each_within_ranked(&c.points, centre, reach, |i, _, p| visit(i, p));
+                tree.for_each_within_ranked(&[], centre, reach, |i, _, p| visit(i, p));
             } else {
                 levels[l].for_each_within(centre, reach, visit);
             }

@@ -378,3 +378,28 @@ fn patches_are_gathered_in_place() {
     assert_eq!(patches.as_ptr() as usize, memory);
     assert_eq!(patches.len(), s.patches().len());
 }
+
+/// A whole surface keeps its constraint points once, in the octree's order, and gives them
+/// back in the constraints' order: those placement gives; its parts give the same surface.
+#[test]
+fn constraint_points_are_kept_once_and_given_back_in_order() {
+    let (p, n) = torus_data(3000, 5);
+    let s = PartitionSurface::fit(&p, &n, &Default::default(), &Default::default()).unwrap();
+    assert!(s.constraints.points.is_empty());
+    let placed = constraints::place(&p, &n, &Default::default()).unwrap();
+    assert_eq!(*s.constraint_points(), placed.points[..]);
+    assert_eq!(s.constraints().points, placed.points);
+    assert_eq!(s.constraint_count(), placed.points.len());
+    assert_eq!(
+        s.data_bounding_box(),
+        constraints::bounding_box(&placed.points[..placed.boundary])
+    );
+    let back = PartitionSurface::from_parts(s.parts()).unwrap();
+    assert!(back.constraints.points.is_empty());
+    assert_eq!(back.constraints().points, placed.points);
+    let x = random_points(500, -1.0, 1.0, 3);
+    let (mut a, mut b) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+    s.values(&x, &mut a);
+    back.values(&x, &mut b);
+    assert_eq!(a, b);
+}
