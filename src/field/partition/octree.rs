@@ -104,6 +104,14 @@ type Run<'a> = (
     &'a mut [DVec3],
 );
 
+/// The `a..b` part of `*rest`, which starts at `offset`; `*rest` then starts at `b`.
+fn take_run<'a, T>(rest: &mut &'a mut [T], offset: usize, a: usize, b: usize) -> &'a mut [T] {
+    let (_, r) = std::mem::take(rest).split_at_mut(a - offset);
+    let (run, r) = r.split_at_mut(b - a);
+    *rest = r;
+    run
+}
+
 /// The runs of the nodes `splitting` (whose runs are disjoint and increasing) in `order` and
 /// `sorted`, with the same ranges of the scratch `spare_order` and `spare_sorted`.
 fn disjoint_runs<'a>(
@@ -114,13 +122,6 @@ fn disjoint_runs<'a>(
     mut spare_order: &'a mut [u32],
     mut spare_sorted: &'a mut [DVec3],
 ) -> Vec<Run<'a>> {
-    /// The `a..b` part of `*rest`, which starts at `offset`; `*rest` then starts at `b`.
-    fn take<'a, T>(rest: &mut &'a mut [T], offset: usize, a: usize, b: usize) -> &'a mut [T] {
-        let (_, r) = std::mem::take(rest).split_at_mut(a - offset);
-        let (run, r) = r.split_at_mut(b - a);
-        *rest = r;
-        run
-    }
     let mut offset = 0;
     let mut runs = Vec::with_capacity(splitting.len());
     for &k in splitting {
@@ -128,10 +129,10 @@ fn disjoint_runs<'a>(
         let (a, b) = (n.start as usize, n.end as usize);
         runs.push((
             n.centre,
-            take(&mut order, offset, a, b),
-            take(&mut sorted, offset, a, b),
-            take(&mut spare_order, offset, a, b),
-            take(&mut spare_sorted, offset, a, b),
+            take_run(&mut order, offset, a, b),
+            take_run(&mut sorted, offset, a, b),
+            take_run(&mut spare_order, offset, a, b),
+            take_run(&mut spare_sorted, offset, a, b),
         ));
         offset = b;
     }
@@ -151,13 +152,11 @@ fn disjoint_runs_in_place<'a>(
     for &k in splitting {
         let n = &nodes[k];
         let (a, b) = (n.start as usize, n.end as usize);
-        let (_, rest) = std::mem::take(&mut order).split_at_mut(a - offset);
-        let (run, rest) = rest.split_at_mut(b - a);
-        order = rest;
-        let (_, rest) = std::mem::take(&mut sorted).split_at_mut(a - offset);
-        let (pts, rest) = rest.split_at_mut(b - a);
-        sorted = rest;
-        runs.push((n.centre, run, pts));
+        runs.push((
+            n.centre,
+            take_run(&mut order, offset, a, b),
+            take_run(&mut sorted, offset, a, b),
+        ));
         offset = b;
     }
     runs
@@ -303,20 +302,26 @@ impl Octree {
         let mut level = 0..1;
         while !level.is_empty() {
             let here = &self;
+            // The node of `self` node `k` stands for, when `self` splits it.
+            let mirror = |k: usize| {
+                (from[k] != u32::MAX)
+                    .then(|| here.nodes[from[k] as usize])
+                    .filter(|m| !m.is_leaf())
+            };
             let splitting: Vec<usize> = level
                 .clone()
                 .into_par_iter()
                 .filter(|&k| {
-                    let mirror = from[k] != u32::MAX && !here.nodes[from[k] as usize].is_leaf();
-                    mirror || (depth[k] < MAX_DEPTH && split(here, &nodes[k]))
+                    mirror(k).is_some() || (depth[k] < MAX_DEPTH && split(here, &nodes[k]))
                 })
                 .collect();
             // The runs of the nodes split below the leaves of `self`, each sorted by octant
             // (those `self` splits are sorted already).
+            let mirrors: Vec<Option<Node>> = splitting.iter().map(|&k| mirror(k)).collect();
             let fresh: Vec<usize> = splitting
                 .iter()
-                .copied()
-                .filter(|&k| from[k] == u32::MAX || self.nodes[from[k] as usize].is_leaf())
+                .zip(&mirrors)
+                .filter_map(|(&k, m)| m.is_none().then_some(k))
                 .collect();
             let runs = disjoint_runs_in_place(&nodes, &fresh, &mut self.order, &mut self.sorted);
             let bounds: Vec<[usize; 9]> = runs
@@ -325,15 +330,11 @@ impl Octree {
                 .collect();
             let mut fresh_bounds = bounds.into_iter();
             let next = nodes.len();
-            for &k in &splitting {
+            for (&k, &mirror) in splitting.iter().zip(&mirrors) {
                 let n = nodes[k];
                 let first = nodes.len() as u32;
                 nodes[k].children = first;
                 let h = 0.5 * n.half;
-                // The node of `self` this one stands for, when `self` splits it.
-                let mirror = (from[k] != u32::MAX)
-                    .then(|| self.nodes[from[k] as usize])
-                    .filter(|m| !m.is_leaf());
                 let b = match mirror {
                     None => fresh_bounds.next().expect("a fresh split has its bounds"),
                     Some(_) => [0; 9],
