@@ -214,7 +214,14 @@ impl PartitionSurface {
         let (centre, half) = Self::cube(&c);
         crate::cancel::check()?;
         let tree = Self::tree(&c, settings)?;
-        let levels = coarse::levels(&c, settings.max_patch, centre, half, settings.max_per_leaf)?;
+        let levels = coarse::levels(
+            &tree,
+            &c,
+            settings.max_patch,
+            centre,
+            half,
+            settings.max_per_leaf,
+        )?;
         let oriented = empty::oriented(&c).then(|| patches::Oriented {
             first_off: c.boundary,
             largest_offset: c.offsets.iter().copied().fold(0.0, f64::max),

@@ -496,8 +496,9 @@ impl Octree {
 
     /// Walks the nodes meeting the closed ball (`c`, `r2` its squared radius) down to those
     /// inside it (`visit(node, true)`) and the leaves it cuts (`visit(leaf, false)`); stops
-    /// when `visit` returns true.
-    fn walk_ball(&self, c: DVec3, r2: f64, mut visit: impl FnMut(&Node, bool) -> bool) {
+    /// when `visit` returns true. `visit` gets the node's index, the node, and whether it is
+    /// inside.
+    fn walk_ball(&self, c: DVec3, r2: f64, mut visit: impl FnMut(u32, &Node, bool) -> bool) {
         let mut stack = NodeStack::root();
         while let Some(k) = stack.pop() {
             let n = &self.nodes[k as usize];
@@ -506,7 +507,7 @@ impl Octree {
             }
             let inside = n.farthest_squared(c) <= r2;
             if inside || n.is_leaf() {
-                if visit(n, inside) {
+                if visit(k, n, inside) {
                     return;
                 }
             } else {
@@ -520,7 +521,7 @@ impl Octree {
     pub fn count_within_up_to(&self, points: &[DVec3], c: DVec3, r: f64, limit: usize) -> usize {
         let r2 = r * r;
         let mut count = 0;
-        self.walk_ball(c, r2, |n, inside| {
+        self.walk_ball(c, r2, |_, n, inside| {
             if inside {
                 count += (n.end - n.start) as usize;
             } else {
@@ -531,6 +532,58 @@ impl Octree {
             count > limit
         });
         count
+    }
+
+    /// The number of points within the closed ball (`c`, `r`) whose position `k` in `order`
+    /// has `keep(k)`, or some number above `limit` once more than `limit` are found; `kept(j)`
+    /// is that number for node `j` (for the nodes inside the ball). Reads the tree's copy of
+    /// the points (which it must have).
+    pub fn count_kept_within_up_to(
+        &self,
+        c: DVec3,
+        r: f64,
+        limit: usize,
+        kept: impl Fn(u32) -> usize,
+        keep: impl Fn(usize) -> bool,
+    ) -> usize {
+        let r2 = r * r;
+        let mut count = 0;
+        self.walk_ball(c, r2, |j, n, inside| {
+            if inside {
+                count += kept(j);
+            } else {
+                let (start, end) = (n.start as usize, n.end as usize);
+                for (k, p) in (start..end).zip(&self.sorted[start..end]) {
+                    count += (keep(k) & ((*p - c).length_squared() <= r2)) as usize;
+                }
+            }
+            count > limit
+        });
+        count
+    }
+
+    /// Calls `visit(i, p)` for every point `i` within the closed ball (`c`, `r`) whose
+    /// position `k` in `order` has `keep(k)`, leaf by leaf. Reads the tree's copy of the points
+    /// (which it must have).
+    pub fn for_each_kept_within(
+        &self,
+        c: DVec3,
+        r: f64,
+        keep: impl Fn(usize) -> bool,
+        mut visit: impl FnMut(u32, DVec3),
+    ) {
+        let r2 = r * r;
+        self.for_each_leaf_meeting(c, r, |j| {
+            let n = &self.nodes[j as usize];
+            for k in n.start as usize..n.end as usize {
+                if keep(k) {
+                    let p = self.sorted[k];
+                    if (p - c).length_squared() <= r2 {
+                        visit(self.order[k], p);
+                    }
+                }
+            }
+        });
     }
 
     /// Whether some point `i` of `points` within the closed ball (`c`, `r`) has `pred(i)`;
@@ -544,7 +597,7 @@ impl Octree {
     ) -> bool {
         let r2 = r * r;
         let mut found = false;
-        self.walk_ball(c, r2, |n, inside| {
+        self.walk_ball(c, r2, |_, n, inside| {
             if inside {
                 found = self.order[n.start as usize..n.end as usize]
                     .iter()

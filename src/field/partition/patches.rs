@@ -11,7 +11,7 @@
 //! only carries the field's sign away from the data: in fits with normal constraints it is a
 //! plane ([`super::empty`]), otherwise completed with up to `min_points` / 2.
 
-use super::coarse::Level;
+use super::coarse::Levels;
 use super::empty;
 use super::octree::Octree;
 use super::PartitionSettings;
@@ -102,7 +102,7 @@ pub struct Oriented {
 pub fn supports(
     tree: &Octree,
     points: &[DVec3],
-    levels: &[Level],
+    levels: &Levels,
     settings: &PartitionSettings,
     oriented: Option<Oriented>,
 ) -> Result<Vec<Support>> {
@@ -160,13 +160,12 @@ pub fn supports(
         let mut choice = (usize::MAX, full);
         if full > budget {
             for (c, &l) in candidates.iter().enumerate() {
-                let level = &levels[l];
                 let last = c + 1 == candidates.len();
                 // The level's constraints between the two balls must fit the budget (the
                 // count within `reach` is exact unless it exceeds the limit).
-                let within_r = level.count_within(n.centre, r);
+                let within_r = levels.count_within(l, n.centre, r);
                 let limit = if last { usize::MAX } else { budget + within_r };
-                let within_reach = level.count_within_up_to(n.centre, reach, limit);
+                let within_reach = levels.count_within_up_to(l, n.centre, reach, limit);
                 if within_reach > limit {
                     continue;
                 }
@@ -176,8 +175,8 @@ pub fn supports(
                 } else if c > 0 {
                     let f = candidates[c - 1];
                     // The level's constraints between the two balls.
-                    let level = &levels[f];
-                    let m = level.count_within(n.centre, reach) - level.count_within(n.centre, r);
+                    let m = levels.count_within(f, n.centre, reach)
+                        - levels.count_within(f, n.centre, r);
                     choice = (f, m);
                 }
                 break;
@@ -236,7 +235,7 @@ const SUPPORT_RUN: usize = 256;
 pub fn fit(
     tree: &Octree,
     c: &Constraints,
-    levels: &[Level],
+    levels: &Levels,
     supports: &[Support],
     settings: &PartitionSettings,
 ) -> Result<Vec<Patch>> {
@@ -289,7 +288,7 @@ pub fn fit(
             if l == usize::MAX {
                 tree.for_each_within_ranked(&[], centre, reach, |i, _, p| visit(i, p));
             } else {
-                levels[l].for_each_within(centre, reach, visit);
+                levels.for_each_within(l, centre, reach, visit);
             }
         }
         own.sort_unstable_by_key(|e| e.0);
