@@ -210,18 +210,21 @@ impl PartitionSurface {
         }))
     }
 
+    /// The coarse levels of the constraints, over the fit's octree `tree`.
+    fn levels<'t>(
+        tree: &'t Octree,
+        c: &Constraints,
+        settings: &PartitionSettings,
+    ) -> Result<coarse::Levels<'t>> {
+        let (centre, half) = Self::cube(c);
+        let (smallest, max_per_leaf) = (settings.max_patch, settings.max_per_leaf);
+        coarse::levels(tree, c, smallest, centre, half, max_per_leaf)
+    }
+
     fn solve(c: Constraints, settings: &PartitionSettings) -> Result<Self> {
-        let (centre, half) = Self::cube(&c);
         crate::cancel::check()?;
         let tree = Self::tree(&c, settings)?;
-        let levels = coarse::levels(
-            &tree,
-            &c,
-            settings.max_patch,
-            centre,
-            half,
-            settings.max_per_leaf,
-        )?;
+        let levels = Self::levels(&tree, &c, settings)?;
         let oriented = empty::oriented(&c).then(|| patches::Oriented {
             first_off: c.boundary,
             largest_offset: c.offsets.iter().copied().fold(0.0, f64::max),

@@ -342,17 +342,8 @@ fn a_set_token_stops_every_stage_before_the_patches() {
     assert!(interrupted(placed));
     let c = constraints::place(&p, &n, &Default::default()).unwrap();
     let settings = PartitionSettings::default();
-    let (centre, half) = PartitionSurface::cube(&c);
     let tree = PartitionSurface::tree(&c, &settings).unwrap();
-    let levels = coarse::levels(
-        &tree,
-        &c,
-        settings.max_patch,
-        centre,
-        half,
-        settings.max_per_leaf,
-    )
-    .unwrap();
+    let levels = PartitionSurface::levels(&tree, &c, &settings).unwrap();
     let supports = |token: crate::cancel::Token| {
         crate::cancel::run_under(token, || {
             patches::supports(&tree, &c.points, &levels, &settings, None).map(|_| ())
@@ -363,15 +354,7 @@ fn a_set_token_stops_every_stage_before_the_patches() {
     let (tree2, levels2) = crate::cancel::run_under(stopped, || {
         (
             PartitionSurface::tree(&c, &settings).map(|_| ()),
-            coarse::levels(
-                &tree,
-                &c,
-                settings.max_patch,
-                centre,
-                half,
-                settings.max_per_leaf,
-            )
-            .map(|_| ()),
+            PartitionSurface::levels(&tree, &c, &settings).map(|_| ()),
         )
     });
     assert!(interrupted(tree2) && interrupted(levels2));
