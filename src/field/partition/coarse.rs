@@ -23,8 +23,9 @@ use crate::field::constraints::Constraints;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// The finest levels, read from the fit's octree (a query on level `L` visits about 2^L of its
-/// points for each constraint of the level it finds).
+/// The finest levels, read from the fit's octree: a query on level `L` counts the nodes inside
+/// its ball whole, and reads every point of the leaves the ball cuts, about 2^L for each
+/// constraint of the level there.
 pub const SHARED_LEVELS: usize = 3;
 
 /// A coarse level: its constraints' indices and an octree over their points (which keeps the
