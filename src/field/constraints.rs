@@ -454,13 +454,13 @@ pub fn crease_caps(vertices: &[DVec3], faces: &[[u32; 3]], normals: &[DVec3]) ->
     cmin.iter().map(|c| (0.9 * c).max(0.5)).collect()
 }
 
+/// A triangle mesh's vertices, faces and vertex normals.
+pub type MeshWithNormals = (Vec<DVec3>, Vec<[u32; 3]>, Vec<DVec3>);
+
 /// Checks a triangle mesh and returns its vertices with exact duplicates merged, the faces
 /// re-indexed, and area-weighted vertex normals (the average of the adjacent faces' normals,
 /// weighted by area). Errors on out-of-range or repeated indices and on vertices that no face uses.
-pub fn mesh_vertices_normals(
-    vertices: &[DVec3],
-    faces: &[[u32; 3]],
-) -> Result<(Vec<DVec3>, Vec<[u32; 3]>, Vec<DVec3>)> {
+pub fn mesh_vertices_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Result<MeshWithNormals> {
     check_finite_points("vertices", vertices)?;
     if faces.is_empty() {
         return Err(Error::invalid("faces", "the mesh has no faces"));
@@ -547,6 +547,8 @@ pub fn mesh_vertices_normals(
     }
     for (i, n) in normals.iter_mut().enumerate() {
         let l = n.length();
+        // Not `l <= 0.0`: a NaN length is refused too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(l > 0.0) {
             return Err(Error::invalid(
                 "faces",

@@ -283,7 +283,9 @@ impl VariationalSurface {
                 .values
                 .iter()
                 .fold(1.0, |a: f64, v| a.max(v.abs()));
-        let mut best: Option<(f64, (Vec<f64>, [f64; 4]))> = None;
+        // (residual, (weights, polynomial)) of the best solution so far.
+        type Solution = (Vec<f64>, [f64; 4]);
+        let mut best: Option<(f64, Solution)> = None;
         for _ in 0..4 {
             crate::cancel::check()?;
             s.set_solution(&x.0, x.1);

@@ -316,7 +316,7 @@ impl MeshBuffers {
     }
 
     /// (vertices (V, 3), faces (F, 3), normals (V, 3) or (0, 3)) numpy arrays.
-    pub fn to_py<'py>(self, py: Python<'py>) -> PyResult<[Bound<'py, PyAny>; 3]> {
+    pub fn into_py_arrays<'py>(self, py: Python<'py>) -> PyResult<[Bound<'py, PyAny>; 3]> {
         let (nv, nf, nn) = (
             self.vertices.len() / 3,
             self.faces.len() / 3,

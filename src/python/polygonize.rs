@@ -291,7 +291,7 @@ fn mesh_to_py<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     let stats_py = stats_to_py(py, stats, lattice)?;
     stats_py.set_item("method", method)?;
-    let [v, f, n] = mesh.to_py(py)?;
+    let [v, f, n] = mesh.into_py_arrays(py)?;
     PyTuple::new(py, [v, f, n, stats_py.into_any()])
 }
 

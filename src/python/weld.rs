@@ -167,7 +167,7 @@ fn welded_tuple<'py>(py: Python<'py>, welded: Welded) -> PyResult<Bound<'py, PyT
         faces: flat_faces(welded.faces),
         normals: flatten_points(welded.normals),
     }
-    .to_py(py)?;
+    .into_py_arrays(py)?;
     PyTuple::new(py, [v, f, n])
 }
 

@@ -863,11 +863,7 @@ mod tests {
                 bare.kth_nearest_distance(&pts, c, 7),
                 t.kth_nearest_distance(&pts, c, 7)
             );
-            assert_eq!(
-                t.more_within_than(&pts, c, r, want.len()),
-                false,
-                "{c:?} {r}"
-            );
+            assert!(!t.more_within_than(&pts, c, r, want.len()), "{c:?} {r}");
             assert!(want.is_empty() || t.more_within_than(&pts, c, r, want.len() - 1));
         }
         // k-th nearest distances agree with sorting.
