@@ -240,6 +240,8 @@ impl PartitionSurface {
         let mut c = c;
         drop(std::mem::take(&mut c.points));
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
+        // Freed before the cover is built, which would otherwise come on top of them.
+        drop((levels, supports));
         crate::cancel::check()?;
         let residual = fitted.iter().map(|p| p.fit.residual()).fold(0.0, f64::max);
         let (cover_start, cover) = patches::cover(&tree, &fitted);
