@@ -327,6 +327,55 @@ fn decided_neighbours_give_their_shared_points() {
     }
 }
 
+/// The decided blocks' codes, two bits each, are those a byte per block holds after the same
+/// marks: single blocks, runs of whole bytes and of parts of bytes, clipped at the lattice's
+/// ends, each mark over earlier ones; and the parallel marks of the last level.
+#[test]
+fn decided_codes_are_those_of_a_byte_per_block() {
+    let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [118, 60, 42]).unwrap();
+    let mut map = DecidedBlocks::new(&lattice);
+    let [nx, ny, nz] = map.dims;
+    let mut model = vec![0u8; nx * ny * nz];
+    let mut next = uniform(3);
+    let mut pick = |n: u32| (next() * n as f64) as u32;
+    for _ in 0..400 {
+        let s = 2 << pick(4);
+        let o = [pick(124), pick(64), pick(46)].map(|c| c & !1);
+        let negative = [Some(true), Some(false), None][pick(3) as usize];
+        map.mark(o, s, negative);
+        let code = match negative {
+            Some(true) => 1,
+            Some(false) => 2,
+            None => 3,
+        };
+        for z in (o[2] / 2) as usize..((o[2] + s) / 2).min(nz as u32) as usize {
+            for y in (o[1] / 2) as usize..((o[1] + s) / 2).min(ny as u32) as usize {
+                for x in (o[0] / 2) as usize..((o[0] + s) / 2).min(nx as u32) as usize {
+                    model[x + nx * (y + ny * z)] = code;
+                }
+            }
+        }
+        let codes: Vec<u8> = (0..map.len()).map(|i| map.get(i)).collect();
+        assert_eq!(codes, model, "after a mark of {s} at {o:?}");
+    }
+    let blocks: Vec<[u32; 3]> = (0..map.len())
+        .map(|i| [2 * (i % nx), 2 * (i / nx % ny), 2 * (i / (nx * ny))].map(|c| c as u32))
+        .collect();
+    let marks: Vec<Option<Option<bool>>> = (0..blocks.len())
+        .map(|_| [None, Some(Some(true)), Some(Some(false)), Some(None)][pick(4) as usize])
+        .collect();
+    map.mark_blocks(&blocks, 2, |i| marks[i]);
+    for (i, m) in marks.iter().enumerate() {
+        let want = match m {
+            None => model[i],
+            Some(Some(true)) => 1,
+            Some(Some(false)) => 2,
+            Some(None) => 3,
+        };
+        assert_eq!(map.get(i), want, "block {i}");
+    }
+}
+
 /// The ends of crossed edges with only a sign are those that an edge-by-edge search finds,
 /// for every leaf of a block and mixes of values, signs and unknown points.
 #[test]
@@ -334,8 +383,8 @@ fn decided_masks_inside_the_map_are_those_at_its_edge() {
     let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [12, 10, 14]).unwrap();
     let mut d = DecidedBlocks::new(&lattice);
     let mut next = uniform(7);
-    for v in d.sign.iter_mut() {
-        *v = (next() * 4.0) as u8;
+    for i in 0..d.len() {
+        d.set(i, (next() * 4.0) as u8);
     }
     let [nx, ny, nz] = d.dims.map(|n| n as u32);
     let mut inside = 0;
