@@ -495,9 +495,8 @@ impl Octree {
     }
 
     /// Walks the nodes meeting the closed ball (`c`, `r2` its squared radius) down to those
-    /// inside it (`visit(node, true)`) and the leaves it cuts (`visit(leaf, false)`); stops
-    /// when `visit` returns true. `visit` gets the node's index, the node, and whether it is
-    /// inside.
+    /// inside it (`visit(k, node, true)`, `k` the node's index) and the leaves it cuts
+    /// (`visit(k, leaf, false)`); stops when `visit` returns true.
     fn walk_ball(&self, c: DVec3, r2: f64, mut visit: impl FnMut(u32, &Node, bool) -> bool) {
         let mut stack = NodeStack::root();
         while let Some(k) = stack.pop() {

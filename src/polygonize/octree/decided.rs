@@ -122,7 +122,7 @@ impl DecidedBlocks {
         self.bits[first_whole >> 2..last_whole >> 2].fill(v * 0b0101_0101);
     }
 
-    /// The byte of a block dropped with sign `sign` (`None`: unknown).
+    /// The code of a block dropped with sign `sign` (`None`: unknown).
     #[inline]
     fn code(sign: Option<bool>) -> u8 {
         match sign {
