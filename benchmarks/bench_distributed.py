@@ -19,7 +19,8 @@ Fields: ``blobs``, primitives with centres uniform in [-0.8, 0.8]³ (radius chos
 spheres of influence cover the cube about 1.6 times: a foam of merged blobs), method
 ``"sparse"``; ``variational``, a partition fit (``VariationalSurface.fit(method="partition")``)
 of points sampled on the knot's ``_hires`` mesh with their face normals (as in bench_scale),
-method ``"octree"``, ``normals=False``. Each field is made once, saved with
+method ``"octree"``, ``normals=False``, at 256³ cells in tiles of 128³ and at 512³ in tiles of
+256³ (eight times the work per tile). Each field is made once, saved with
 :func:`implicitmesh.save`, and loaded by every case. ``many``: a small blob field in about 10⁴
 tiles of 4³ cells on 2 workers, and 10⁴ no-op tasks, for the scheduler's and the weld's cost per
 tile.
@@ -46,12 +47,13 @@ from benchmarks.bench_scale import samples, vmhwm_mib
 from benchmarks.timing import RunRecord, fmt_s, md_table, run_case_process, run_markdown, run_section
 
 BOX = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]
-#: Per field (full, quick): size (primitives or points), cells per lattice edge, cells per tile edge.
-#: The quick blob field is the full one scaled by 1/4 in cells (1/64 of the primitives, 4 times
-#: the radius): the same foam, coarser.
+#: Per field (full, quick): size (primitives or points) and its lattices: (cells per lattice edge,
+#: cells per tile edge). The quick blob field is the full one scaled by 1/4 in cells (1/64 of the
+#: primitives, 4 times the radius): the same foam, coarser. The variational fit at 512³ has the
+#: 256³ case's tiles eight times the work.
 CASES = {
-    False: {"blobs": (200_000, 512, 128), "variational": (100_000, 256, 128)},
-    True: {"blobs": (3_125, 128, 64), "variational": (10_000, 64, 32)},
+    False: {"blobs": (200_000, [(512, 128)]), "variational": (100_000, [(256, 128), (512, 256)])},
+    True: {"blobs": (3_125, [(128, 64)]), "variational": (10_000, [(64, 32)])},
 }
 #: Blob radius at 200,000 primitives; it scales with the cube root of 1 / primitives.
 BLOB_RADIUS = 0.02
@@ -275,7 +277,8 @@ def many(file: str, resolution: int, tile: int, noop_tasks: int) -> dict:
 def run_one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int) -> dict:
     """:func:`one` in a fresh process."""
     args = [name, setup, file, str(resolution), str(tile), str(runs)]
-    return run_case_process("benchmarks.bench_distributed", args, {"field": name, "setup": setup})
+    return run_case_process("benchmarks.bench_distributed", args,
+                            {"field": name, "setup": setup, "resolution": resolution, "tile": tile})
 
 
 def measure(a: argparse.Namespace) -> dict:
@@ -284,15 +287,16 @@ def measure(a: argparse.Namespace) -> dict:
     run = RunRecord("benchmarks.bench_distributed", a.quick)
     cases = []
     with tempfile.TemporaryDirectory(prefix="bench_distributed_") as tmp:
-        for name, (size, resolution, tile) in CASES[a.quick].items():
+        for name, (size, lattices) in CASES[a.quick].items():
             file = str(Path(tmp) / f"{name}.npz")
             t = time.perf_counter()
             im.save(file, make_field(name, size))
             log(f"{name}: {size:,} made and saved in {time.perf_counter() - t:.1f} s")
-            for setup in SETUPS:
-                log(f"{name}, {resolution}³, tile {tile}, {setup}")
-                r = run_one(name, setup, file, resolution, tile, RUNS[a.quick])
-                cases.append({**r, "size": size})
+            for resolution, tile in lattices:
+                for setup in SETUPS:
+                    log(f"{name}, {resolution}³, tile {tile}, {setup}")
+                    r = run_one(name, setup, file, resolution, tile, RUNS[a.quick])
+                    cases.append({**r, "size": size})
             if name == "blobs":
                 quick_size = CASES[True]["blobs"][0]
                 im.save(file, make_field(name, quick_size))
@@ -312,9 +316,9 @@ def _mean_max(values: list, scale: float = 1.0, fmt: str = "{:.2f}") -> str:
 def render(raw: dict) -> str:
     run = raw["run"]
     rows, checks = [], []
-    by = {(c["field"], c["setup"]): c for c in raw["cases"]}
-    for name in dict.fromkeys(c["field"] for c in raw["cases"] if c["field"] != "many"):
-        cases = [by.get((name, s), {}) for s in SETUPS]
+    by = {(c["field"], c.get("resolution"), c["setup"]): c for c in raw["cases"]}
+    for name, resolution in dict.fromkeys((c["field"], c.get("resolution")) for c in raw["cases"] if c["field"] != "many"):
+        cases = [by.get((name, resolution, s), {}) for s in SETUPS]
         single, d1, d2 = cases[:3]
         t = {s: statistics.median(c["times"]) if "times" in c else None for s, c in zip(SETUPS, cases)}
         for setup, c in zip(SETUPS, cases):
@@ -340,16 +344,19 @@ def render(raw: dict) -> str:
             ])
         if all(t[s] for s in COMPARED) and single.get("triangles") == d1.get("triangles") == d2.get("triangles"):
             speedup, overhead = t["dask-1"] / t["dask-2"], t["dask-2"] / t["single"] - 1
-            bound = _bound(t["dask-1"], d2)
-            checks.append(f"- {name}: 2 workers {speedup:.2f}× one (target ≥ {SPEEDUP_TARGET}×: "
+            bound, cores = _bound(t["dask-1"], d2), _cores(t["dask-1"], d1)
+            checks.append(f"- {name}, {resolution}³: 2 workers {speedup:.2f}× one (target ≥ {SPEEDUP_TARGET}×: "
                           f"{'met' if speedup >= SPEEDUP_TARGET else 'not met'}"
+                          + (f"; `dask-1` already kept {cores:.2f} cores busy on average (its worker's and its "
+                             f"client's CPU over its time), so two cores can make it at most {2 / cores:.2f}× as fast "
+                             "without the work itself shrinking" if cores else "")
                           + (f"; the CPU that `dask-2`'s workers and client used, spread over two cores, allows at most {bound:.2f}×"
                              if bound else "")
                           + f"); overhead of 2 workers against one "
                           f"process {overhead:+.0%} (target ≤ {OVERHEAD_TARGET:.0%}: "
                           f"{'met' if overhead <= OVERHEAD_TARGET else 'not met'}).")
         elif all(t[s] for s in COMPARED):
-            checks.append(f"- {name}: the setups' triangle counts differ (see the table).")
+            checks.append(f"- {name}, {resolution}³: the setups' triangle counts differ (see the table).")
     return "\n".join([
         "## Tiled polygonization on Dask" + (" (QUICK)" if run["quick"] else ""),
         "",
@@ -395,6 +402,14 @@ def _cpu(c: dict) -> str:
     if "worker_cpu" not in c:
         return fmt_s(statistics.median(c["client_cpu"]))
     return f"{fmt_s(statistics.median(c['worker_cpu']))} / {fmt_s(statistics.median(c['client_cpu']))}"
+
+
+def _cores(one_worker_s: float, one: dict) -> float | None:
+    """The cores one worker's run kept busy on average: the CPU seconds its worker and its
+    client used (medians) over its time."""
+    if "worker_cpu" not in one:
+        return None
+    return (statistics.median(one["worker_cpu"]) + statistics.median(one["client_cpu"])) / one_worker_s
 
 
 def _bound(one_worker_s: float, two: dict) -> float | None:

@@ -172,6 +172,25 @@ def test_a_partition_cut_ships_only_its_part(knot):
     assert np.mean(sizes[10]) < 0.7 * whole and np.mean(sizes[10]) < np.mean(sizes[20]) < whole
 
 
+def test_larger_cuts_of_a_partition_fit_run_first(knot, blobs):
+    """A partition fit's tiles get Dask priorities that grow with their cut's constraints, all
+    below the weld's writes; blob tiles and shared fields keep window order (priority 0)."""
+    from implicitmesh import _weld_in_place
+
+    surface = knot[1]
+    cells, origin, cell = im._core.lattice(np.asarray(surface.bounds), 40)
+    parts = [imd.cut_field(surface, *imd.tile_box(np.asarray(origin), np.asarray(cell), lo, hi))
+             for lo, hi in imd.tiles(cells, (10,) * 3)]
+    sizes = [len(p) for p in parts]
+    assert len(set(sizes)) > 5
+    priorities = [imd._tile_priority(p) for p in parts]
+    assert all(p < _weld_in_place.WRITE_PRIORITY for p in priorities)
+    by_size = sorted(zip(sizes, priorities))
+    assert all(a[1] < b[1] for a, b in zip(by_size, by_size[1:]) if a[0] < b[0])
+    assert imd._tile_priority(imd.cut_field(blobs, np.full(3, -0.5), np.full(3, 0.5))) == 0
+    assert imd._tile_priority(knot[0]) == 0
+
+
 def test_a_cut_file_reads_back_the_cut_bit_for_bit(knot, tmp_path):
     """A partition cut written to a file (how the client hands cuts to workers on its machine)
     loads as the same surface: the same bits at the tile's points, the same state; a process
@@ -654,10 +673,11 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot, monkeypatch, cuts
     assert (len(resent) > 0) == (cuts == "scattered")
 
 
-@pytest.mark.parametrize("transport", ["in-place", "files", "comms", "files-unseen"])
+@pytest.mark.parametrize("transport", ["in-place", "in-place-whole", "files", "comms", "files-unseen"])
 def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, monkeypatch, transport):
     """Workers on the client's machine write their tiles (here of any size) into the welded
-    mesh's files in the run's directory ("in-place"), or, where it cannot hold the welded mesh,
+    mesh's files in the run's directory ("in-place"; tiles under MIN_KEPT_BYTES come back whole from
+    their one task and the client writes them, "in-place-whole"), or, where it cannot hold the welded mesh,
     pass them through files there ("files"); without one ("comms"), or where the workers do
     not see it ("files-unseen"), the tiles come through Dask: the same arrays each way, bit for
     bit, and the directory removed afterwards."""
@@ -666,14 +686,16 @@ def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, mo
     made, original = [], _tile_files.make_directory
 
     def make_directory():
-        d = {"in-place": original, "files": original, "comms": lambda: None,
+        d = {"in-place": original, "in-place-whole": original, "files": original, "comms": lambda: None,
              "files-unseen": lambda: "/nonexistent/implicitmesh-tiles"}[transport]()
         made.append(d)
         return d
 
     monkeypatch.setattr(_tile_files, "make_directory", make_directory)
+    in_place = transport.startswith("in-place")
     monkeypatch.setattr(_tile_files, "MIN_BYTES", 0)
-    monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if transport == "in-place" else 1 << 62)
+    monkeypatch.setattr(_weld_in_place, "MIN_KEPT_BYTES", 1 << 40 if transport == "in-place-whole" else 0)
+    monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if in_place else 1 << 62)
     monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
     read, write_rows, gathered = _tile_files.read, _weld_in_place.write_rows, imd._gathered_weld
     files_read, client_writes = [], []
@@ -688,19 +710,30 @@ def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, mo
 
     monkeypatch.setattr(_tile_files, "read", counted_read)
     monkeypatch.setattr(_weld_in_place, "write_rows", counted_write_rows)
-    welds_in_place = []
+    welds_in_place, entry_tasks, entry_task = [], [], _weld_in_place.WeldInPlace.entry_task
     monkeypatch.setattr(imd, "_gathered_weld", lambda *a: welds_in_place.append(a[2] is not None) or gathered(*a))
+
+    def counted_entry_task(self, i, fut):
+        follow = entry_task(self, i, fut)
+        if follow is not None:
+            entry_tasks.append(i)
+        return follow
+
+    monkeypatch.setattr(_weld_in_place.WeldInPlace, "entry_task", counted_entry_task)
     whole = im.polygonize(blobs, bounds=BOX, resolution=40, method="sparse")
     # A memory limit of 64 MiB: the welded mesh fits in a small /dev/shm too.
     tiled = imd.polygonize(blobs, bounds=BOX, resolution=40, method="sparse", client=client, tile=15, memory_limit=1 << 26)
-    assert welds_in_place == [transport == "in-place"]
+    assert welds_in_place == [in_place]
     assert_same_mesh(tiled, whole)
     assert len(files_read) == (tiled.stats["tiles"] if transport == "files" else 0)
-    # In place, every tile is written by a worker (none is under MIN_BYTES).
-    assert client_writes == []
+    # In place, every tile is written by a worker (none is under MIN_KEPT_BYTES), after a task
+    # gives its entry; or every tile comes back whole and the client writes it.
+    tiles = tiled.stats["tiles"]
+    assert len(client_writes) == (tiles if transport == "in-place-whole" else 0)
+    assert len(entry_tasks) == (tiles if transport == "in-place" else 0)
     if made[0] is not None:
         assert not os.path.exists(made[0])
-    if transport == "in-place":
+    if in_place:
         monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 1 << 62)
         streamed = imd.polygonize(blobs, bounds=BOX, resolution=40, method="sparse", client=client, tile=15,
                                   memory_limit=1 << 26)
@@ -749,16 +782,20 @@ def test_a_weld_in_place_writes_the_rows_a_worker_elsewhere_returns(blobs, tmp_p
     weld = _weld_in_place.WeldInPlace(fake, str(tmp_path), kept, cells, origin, cell, True, None)
     stream = im._core.StreamedWeld(0, cells, origin, cell, True)
     for i, (lo, hi) in enumerate(imd.tiles(cells, (11, 11, 11))):
-        kept[i] = fake.submit(imd._run_tile, blobs, BOX, 30, (lo, hi), "dense", {}, None, _weld_in_place.KEEP)
-        entry = _weld_in_place.tile_entry(kept[i].value, 0 if i % 2 else 1 << 40)
-        a = kept[i].value[1]
+        # Every other tile comes back whole, and the client writes it.
+        keep = (_weld_in_place.KEEP, 0 if i % 2 else 1 << 40)
+        kept[i] = fake.submit(imd._run_tile, blobs, BOX, 30, (lo, hi), "dense", {}, None, keep)
+        value = kept[i].value
+        assert isinstance(value, dict) == (i % 2 == 0)
+        entry = _weld_in_place.tile_entry(value)
+        a = value if i % 2 == 0 else value[1]
         stream.add([list(lo), list(hi)], a["v"], a["f"], a["n"], a["b"], a["k"])
         weld.add(entry, i)
     assert not kept
     for a, b in zip(weld.result(), stream.result()):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
     # A worker that does not see the files, or cannot open them, returns the rows.
-    result = imd._run_tile(blobs, BOX, 30, ((0, 0, 0), (11, 11, 11)), "dense", {}, None, _weld_in_place.KEEP)
+    result = imd._run_tile(blobs, BOX, 30, ((0, 0, 0), (11, 11, 11)), "dense", {}, None, (_weld_in_place.KEEP, 0))
     for where in (tmp_path / "elsewhere", tmp_path):
         paths = {k: str(where / f"absent-{k}") for k in ("vertices", "faces", "normals")}
         rows = _weld_in_place.write_kept(result, paths, 0, 0, np.zeros((0, 2), np.uint32))

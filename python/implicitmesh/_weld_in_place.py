@@ -41,6 +41,11 @@ MIN_TILE_CELLS = 64**3
 #: ``_run_tile``'s ``local`` when the tile's arrays stay on its worker.
 KEEP = "keep"
 
+#: Tiles of fewer bytes come back whole from their task and the client writes them: below this
+#: size, the two more tasks that keep a tile on its worker cost more than the client's writing
+#: of its rows.
+MIN_KEPT_BYTES = 8 << 20
+
 
 def usable(directory: str | None, memory_limit: int, tile_cells: int, worker_threads: int) -> bool:
     """Whether a run of tiles of ``tile_cells`` cells welds in place: tiles of at least
@@ -102,17 +107,14 @@ def write_rows(paths: dict[str, str], v, f, n, first_vertex: int, first_face: in
         rooms.clear()  # the maps close only without views of them
 
 
-def tile_entry(result: tuple, min_bytes: int) -> dict:
+def tile_entry(result: tuple | dict) -> dict:
     """A task on the worker that holds a tile's ``(entry, arrays)``: the manifest entry the
-    client plans the weld with, its boundary vertices' indices, keys and positions; for a tile
-    of fewer than ``min_bytes`` bytes, its arrays (the client writes it)."""
+    client plans the weld with, its boundary vertices' indices, keys and positions. A tile that
+    came back whole (an entry with its arrays) is its own entry."""
+    if isinstance(result, dict):
+        return result
     entry, a = result
-    entry = dict(entry)
-    if sum(x.nbytes for x in a.values()) < min_bytes:
-        entry.update(a)
-    else:
-        entry.update(kept=True, b=a["b"], k=a["k"], p=a["v"][a["b"]])
-    return entry
+    return dict(entry, kept=True, b=a["b"], k=a["k"], p=a["v"][a["b"]])
 
 
 def write_kept(result: tuple, paths: dict[str, str], first_vertex: int, first_face: int, joined) -> tuple | None:
@@ -147,6 +149,14 @@ class WeldInPlace:
     def tasks(self) -> list:
         """The futures of the writes."""
         return [w[0] for w in self.writes]
+
+    def entry_task(self, tile: int, fut: Any) -> Any:
+        """For tile ``tile``'s finished task ``fut``: the future of a task on its worker giving
+        its entry when the tile left its arrays there, else None (the tile came back whole, its
+        result is its entry; Dask reports the result's type without sending it)."""
+        if self.kept.get(tile) is not fut or fut.type in ("dict", dict):
+            return None
+        return self.client.submit(tile_entry, fut, pure=False)
 
     @property
     def vertices(self) -> int:

@@ -180,9 +180,10 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     file of the gathered run's directory when ``local = (directory, min_bytes)`` is given, this
     worker can write there and the tile is large enough, see :mod:`implicitmesh._tile_files`),
     or with ``output`` writes it to ``output/tile-….npz`` and returns its entry of the
-    manifest; with ``local`` ``_weld_in_place.KEEP``, returns its entry and its arrays, which
-    stay on the worker (see :mod:`implicitmesh._weld_in_place`). ``field`` may be a
-    :class:`implicitmesh._cut_files.CutFile`, read here."""
+    manifest; with ``local = (_weld_in_place.KEEP, min_bytes)``, returns its entry with its
+    arrays in it (a dict) when they take fewer than ``min_bytes`` bytes, else the tuple of its
+    entry and its arrays, which stay on the worker (see :mod:`implicitmesh._weld_in_place`).
+    ``field`` may be a :class:`implicitmesh._cut_files.CutFile`, read here."""
     if isinstance(field, _cut_files.CutFile):
         field = field.load()
     v, f, n, stats, b, k = _core.polygonize(
@@ -195,7 +196,10 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     name = "tile-{}-{}-{}".format(*window[0])
     if output is None:
         arrays = dict(v=v, f=f, n=n, b=b, k=k)
-        if local == _weld_in_place.KEEP:
+        if isinstance(local, tuple) and local[0] == _weld_in_place.KEEP:
+            if entry["bytes"] < local[1]:
+                entry.update(arrays)
+                return entry
             return entry, arrays
         if local is not None and _tile_files.write(local, name, arrays):
             entry["local"] = name
@@ -211,20 +215,32 @@ def _run_tile(field, bounds, resolution, window, method, options, output, local=
     return entry
 
 
+def _tile_priority(part: Any) -> float:
+    """The Dask priority of a tile's task. The tiles of a partition fit run the cuts with more
+    constraints first (a tile's work grows with its constraints and varies several times between
+    tiles), so that the last tasks to finish are short ones; all below
+    ``_weld_in_place.WRITE_PRIORITY``, so that writes run before further tiles. Other tiles run
+    in window order (0), the order the weld takes them in."""
+    if isinstance(part, _core.VariationalSurface) and part.method == "partition":
+        return -1.0 / (1.0 + len(part))
+    return 0.0
+
+
 def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, sent: "_SentCuts | None", i: int):
     """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field, and
     returns the future of its manifest entry; ``args``: ``(bounds, resolution, method, options,
-    output, local)``. With ``kept`` (a weld in place), the tile's arrays stay on its worker
-    (their future in ``kept[i]``) and a second task there gives its entry. With ``sent``, a
+    output, local)``. With ``kept`` (a weld in place), the future is also ``kept[i]``: a tile
+    too large to come back whole leaves its arrays on its worker, and a second task there gives
+    its entry (:meth:`implicitmesh._weld_in_place.WeldInPlace.entry_task`). With ``sent``, a
     partition fit's cut goes to the workers as :class:`_SentCuts` sends it; otherwise inside the
     task, through the scheduler."""
+    priority = _tile_priority(part)
     if sent is not None and isinstance(part, _core.VariationalSurface):
         part = sent.send(part, i)
-    tile = client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False)
-    if kept is None:
-        return tile
-    kept[i] = tile
-    return client.submit(_weld_in_place.tile_entry, tile, _tile_files.MIN_BYTES, pure=False)
+    tile = client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False, priority=priority)
+    if kept is not None:
+        kept[i] = tile
+    return tile
 
 
 class _SentCuts:
@@ -291,6 +307,12 @@ def _collect(distributed, futures: list, sent: _SentCuts | None, resend: Callabl
     pending = distributed.as_completed(futures)
     for fut in pending:
         i = place[fut.key]
+        follow = None if weld is None or fut.status != "finished" else weld.entry_task(i, fut)
+        if follow is not None:
+            futures[i] = follow
+            place[follow.key] = i
+            pending.add(follow)
+            continue
         try:
             arrived[i] = fut.result()
         except (CancelledError, _cut_files.CutFileMissing) as e:
@@ -327,6 +349,9 @@ class _StreamedWeld:
 
     def tasks(self) -> list:
         return []
+
+    def entry_task(self, tile: int, fut: Any) -> None:
+        return None
 
     @property
     def vertices(self) -> int:
@@ -534,7 +559,8 @@ def polygonize(
                 method,
                 options,
                 None if output is None else str(output),
-                _weld_in_place.KEEP if in_place else None if local is None else (local, _tile_files.MIN_BYTES),
+                (_weld_in_place.KEEP, _weld_in_place.MIN_KEPT_BYTES) if in_place
+                else None if local is None else (local, _tile_files.MIN_BYTES),
             ),
             kept,
         )
