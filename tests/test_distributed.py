@@ -218,17 +218,31 @@ def test_a_cut_file_reads_back_the_cut_bit_for_bit(knot, tmp_path):
     with pytest.raises(_cut_files.CutFileMissing):
         cut.load()
     assert _cut_files.write(str(tmp_path / "missing"), 0, part) is None
+    # A blob field's cut, with its kernel, precision and threshold.
+    rng = np.random.default_rng(6)
+    blobs = im.BlobField.from_particles(rng.uniform(-0.5, 0.5, (400, 3)), 0.05, precision="single")
+    part = imd.cut_field(blobs, lo, hi)
+    back = _cut_files.write(str(tmp_path), 4, part).load()
+    assert isinstance(back, im.BlobField) and len(back) == len(part) < len(blobs)
+    assert np.array_equal(back(points).view(np.uint64), blobs(points).view(np.uint64))
+    assert np.array_equal(back.gradient(points).view(np.uint64), part.gradient(points).view(np.uint64))
+    (a, ka), (b, kb) = part.__getnewargs_ex__(), back.__getnewargs_ex__()
+    assert ka == kb and a[3] == b[3] and all(np.array_equal(x, y) for x, y in zip(a[:3], b[:3]))
 
 
+@pytest.mark.parametrize("kind", ["partition", "blobs", "small-blobs"])
 @pytest.mark.parametrize("route", ["files", "files-unseen", "scattered"])
-def test_partition_cuts_reach_the_workers_through_files_or_dask(client, knot, monkeypatch, route):
+def test_cuts_reach_the_workers_through_files_or_dask(client, knot, blobs, monkeypatch, route, kind):
     """Workers that see the run's directory read each tile's cut from a file there ("files"); a
     worker that does not see its file has the cut sent again through Dask ("files-unseen"), as
     do all tiles when the workers do not see the directory ("scattered"): the single machine's
-    mesh each way, and the run's directory removed afterwards."""
+    mesh each way, and the run's directory removed afterwards. Blob cuts of fewer than
+    MIN_SENT_BLOBS primitives travel inside their tasks ("small-blobs")."""
     from implicitmesh import _cut_files, _tile_files
 
-    surface = knot[1]
+    field, options = (knot[1], {"method": "octree"}) if kind == "partition" else (blobs, {"bounds": BOX, "method": "sparse"})
+    if kind == "blobs":
+        monkeypatch.setattr(imd._SentCuts, "MIN_SENT_BLOBS", 0)
     made, original = [], _tile_files.make_directory
 
     def make_directory():
@@ -254,12 +268,16 @@ def test_partition_cuts_reach_the_workers_through_files_or_dask(client, knot, mo
         return collect(distributed, futures, cuts, lambda i: resent.append(i) or resend(i), weld, report)
 
     monkeypatch.setattr(imd, "_collect", counted_collect)
-    whole = im.polygonize(surface, resolution=40, method="octree")
-    tiled = imd.polygonize(surface, resolution=40, method="octree", client=client, tile=13)
+    whole = im.polygonize(field, resolution=40, **options)
+    scattered = []
+    monkeypatch.setattr(client, "scatter", lambda *a, **k: scattered.append(1) or distributed.Client.scatter(client, *a, **k))
+    tiled = imd.polygonize(field, resolution=40, client=client, tile=13, **options)
     assert_same_mesh(tiled, whole)
     tiles = tiled.stats["tiles"]
-    assert len(sent) == (0 if route == "scattered" else tiles)
-    assert sorted(resent) == (list(range(tiles)) if route == "files-unseen" else [])
+    inline = kind == "small-blobs"
+    assert len(sent) == (0 if route == "scattered" or inline else tiles)
+    assert len(scattered) == (0 if inline else tiles if route == "scattered" else 0)
+    assert sorted(resent) == (list(range(tiles)) if route == "files-unseen" and not inline else [])
     assert not os.path.exists(made[0])
 
 

@@ -399,6 +399,55 @@ def test_compare_ignores_numbering_and_order_but_not_orientation(sphere_32):
     assert compare(a, holed) == {"missing": 10, "extra": 0, "common": len(a.faces) - 10}
 
 
+def _compare_by_sets(a: Mesh, b: Mesh) -> dict:
+    """compare's counts from Python sets of triangles as tuples of corner bit patterns."""
+
+    def triangles(m):
+        out = set()
+        for f in m.faces:
+            c = [tuple(m.vertices[i].view(np.uint64)) for i in f]
+            k = min(range(3), key=lambda i: c[i])
+            out.add(tuple(c[k:] + c[:k]))
+        return out
+
+    ta, tb = triangles(a), triangles(b)
+    return {"missing": len(ta - tb), "extra": len(tb - ta), "common": len(ta & tb)}
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compare_counts_what_sets_of_triangles_count(seed):
+    """Random meshes over a few positions (repeated vertices, repeated and degenerate
+    triangles, -0.0 against 0.0): compare's counts are those of sets of triangles."""
+    rng = np.random.default_rng(seed)
+    pool = rng.integers(-2, 3, (12, 3)).astype(np.float64) * 0.5
+    pool[0] = [-0.0, 0.0, 0.5]
+    pool[1] = [0.0, 0.0, 0.5]
+
+    def mesh():
+        v = pool[rng.integers(0, len(pool), 20)]
+        f = rng.integers(0, len(v), (rng.integers(0, 40), 3))
+        return Mesh(v, f)
+
+    for _ in range(5):
+        a, b = mesh(), mesh()
+        assert compare(a, b) == _compare_by_sets(a, b)
+        assert compare(a, a) == _compare_by_sets(a, a)
+
+
+def test_triangle_keys_name_rotated_rows_with_one_key_or_two():
+    from implicitmesh.mesh import _triangle_keys
+
+    rng = np.random.default_rng(1)
+    ids = rng.integers(0, 6, (400, 3))
+    rotated = [tuple(np.roll(r, -int(np.argmin(r)))) for r in ids]
+    for n in (6, (1 << 21) + 1):
+        keys = _triangle_keys(ids, n)
+        assert keys.shape == (len(ids), 1 if n <= 1 << 21 else 2)
+        for i in range(0, len(ids), 7):
+            for j in range(len(ids)):
+                assert (keys[i] == keys[j]).all() == (rotated[i] == rotated[j])
+
+
 def test_compare_different_resolutions(sphere_32):
     other = polygonize(shapes.Sphere(center=(0.01, 0.02, 0.03), radius=0.7), bounds=BOX, resolution=33)
     c = compare(sphere_32, other)

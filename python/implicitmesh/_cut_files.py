@@ -1,11 +1,12 @@
-"""The tiles' cuts of a partition fit passed to the workers through files on the client's machine
-instead of Dask's comms.
+"""The tiles' cuts of a partition fit or a blob field passed to the workers through files on the
+client's machine instead of Dask's comms.
 
 When every worker sees the run's directory (made by the client in shared memory, ``/dev/shm``,
 where there is one: see :mod:`implicitmesh._tile_files`), the client writes each tile's cut
-(:meth:`VariationalSurface.to_state`: its arrays in ``.npy`` format one after another, then its
-other entries as JSON) into a file there, and the tile's task carries only a :class:`CutFile`
-naming it; the worker maps the file and builds the cut from it (:meth:`CutFile.load`).
+(:meth:`VariationalSurface.to_state`, or a blob field's constructor arguments: its arrays in
+``.npy`` format one after another, then its other entries as JSON) into a file there, and the
+tile's task carries only a :class:`CutFile` naming it; the worker maps the file and builds the
+cut from it (:meth:`CutFile.load`).
 Scattering the cut instead pickles it on the client, copies it through a socket and unpickles it
 on the worker, and waits for the worker's answer before the next tile is sent: on one machine
 that keeps the workers waiting for their tiles.
@@ -39,22 +40,34 @@ class CutFile:
     def __reduce__(self):
         return CutFile, (self.path,)
 
-    def load(self) -> "_core.VariationalSurface":
-        """The cut: the same bits as the surface written. Raises :class:`CutFileMissing` when
+    def load(self) -> "_core.VariationalSurface | _core.BlobField":
+        """The cut: the same bits as the field written. Raises :class:`CutFileMissing` when
         this process does not see the file."""
         try:
             with _tile_files.mapped_arrays(self.path) as arrays:
                 header = json.loads(arrays[-1].tobytes())
                 state = dict(header["entries"], **dict(zip(header["arrays"], arrays)))
+                if state.pop(BLOB_FIELD, False):
+                    args = [state.pop(k) for k in ("centers", "radii", "strengths", "threshold")]
+                    return _core.BlobField(*args, **state)
                 return _core.VariationalSurface.from_state(state)
         except FileNotFoundError:
             raise CutFileMissing(self.path) from None
 
 
-def write(directory: str, tile: int, surface: "_core.VariationalSurface") -> CutFile | None:
-    """Writes ``surface`` (a tile's cut) to a file in ``directory``; None when it cannot be
+#: The entry that marks a blob field's file (its constructor's arguments, not a state).
+BLOB_FIELD = "blob_field"
+
+
+def write(directory: str, tile: int, field: "_core.VariationalSurface | _core.BlobField") -> CutFile | None:
+    """Writes ``field`` (a tile's cut) to a file in ``directory``; None when it cannot be
     written (nothing is left behind)."""
-    state = surface.to_state()
+    if isinstance(field, _core.BlobField):
+        (centers, radii, strengths, threshold), keywords = field.__getnewargs_ex__()
+        state = dict(keywords, centers=centers, radii=radii, strengths=strengths, threshold=threshold)
+        state[BLOB_FIELD] = True
+    else:
+        state = field.to_state()
     arrays = {k: v for k, v in state.items() if isinstance(v, np.ndarray)}
     # 8-byte elements first, so that every array's data is aligned in the file.
     names = sorted(arrays, key=lambda k: -arrays[k].dtype.itemsize)

@@ -82,68 +82,28 @@ def tiles(cells: Sequence[int], tile: Sequence[int]) -> Iterator[tuple[tuple[int
         yield (rx[0], ry[0], rz[0]), (rx[1], ry[1], rz[1])
 
 
-def _blob_arrays(field: "_core.BlobField") -> tuple:
-    """``field``'s centers, radii and strengths (copies, read once) and its other constructor
-    arguments: threshold and the keywords (voxel size, kernel)."""
-    _, kwargs = field.__getnewargs_ex__()
-    return field.centers, field.radii, field.strengths, field.threshold, kwargs
-
-
-def _blob_subset(arrays: tuple, keep: np.ndarray) -> "_core.BlobField":
-    """The blob field of the primitives ``keep`` (increasing indices) of the field whose
-    :func:`_blob_arrays` are ``arrays``."""
-    centers, radii, strengths, threshold, kwargs = arrays
-    return _core.BlobField(centers[keep], radii[keep], strengths[keep], threshold, **kwargs)
-
-
 def _reaches(centers: np.ndarray, reach: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Whether each sphere (``centers``, ``reach``) meets the box ``[lo, hi]`` (rows of boxes
-    or one box)."""
+    """Whether each sphere (``centers``, ``reach``) meets the box ``[lo, hi]``, with the core's
+    arithmetic (``blob::tiles::sphere_meets_box``): the same answer, bit for bit."""
     near = np.maximum(np.maximum(lo - centers, centers - hi), 0.0)
-    return np.einsum("ij,ij->i", near, near) <= reach * reach
+    return (near[:, 0] * near[:, 0] + near[:, 1] * near[:, 1]) + near[:, 2] * near[:, 2] <= reach * reach
 
 
 def cut_blobs(field: "_core.BlobField", lo: np.ndarray, hi: np.ndarray) -> "_core.BlobField | None":
     """The blob field of the primitives of ``field`` whose sphere of influence reaches the box
     ``[lo, hi]``, in their order (so values and gradients in the box are the same bits as the
     whole field's), or None when no primitive reaches it (the field is positive there)."""
-    arrays = _blob_arrays(field)
-    keep = _reaches(arrays[0], arrays[1] * (1.0 + _RADIUS_MARGIN), lo, hi)
-    return _blob_subset(arrays, np.flatnonzero(keep)) if keep.any() else None
+    keep = _reaches(field.centers, field.radii * (1.0 + _RADIUS_MARGIN), lo, hi)
+    return field._subset(np.flatnonzero(keep).astype(np.uint32)) if keep.any() else None
 
 
 def _blob_tiles(field: "_core.BlobField", cells, origin: np.ndarray, cell: np.ndarray, tile) -> list:
     """:func:`cut_blobs` for every tile of :func:`tiles` at once, in its order (None for a tile
-    no primitive reaches): each primitive is tested against the tiles its sphere's bounding box
-    meets (widened by a millionth of a tile against rounding), not against every tile, with
+    no primitive reaches): the core tests each primitive against the tiles its sphere's bounding
+    box meets (widened by a millionth of a tile against rounding), not against every tile, with
     :func:`cut_blobs`'s test, so each tile gets the same primitives."""
-    cells, tile = np.asarray(cells, dtype=np.int64), np.asarray(tile, dtype=np.int64)
-    counts = -(-cells // tile)
-    arrays = _blob_arrays(field)
-    centers, reach = arrays[0], arrays[1] * (1.0 + _RADIUS_MARGIN)
-    side = tile * cell
-    first = np.floor((centers - reach[:, None] - origin) / side - 1e-6).astype(np.int64)
-    last = np.floor((centers + reach[:, None] - origin) / side + 1e-6).astype(np.int64)
-    first, last = np.clip(first, 0, counts - 1), np.clip(last, 0, counts - 1)
-    span = np.maximum(last - first + 1, 0)
-    pairs = span.prod(axis=1)
-    prim = np.repeat(np.arange(len(centers)), pairs)
-    k = np.arange(len(prim)) - np.repeat(np.cumsum(pairs) - pairs, pairs)
-    t = np.empty((len(prim), 3), dtype=np.int64)
-    for axis in range(3):
-        n = span[prim, axis]
-        t[:, axis] = first[prim, axis] + k % n
-        k //= n
-    lo = t * tile
-    box_lo = origin + lo.astype(np.float64) * cell
-    box_hi = origin + np.minimum(lo + tile, cells).astype(np.float64) * cell
-    hit = _reaches(centers[prim], reach[prim], box_lo, box_hi)
-    prim, t = prim[hit], t[hit]
-    ids = (t[:, 2] * counts[1] + t[:, 1]) * counts[0] + t[:, 0]
-    order = np.argsort(ids, kind="stable")
-    prim, ids = prim[order], ids[order]
-    bounds = np.searchsorted(ids, np.arange(int(counts.prod()) + 1))
-    return [_blob_subset(arrays, prim[a:b]) if b > a else None for a, b in zip(bounds[:-1], bounds[1:])]
+    index, start = field._tile_primitives(origin, cell, cells, tile, _RADIUS_MARGIN)
+    return [field._subset(index[a:b]) if b > a else None for a, b in zip(start[:-1], start[1:])]
 
 
 def _cut_per_tile(field: Any) -> bool:
@@ -232,10 +192,10 @@ def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, sent
     output, local)``. With ``kept`` (a weld in place), the future is also ``kept[i]``: a tile
     too large to come back whole leaves its arrays on its worker, and a second task there gives
     its entry (:meth:`implicitmesh._weld_in_place.WeldInPlace.entry_task`). With ``sent``, a
-    partition fit's cut goes to the workers as :class:`_SentCuts` sends it; otherwise inside the
+    cut that :class:`_SentCuts` takes goes to the workers as it sends it; otherwise inside the
     task, through the scheduler."""
     priority = _tile_priority(part)
-    if sent is not None and isinstance(part, _core.VariationalSurface):
+    if sent is not None and sent.takes(part):
         part = sent.send(part, i)
     tile = client.submit(_run_tile, part, *args[:2], window, *args[2:], pure=False, priority=priority)
     if kept is not None:
@@ -244,12 +204,17 @@ def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, sent
 
 
 class _SentCuts:
-    """How the tiles' cuts of a partition fit reach the workers: through files in the run's
-    ``directory`` when every worker sees it (:mod:`implicitmesh._cut_files`), else scattered
-    straight to a worker instead of travelling inside the task through the scheduler, which a
-    ``LocalCluster`` runs in the client's process. A cut's file is removed when its tile is done,
-    unless ``keep_files`` (its tile's arrays stay on a worker, which Dask recomputes them on
-    if the worker dies)."""
+    """How the tiles' cuts of a partition fit, and those of a blob field of at least
+    ``MIN_SENT_BLOBS`` primitives, reach the workers: through files in the run's ``directory``
+    when every worker sees it (:mod:`implicitmesh._cut_files`), else scattered straight to a
+    worker instead of travelling inside the task through the scheduler, which a ``LocalCluster``
+    runs in the client's process. A cut's file is removed when its tile is done, unless
+    ``keep_files`` (its tile's arrays stay on a worker, which Dask recomputes them on if the
+    worker dies)."""
+
+    #: Smaller blob cuts (under 1.3 MB, 40 bytes per primitive) travel inside their task, without
+    #: a file or a round trip to a worker per tile.
+    MIN_SENT_BLOBS = 1 << 15
 
     def __init__(self, client, directory: str | None, keep_files: bool):
         self.client, self.keep_files = client, keep_files
@@ -264,7 +229,13 @@ class _SentCuts:
             return False
         return bool(seen) and all(seen.values())
 
-    def send(self, part: "_core.VariationalSurface", i: int) -> Any:
+    def takes(self, part: Any) -> bool:
+        """Whether the cut ``part`` is sent this way."""
+        if isinstance(part, _core.BlobField):
+            return len(part) >= self.MIN_SENT_BLOBS
+        return isinstance(part, _core.VariationalSurface)
+
+    def send(self, part: "_core.VariationalSurface | _core.BlobField", i: int) -> Any:
         """What tile ``i``'s task receives for ``part``."""
         if self.directory is not None:
             cut = _cut_files.write(self.directory, i, part)
@@ -537,9 +508,8 @@ def polygonize(
     client, own = _get_client(client)
     futures, shared, sent, welder, welded = [], None, None, None, None
     cut = _cut_per_tile(field)
-    # The run's directory: for the tiles' meshes of a gathered run, and the cuts of a partition fit.
-    partition = cut and isinstance(field, _core.VariationalSurface)
-    local = _tile_files.make_directory() if output is None or partition else None
+    # The run's directory: for the tiles' meshes of a gathered run, and the fields' cuts.
+    local = _tile_files.make_directory() if output is None or cut else None
     limit = options.get("memory_limit") or _core.DEFAULT_MEMORY_LIMIT
     in_place = output is None and _weld_in_place.usable(local, limit, int(np.prod(tile3)), _worker_threads(client))
     kept: dict | None = {} if in_place else None
@@ -549,7 +519,7 @@ def polygonize(
         # that the tiles share (a task, not scattered data, so that Dask recomputes it if its
         # worker dies).
         shared = None if cut else client.submit(_pickled(field), pure=False)
-        sent = _SentCuts(client, local, in_place) if partition else None
+        sent = _SentCuts(client, local, in_place) if cut else None
         submit = functools.partial(
             _submit_tile,
             client,

@@ -122,9 +122,38 @@ def _canonical_triangles(ids: np.ndarray) -> np.ndarray:
     """Rotates each row (a triangle's corner ids) so its smallest id comes first, keeping the
     cyclic order (the orientation)."""
     m = np.argmin(ids, axis=1)
-    rows = np.arange(len(ids))[:, None]
-    cols = (m[:, None] + np.arange(3)[None, :]) % 3
-    return np.ascontiguousarray(ids[rows, cols])
+    return np.take_along_axis(ids, (m[:, None] + np.arange(3)) % 3, axis=1)
+
+
+def _sorted_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``rows`` (n, k) sorted lexicographically: (the order, the sorted rows, whether each
+    sorted row differs from the one before it)."""
+    order = np.lexsort(rows.T[::-1])
+    s = rows[order]
+    first = np.ones(len(s), dtype=bool)
+    first[1:] = (s[1:] != s[:-1]).any(axis=1)
+    return order, s, first
+
+
+def _triangle_keys(ids: np.ndarray, n: int) -> np.ndarray:
+    """(F, 3) corner ids below ``n``, each row rotated to start at its smallest id, as (F, k)
+    int64 keys that are equal exactly when the rotated rows are: one key when three ids fit in
+    63 bits, else two."""
+    t = _canonical_triangles(ids)
+    if n <= 1 << 21:
+        return ((t[:, 0] << 42) | (t[:, 1] << 21) | t[:, 2])[:, None]
+    return np.stack([t[:, 0] * n + t[:, 1], t[:, 2]], axis=1)
+
+
+def _distinct_rows(rows: np.ndarray) -> np.ndarray:
+    """The distinct rows of ``rows`` (n, k), sorted."""
+    if rows.shape[1] == 1:
+        s = np.sort(rows[:, 0])
+        first = np.ones(len(s), dtype=bool)
+        first[1:] = s[1:] != s[:-1]
+        return s[first][:, None]
+    _, s, first = _sorted_rows(rows)
+    return s[first]
 
 
 def compare(a: Mesh, b: Mesh) -> dict[str, int]:
@@ -143,14 +172,17 @@ def compare(a: Mesh, b: Mesh) -> dict[str, int]:
     dict
         ``missing``: triangles of ``a`` not in ``b`` (holes in ``b`` when ``a`` is the dense
         reference); ``extra``: triangles of ``b`` not in ``a``; ``common``: triangles in both.
+        Triangles are counted once however often a mesh repeats them.
     """
-    corners = np.concatenate([a.vertices[a.faces].reshape(-1, 3), b.vertices[b.faces].reshape(-1, 3)])
-    _, ids = np.unique(corners.view(np.uint64), axis=0, return_inverse=True)
-    ids = ids.reshape(-1, 3)
-    ta = _canonical_triangles(ids[: len(a.faces)])
-    tb = _canonical_triangles(ids[len(a.faces) :])
-    dt = np.dtype((np.void, ta.dtype.itemsize * 3))
-    sa = np.unique(ta.view(dt).ravel())
-    sb = np.unique(tb.view(dt).ravel())
-    common = len(np.intersect1d(sa, sb, assume_unique=True))
-    return {"missing": len(sa) - common, "extra": len(sb) - common, "common": common}
+    # One id per distinct position (coordinate bit patterns) of either mesh's vertices.
+    positions = np.concatenate([a.vertices, b.vertices]).view(np.uint64).reshape(-1, 3)
+    order, _, first = _sorted_rows(positions)
+    ids = np.empty(len(positions), dtype=np.int64)
+    ids[order] = np.cumsum(first) - 1
+    n = int(np.count_nonzero(first))
+    ta = _distinct_rows(_triangle_keys(ids[: len(a.vertices)][a.faces].reshape(-1, 3), n))
+    tb = _distinct_rows(_triangle_keys(ids[len(a.vertices) :][b.faces].reshape(-1, 3), n))
+    # A triangle in both meshes is one row of each, so two equal rows of the two together.
+    both = np.concatenate([ta, tb])
+    common = len(both) - len(_distinct_rows(both))
+    return {"missing": len(ta) - common, "extra": len(tb) - common, "common": common}

@@ -13,6 +13,7 @@ mod hints;
 mod interior;
 mod kept;
 mod single;
+pub mod tiles;
 
 use hints::{Hints, Proof, ONE_SIGN_FRAMES};
 pub use single::Precision;

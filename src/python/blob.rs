@@ -245,6 +245,57 @@ impl PyBlobField {
         self.evaluate(py, points)
     }
 
+    /// Which primitives each tile of a lattice cut into tiles needs (``implicitmesh.distributed``):
+    /// those whose radius × (1 + ``margin``) reaches the tile's box. Returns ``(index, start)``,
+    /// (K,) uint32 and (T + 1,) int64: tile ``t``'s primitives, in increasing order, are
+    /// ``index[start[t]:start[t + 1]]``, the tiles of ``tile`` cells (the last along an axis
+    /// holds what is left) numbered x fastest, then y, then z. ``origin`` and ``cell`` (3,)
+    /// float, ``cells`` and ``tile`` (3,) int.
+    fn _tile_primitives<'py>(
+        &self,
+        py: Python<'py>,
+        origin: [f64; 3],
+        cell: [f64; 3],
+        cells: [u64; 3],
+        tile: [u64; 3],
+        margin: f64,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        if tile.contains(&0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "tile: cells per tile edge must be positive, got {tile:?}"
+            )));
+        }
+        let grid = blob::tiles::TileGrid {
+            origin: DVec3::from_array(origin),
+            cell: DVec3::from_array(cell),
+            cells,
+            tile,
+        };
+        let (index, start) = super::interrupt::run(py, None, false, || {
+            self.inner.primitives_by_tile(&grid, margin)
+        })?;
+        let start: Vec<i64> = start.into_iter().map(|s| s as i64).collect();
+        Ok((
+            numpy::PyArray1::from_vec(py, index).into_any(),
+            numpy::PyArray1::from_vec(py, start).into_any(),
+        ))
+    }
+
+    /// The blob field of the primitives ``index`` ((K,) uint32, in that order) with this field's
+    /// threshold and settings: the field ``BlobField(centers[index], radii[index],
+    /// strengths[index], threshold, **settings)`` is.
+    fn _subset(&self, py: Python<'_>, index: numpy::PyReadonlyArray1<'_, u32>) -> PyResult<Self> {
+        let keep = index.as_array().to_vec();
+        let n = self.inner.centers().len();
+        if let Some(&i) = keep.iter().find(|&&i| i as usize >= n) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "index: {i} is not a primitive of a field of {n}"
+            )));
+        }
+        let inner = py.detach(|| self.inner.subset(&keep))?;
+        Ok(PyBlobField { inner })
+    }
+
     /// (N, 3) float64: the primitive positions.
     #[getter]
     fn centers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
