@@ -20,7 +20,9 @@ spheres of influence cover the cube about 1.6 times: a foam of merged blobs), me
 ``"sparse"``; ``variational``, a partition fit (``VariationalSurface.fit(method="partition")``)
 of points sampled on the knot's ``_hires`` mesh with their face normals (as in bench_scale),
 method ``"octree"``, ``normals=False``, at 256³ cells in tiles of 128³ and at 512³ in tiles of
-256³ (eight times the work per tile). Each field is made once, saved with
+256³ (eight times the work per tile); ``particles``, 10⁷ particles of bench_particles' ``slab``
+layout as the colour field of ``BlobField.from_particles``, method ``"sparse"``, on that
+benchmark's lattice of cells of s/4 around them, in tiles of 256³. Each field is made once, saved with
 :func:`implicitmesh.save`, and loaded by every case. ``many``: a small blob field in about 10⁴
 tiles of 4³ cells on 2 workers, and 10⁴ no-op tasks, for the scheduler's and the weld's cost per
 tile.
@@ -47,21 +49,26 @@ from benchmarks.bench_scale import samples, vmhwm_mib
 from benchmarks.timing import RunRecord, fmt_s, md_table, run_case_process, run_markdown, run_section
 
 BOX = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]
+#: The particles' lattice (0 in place of a resolution): bench_particles' cells of s/4 around
+#: them, saved beside the field (:func:`lattice_of`).
+PARTICLE_LATTICE = 0
 #: Per field (full, quick): size (primitives or points) and its lattices: (cells per lattice edge,
 #: cells per tile edge). The quick blob field is the full one scaled by 1/4 in cells (1/64 of the
 #: primitives, 4 times the radius): the same foam, coarser. The variational fit at 512³ has the
 #: 256³ case's tiles eight times the work.
 CASES = {
-    False: {"blobs": (200_000, [(512, 128)]), "variational": (100_000, [(256, 128), (512, 256)])},
-    True: {"blobs": (3_125, [(128, 64)]), "variational": (10_000, [(64, 32)])},
+    False: {"blobs": (200_000, [(512, 128)]), "variational": (100_000, [(256, 128), (512, 256)]),
+            "particles": (10_000_000, [(PARTICLE_LATTICE, 256)])},
+    True: {"blobs": (3_125, [(128, 64)]), "variational": (10_000, [(64, 32)]),
+           "particles": (100_000, [(PARTICLE_LATTICE, 64)])},
 }
 #: Blob radius at 200,000 primitives; it scales with the cube root of 1 / primitives.
 BLOB_RADIUS = 0.02
 SETUPS = ("single", "dask-1", "dask-2", "dask-2-dir")
 #: The setups the targets compare.
 COMPARED = ("single", "dask-1", "dask-2")
-METHOD = {"blobs": "sparse", "variational": "octree"}
-OPTIONS = {"blobs": {}, "variational": {"normals": False}}
+METHOD = {"blobs": "sparse", "variational": "octree", "particles": "sparse"}
+OPTIONS = {"blobs": {}, "variational": {"normals": False}, "particles": {}}
 #: Many small tiles, for the scheduler's and the weld's cost per tile: the quick blob field over
 #: MANY_BOUNDS (every tile reached by primitives), lattice cells and cells per tile edge.
 MANY = {False: (88, 4), True: (40, 4)}
@@ -73,7 +80,7 @@ NOOP_TASKS = {False: 10_000, True: 1_000}
 WORKER_ENV = {"RAYON_NUM_THREADS": "1"}
 #: Timed runs per case (after one warm-up on a small lattice), by field (full, quick); the median
 #: is reported. The variational runs take under a second and vary more than the blobs'.
-RUNS = {False: {"blobs": 3, "variational": 9}, True: {"blobs": 1, "variational": 1}}
+RUNS = {False: {"blobs": 3, "variational": 9, "particles": 1}, True: {"blobs": 1, "variational": 1, "particles": 1}}
 #: Targets of issue 25.
 SPEEDUP_TARGET = 1.6
 OVERHEAD_TARGET = 0.25
@@ -99,6 +106,10 @@ def make_field(name: str, size: int):
     if name == "blobs":
         centers = np.random.default_rng(11).uniform(-0.8, 0.8, (size, 3))
         return im.BlobField(centers, BLOB_RADIUS * (200_000 / size) ** (1 / 3))
+    if name == "particles":
+        from benchmarks.bench_particles import ISO, S, particles
+
+        return im.BlobField.from_particles(particles("slab", size), S / 2, iso_surface_threshold=ISO)
     p, n, _ = samples(size)
     return im.VariationalSurface.fit(p, n, method="partition")
 
@@ -141,7 +152,33 @@ class Phases:
         return parts
 
 
-def pickled_parts(field, resolution: int, tile: int) -> list[int]:
+def save_field(name: str, size: int, file: str) -> None:
+    """Makes the field and saves it to ``file``; for particles, their lattice beside it."""
+    import json
+
+    import implicitmesh as im
+
+    if name == "particles":
+        from benchmarks.bench_particles import ISO, S, lattice, particles
+
+        p = particles("slab", size)
+        bounds, cells = lattice(p)
+        Path(file + ".lattice.json").write_text(json.dumps({"bounds": bounds.tolist(), "cells": cells}))
+        im.save(file, im.BlobField.from_particles(p, S / 2, iso_surface_threshold=ISO))
+        return
+    im.save(file, make_field(name, size))
+
+
+def lattice_of(file: str, resolution: int) -> tuple:
+    """(bounds, resolution) of a case: BOX and ``resolution``, or the particles' lattice saved
+    beside their field (``resolution`` 0)."""
+    if resolution != PARTICLE_LATTICE:
+        return BOX, resolution
+    saved = json.loads(Path(file + ".lattice.json").read_text())
+    return saved["bounds"], saved["cells"]
+
+
+def pickled_parts(field, bounds, resolution, tile: int) -> list[int]:
     """Bytes each task's field pickles to (what :func:`implicitmesh.distributed.cut_field`
     gives its tile; tiles it gives nothing are not run)."""
     import numpy as np
@@ -149,7 +186,7 @@ def pickled_parts(field, resolution: int, tile: int) -> list[int]:
     from implicitmesh import _core
     from implicitmesh import distributed as imd
 
-    cells, origin, cell = _core.lattice(np.asarray(BOX), resolution)
+    cells, origin, cell = _core.lattice(np.asarray(bounds), resolution)
     parts = (imd.cut_field(field, *imd.tile_box(np.asarray(origin), np.asarray(cell), lo, hi))
              for lo, hi in imd.tiles(cells, (tile,) * 3))
     return [len(pickle.dumps(p)) for p in parts if p is not None]
@@ -163,14 +200,15 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
         return many(file, resolution, tile, runs)
     field = im.load(file)
     method, options = METHOD[name], OPTIONS[name]
-    out: dict = {"field": name, "setup": setup, "resolution": resolution, "tile": tile}
+    box, lattice = lattice_of(file, resolution)
+    out: dict = {"field": name, "setup": setup, "resolution": lattice, "tile": tile}
     if setup == "single":
-        im.polygonize(field, bounds=BOX, resolution=16, method=method, **options)  # warm-up
+        im.polygonize(field, bounds=box, resolution=16, method=method, **options)  # warm-up
         times, cpu = [], []
         for _ in range(runs):
             mesh = None  # the peak is one run's: the last run's mesh is not kept during the next
             c, t = cpu_seconds(), time.perf_counter()
-            mesh = im.polygonize(field, bounds=BOX, resolution=resolution, method=method, **options)
+            mesh = im.polygonize(field, bounds=box, resolution=lattice, method=method, **options)
             times.append(time.perf_counter() - t)
             cpu.append(cpu_seconds() - c)
         out.update(times=times, triangles=len(mesh.faces), vertices=len(mesh.vertices), peak_mib=vmhwm_mib(),
@@ -189,7 +227,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
         phases = Phases(imd)
         def run(res: int, t: int):
             out = tempfile.mkdtemp(prefix="bench_distributed_tiles_") if to_dir else None
-            return imd.polygonize(field, bounds=BOX, resolution=res, method=method, client=client, tile=t,
+            return imd.polygonize(field, bounds=box, resolution=res, method=method, client=client, tile=t,
                                   output=out, **options)
 
         warm = run(16, 8)  # warm-up: the workers import implicitmesh
@@ -204,10 +242,10 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
             t = time.perf_counter()
             if last:
                 with distributed.get_task_stream(client) as ts:
-                    mesh = run(resolution, tile)
+                    mesh = run(lattice, tile)
                 stream = ts.data
             else:
-                mesh = run(resolution, tile)
+                mesh = run(lattice, tile)
             times.append(time.perf_counter() - t)
             after = (cpu_seconds(), client.run(cpu_seconds))
             client_cpu.append(after[0] - before[0])
@@ -224,7 +262,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
             shutil.rmtree(directory)
             in_tiles = sum(e["vertices"] for e in manifest["tiles"])
             welded = (in_tiles, in_tiles - len(mesh.vertices))
-        field_bytes = pickled_parts(field, resolution, tile)
+        field_bytes = pickled_parts(field, box, lattice, tile)
         tasks = [r for r in stream if str(r["key"]).startswith("_run_tile")]
         compute = [sum(s["stop"] - s["start"] for s in r["startstops"] if s["action"] == "compute") for r in tasks]
         result_bytes = phases.tile_bytes
@@ -291,11 +329,12 @@ def measure(a: argparse.Namespace) -> dict:
         for name, (size, lattices) in CASES[a.quick].items():
             file = str(Path(tmp) / f"{name}.npz")
             t = time.perf_counter()
-            im.save(file, make_field(name, size))
+            save_field(name, size, file)
             log(f"{name}: {size:,} made and saved in {time.perf_counter() - t:.1f} s")
             for resolution, tile in lattices:
                 for setup in SETUPS:
-                    log(f"{name}, {resolution}³, tile {tile}, {setup}")
+                    where = "their lattice" if resolution == PARTICLE_LATTICE else f"{resolution}³"
+                    log(f"{name}, {where}, tile {tile}, {setup}")
                     r = run_one(name, setup, file, resolution, tile, RUNS[a.quick][name])
                     cases.append({**r, "size": size})
             if name == "blobs":
@@ -317,8 +356,9 @@ def _mean_max(values: list, scale: float = 1.0, fmt: str = "{:.2f}") -> str:
 def render(raw: dict) -> str:
     run = raw["run"]
     rows, checks = [], []
-    by = {(c["field"], c.get("resolution"), c["setup"]): c for c in raw["cases"]}
-    for name, resolution in dict.fromkeys((c["field"], c.get("resolution")) for c in raw["cases"] if c["field"] != "many"):
+    by = {(c["field"], _lattice_label(c.get("resolution")), c["setup"]): c for c in raw["cases"]}
+    for name, resolution in dict.fromkeys((c["field"], _lattice_label(c.get("resolution"))) for c in raw["cases"]
+                                          if c["field"] != "many"):
         cases = [by.get((name, resolution, s), {}) for s in SETUPS]
         single, d1, d2 = cases[:3]
         t = {s: statistics.median(c["times"]) if "times" in c else None for s, c in zip(SETUPS, cases)}
@@ -328,7 +368,7 @@ def render(raw: dict) -> str:
                 continue
             dask = setup != "single"
             rows.append([
-                f"{name}, {c['size']:,}, {c['resolution']}³" + (f", tile {c['tile']}" if dask else ""),
+                f"{name}, {c['size']:,}, {resolution}" + (f", tile {c['tile']}" if dask else ""),
                 setup, fmt_s(t[setup]),
                 f"{t['dask-1'] / t[setup]:.2f}×" if dask and t["dask-1"] else "",
                 f"{t[setup] / t['single'] - 1:+.0%}" if dask and t["single"] else "",
@@ -346,7 +386,7 @@ def render(raw: dict) -> str:
         if all(t[s] for s in COMPARED) and single.get("triangles") == d1.get("triangles") == d2.get("triangles"):
             speedup, overhead = t["dask-1"] / t["dask-2"], t["dask-2"] / t["single"] - 1
             bound, cores = _bound(t["dask-1"], d2), _cores(t["dask-1"], d1)
-            checks.append(f"- {name}, {resolution}³: 2 workers {speedup:.2f}× one (target ≥ {SPEEDUP_TARGET}×: "
+            checks.append(f"- {name}, {resolution}: 2 workers {speedup:.2f}× one (target ≥ {SPEEDUP_TARGET}×: "
                           f"{'met' if speedup >= SPEEDUP_TARGET else 'not met'}"
                           + (f"; `dask-1` already kept {cores:.2f} cores busy on average (its worker's and its "
                              f"client's CPU over its time), so two cores can make it at most {2 / cores:.2f}× as fast "
@@ -357,7 +397,7 @@ def render(raw: dict) -> str:
                           f"process {overhead:+.0%} (target ≤ {OVERHEAD_TARGET:.0%}: "
                           f"{'met' if overhead <= OVERHEAD_TARGET else 'not met'}).")
         elif all(t[s] for s in COMPARED):
-            checks.append(f"- {name}, {resolution}³: the setups' triangle counts differ (see the table).")
+            checks.append(f"- {name}, {resolution}: the setups' triangle counts differ (see the table).")
     return "\n".join([
         "## Tiled polygonization on Dask" + (" (QUICK)" if run["quick"] else ""),
         "",
@@ -368,7 +408,9 @@ def render(raw: dict) -> str:
         "independent the tasks are; `dask-2-dir` is `dask-2` with `output=DIR` on local disk (nothing gathered); the client welds each tile as it arrives (`weld(DIR)` with all its threads). Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
         "200,000 primitives, scaled with the cube root of 1 / primitives), `method=\"sparse\"`. Variational: "
         "a partition fit of points sampled on `knot_hires` with their face normals (bench_scale's samples), "
-        "`method=\"octree\"`, `normals=False`, at 256³ in tiles of 128³ and at 512³ in tiles of 256³. Bounds [-1, 1]³. Each setup in a fresh process, after a warm-up "
+        "`method=\"octree\"`, `normals=False`, at 256³ in tiles of 128³ and at 512³ in tiles of 256³. Bounds [-1, 1]³. "
+        "Particles: 10⁷ particles of bench_particles' `slab` layout, the colour field of `BlobField.from_particles`, "
+        "`method=\"sparse\"`, on that benchmark's lattice (cells of s/4 around the particles), in tiles of 256³. Each setup in a fresh process, after a warm-up "
         "at 16³; times are wall-clock medians of the runs column, cluster start-up excluded. "
         "Speed-up: `dask-1`'s time over this row's; overhead: this row's time over `single`'s, minus 1. "
         "Per tile: the task's compute seconds (Dask's task stream) and the megabytes of its field (pickled) "
@@ -395,6 +437,13 @@ def render(raw: dict) -> str:
         *checks,
         "",
     ])
+
+
+def _lattice_label(resolution) -> str:
+    """``512³`` for a resolution, ``1,329 × 1,329 × 1,150`` for cells per axis."""
+    if isinstance(resolution, (list, tuple)):
+        return " × ".join(f"{r:,}" for r in resolution)
+    return f"{resolution}³"
 
 
 def _cpu(c: dict) -> str:
