@@ -281,6 +281,15 @@ def test_cuts_reach_the_workers_through_files_or_dask(client, knot, blobs, monke
     assert not os.path.exists(made[0])
 
 
+def test_the_core_cut_refuses_bad_input(blobs):
+    with pytest.raises(ValueError, match="index"):
+        blobs._subset(np.array([0, len(blobs)], dtype=np.uint32))
+    with pytest.raises(ValueError, match="tile"):
+        blobs._tile_primitives([0.0, 0.0, 0.0], [0.1, 0.1, 0.1], [4, 4, 4], [2, 0, 2], 1e-6)
+    part = blobs._subset(np.array([5, 2], dtype=np.uint32))
+    assert np.array_equal(part.centers, blobs.centers[[5, 2]]) and part.threshold == blobs.threshold
+
+
 def test_tiles_get_the_primitives_cut_blobs_gives_them():
     """The primitives of every tile, found for all tiles at once, are those cut_blobs finds for
     the tile alone (uneven tiles, radii from a tenth of a tile to several tiles, centres outside

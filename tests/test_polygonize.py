@@ -448,6 +448,18 @@ def test_triangle_keys_name_rotated_rows_with_one_key_or_two():
                 assert (keys[i] == keys[j]).all() == (rotated[i] == rotated[j])
 
 
+def test_edge_and_index_counts_are_those_of_unique():
+    from implicitmesh.mesh import count_distinct, count_edges
+
+    rng = np.random.default_rng(2)
+    for _ in range(100):
+        f = rng.integers(0, rng.integers(1, 30), (rng.integers(1, 40), 3))
+        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        assert count_edges(f) == len(np.unique(e, axis=0))
+        assert count_distinct(f.ravel()) == len(np.unique(f))
+    assert count_distinct(np.zeros(0, dtype=np.int64)) == 0
+
+
 def test_compare_different_resolutions(sphere_32):
     other = polygonize(shapes.Sphere(center=(0.01, 0.02, 0.03), radius=0.7), bounds=BOX, resolution=33)
     c = compare(sphere_32, other)

@@ -17,7 +17,7 @@ import numpy as np
 from . import _core
 from ._core import BlobField, VariationalSurface
 from ._progress import reporter
-from .mesh import Mesh
+from .mesh import Mesh, count_edges
 
 __all__ = ["subdivide", "butterfly", "blend"]
 
@@ -46,8 +46,7 @@ def _vertex_total(faces: Any, vertices: Any, levels: int) -> int | None:
             return None
     except (TypeError, ValueError):
         return None
-    pairs = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    e, t = len(np.unique(pairs, axis=0)), len(f)
+    e, t = count_edges(f) if len(f) else 0, len(f)
     for _ in range(levels):
         n, e, t = n + e, 2 * e + 3 * t, 4 * t
     return n

@@ -5,7 +5,7 @@
 
 use super::{BlobField, PerPrimitive};
 use crate::cancel;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -51,14 +51,24 @@ impl BlobField {
     /// `margin`) reaches its box ([`sphere_meets_box`]), in increasing order: `(index, start)`,
     /// tile `t`'s primitives being `index[start[t]..start[t + 1]]`. Each primitive is tested
     /// against the tiles its sphere's bounding box meets (widened by a millionth of a tile
-    /// against rounding). Errors with [`crate::error::Error::Interrupted`] when the calling
-    /// thread's token is set.
+    /// against rounding). Errors with [`Error::Interrupted`] when the calling thread's token is
+    /// set, and naming `tile` for more than 2³² − 1 tiles or primitives.
     pub fn primitives_by_tile(
         &self,
         grid: &TileGrid,
         margin: f64,
     ) -> Result<(Vec<u32>, Vec<usize>)> {
         let counts = grid.counts();
+        let tiles = counts.iter().product::<u64>();
+        if tiles > u64::from(u32::MAX) || self.centers().len() > u32::MAX as usize {
+            return Err(Error::invalid(
+                "tile",
+                format!(
+                    "{tiles} tiles of {} primitives: at most 2³² − 1 of each",
+                    self.centers().len()
+                ),
+            ));
+        }
         let side = DVec3::new(
             grid.tile[0] as f64,
             grid.tile[1] as f64,
@@ -101,7 +111,7 @@ impl BlobField {
             .collect();
         cancel::check()?;
         // A counting sort by tile, stable: each tile's primitives stay in increasing order.
-        let tiles = (counts[0] * counts[1] * counts[2]) as usize;
+        let tiles = tiles as usize;
         let mut start = vec![0usize; tiles + 1];
         for &(t, _) in pairs.iter().flatten() {
             start[t as usize + 1] += 1;
