@@ -106,10 +106,6 @@ def make_field(name: str, size: int):
     if name == "blobs":
         centers = np.random.default_rng(11).uniform(-0.8, 0.8, (size, 3))
         return im.BlobField(centers, BLOB_RADIUS * (200_000 / size) ** (1 / 3))
-    if name == "particles":
-        from benchmarks.bench_particles import ISO, S, particles
-
-        return im.BlobField.from_particles(particles("slab", size), S / 2, iso_surface_threshold=ISO)
     p, n, _ = samples(size)
     return im.VariationalSurface.fit(p, n, method="partition")
 
@@ -154,8 +150,6 @@ class Phases:
 
 def save_field(name: str, size: int, file: str) -> None:
     """Makes the field and saves it to ``file``; for particles, their lattice beside it."""
-    import json
-
     import implicitmesh as im
 
     if name == "particles":

@@ -188,7 +188,7 @@ def _tile_priority(part: Any) -> float:
 
 def _submit_tile(client, args: tuple, kept: dict | None, part: Any, window, sent: "_SentCuts | None", i: int):
     """Submits the task of tile ``i`` (cells ``window``) with ``part`` of the field, and
-    returns the future of its manifest entry; ``args``: ``(bounds, resolution, method, options,
+    returns its future, whose result is the tile's manifest entry; ``args``: ``(bounds, resolution, method, options,
     output, local)``. With ``kept`` (a weld in place), the future is also ``kept[i]``: a tile
     too large to come back whole leaves its arrays on its worker, and a second task there gives
     its entry (:meth:`implicitmesh._weld_in_place.WeldInPlace.entry_task`). With ``sent``, a
@@ -271,7 +271,8 @@ def _collect(distributed, futures: list, sent: _SentCuts | None, resend: Callabl
     added to ``weld`` (when given) as soon as those before it are, then freed; ``report``
     gets the tiles done. A tile whose cut did not reach its worker (``sent``, see
     :meth:`_SentCuts.lost`) is sent again with ``resend(tile)``, its new future replacing the
-    old in ``futures``."""
+    old in ``futures``; so does the task that gives the entry of a tile whose arrays stay on its
+    worker (``weld.entry_task``)."""
     place = {fut.key: i for i, fut in enumerate(futures)}
     arrived: dict[int, dict] = {}
     entries: list = []

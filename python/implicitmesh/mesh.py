@@ -116,11 +116,18 @@ class Mesh:
         }
 
 
-def count_distinct(values: np.ndarray) -> int:
-    """The number of distinct integers in ``values`` (a sort, not numpy's hashing ``unique``,
-    which is several times slower on millions of values)."""
+def _distinct(values: np.ndarray) -> np.ndarray:
+    """The distinct values of ``values``, sorted (a sort, not numpy's hashing ``unique``, which
+    is several times slower on millions of integers)."""
     s = np.sort(values, axis=None)
-    return int(len(s) > 0) + int(np.count_nonzero(s[1:] != s[:-1]))
+    first = np.ones(len(s), dtype=bool)
+    first[1:] = s[1:] != s[:-1]
+    return s[first]
+
+
+def count_distinct(values: np.ndarray) -> int:
+    """The number of distinct integers in ``values``."""
+    return len(_distinct(values))
 
 
 def count_edges(faces: np.ndarray) -> int:
@@ -160,10 +167,7 @@ def _triangle_keys(ids: np.ndarray, n: int) -> np.ndarray:
 def _distinct_rows(rows: np.ndarray) -> np.ndarray:
     """The distinct rows of ``rows`` (n, k), sorted."""
     if rows.shape[1] == 1:
-        s = np.sort(rows[:, 0])
-        first = np.ones(len(s), dtype=bool)
-        first[1:] = s[1:] != s[:-1]
-        return s[first][:, None]
+        return _distinct(rows[:, 0])[:, None]
     _, s, first = _sorted_rows(rows)
     return s[first]
 

@@ -260,11 +260,6 @@ impl PyBlobField {
         tile: [u64; 3],
         margin: f64,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        if tile.contains(&0) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "tile: cells per tile edge must be positive, got {tile:?}"
-            )));
-        }
         let grid = blob::tiles::TileGrid {
             origin: DVec3::from_array(origin),
             cell: DVec3::from_array(cell),
@@ -286,12 +281,6 @@ impl PyBlobField {
     /// strengths[index], threshold, **settings)`` is.
     fn _subset(&self, py: Python<'_>, index: numpy::PyReadonlyArray1<'_, u32>) -> PyResult<Self> {
         let keep = index.as_array().to_vec();
-        let n = self.inner.centers().len();
-        if let Some(&i) = keep.iter().find(|&&i| i as usize >= n) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "index: {i} is not a primitive of a field of {n}"
-            )));
-        }
         let inner = py.detach(|| self.inner.subset(&keep))?;
         Ok(PyBlobField { inner })
     }

@@ -52,12 +52,18 @@ impl BlobField {
     /// tile `t`'s primitives being `index[start[t]..start[t + 1]]`. Each primitive is tested
     /// against the tiles its sphere's bounding box meets (widened by a millionth of a tile
     /// against rounding). Errors with [`Error::Interrupted`] when the calling thread's token is
-    /// set, and naming `tile` for more than 2³² − 1 tiles or primitives.
+    /// set, and naming `tile` for a tile of no cells or more than 2³² − 1 tiles or primitives.
     pub fn primitives_by_tile(
         &self,
         grid: &TileGrid,
         margin: f64,
     ) -> Result<(Vec<u32>, Vec<usize>)> {
+        if grid.tile.contains(&0) {
+            return Err(Error::invalid(
+                "tile",
+                format!("cells per tile edge must be positive, got {:?}", grid.tile),
+            ));
+        }
         let counts = grid.counts();
         let tiles = counts.iter().product::<u64>();
         if tiles > u64::from(u32::MAX) || self.centers().len() > u32::MAX as usize {
@@ -130,8 +136,15 @@ impl BlobField {
 
     /// The blob field of the primitives `keep` (indices, in the order given) with this field's
     /// threshold and settings: the field the same primitives make when passed to
-    /// [`BlobField::new`].
+    /// [`BlobField::new`]. Errors naming `index` for an index that is no primitive.
     pub fn subset(&self, keep: &[u32]) -> Result<BlobField> {
+        let n = self.centers().len();
+        if let Some(&i) = keep.iter().find(|&&i| i as usize >= n) {
+            return Err(Error::invalid(
+                "index",
+                format!("{i} is not a primitive of a field of {n}"),
+            ));
+        }
         let centers: Vec<DVec3> = keep.iter().map(|&i| self.centers()[i as usize]).collect();
         let radii: Vec<f64> = keep.iter().map(|&i| self.radii()[i as usize]).collect();
         let strengths: Vec<f64> = keep.iter().map(|&i| self.strengths()[i as usize]).collect();
@@ -205,5 +218,12 @@ mod tests {
             .iter()
             .zip(part.radii())
             .all(|(&i, &r)| r == radii[i as usize]));
+        // Bad input is an error, not a panic.
+        assert!(field.subset(&[0, 500]).is_err());
+        let no_cells = TileGrid {
+            tile: [5, 0, 5],
+            ..grid
+        };
+        assert!(field.primitives_by_tile(&no_cells, margin).is_err());
     }
 }
