@@ -11,7 +11,7 @@ Setups, each in a fresh process (its peak resident size its own):
   uses, and ``dask-2`` against ``dask-1`` measures how independent the tasks are (a worker whose
   polygonizer ran on both cores would leave nothing for a second worker to gain). The client
   welds each tile as it arrives;
-- ``dask-2-dir``: ``dask-2`` with ``output=DIR`` (each worker writes its tiles to a directory
+- ``dask-2-dir``: ``dask-2`` with ``write_tiles(field, DIR)`` (each worker writes its tiles to a directory
   on local disk, nothing is gathered), timed to the manifest; ``weld(DIR)`` afterwards is timed
   on its own.
 
@@ -111,28 +111,30 @@ def make_field(name: str, size: int):
 
 
 class Phases:
-    """Wraps ``_tile_fields`` and ``_weld_tile`` of :mod:`implicitmesh.distributed` (the
+    """Wraps ``tile_fields`` and ``weld_tile`` of :mod:`implicitmesh.distributed._run` (the
     gathered run's weld, one tile at a time as the tiles arrive: in place, the client plans it
     and the workers write the rows) to count the client's seconds cutting the field for the
     tiles and welding, the vertices the weld joins and the bytes of each tile's mesh (the
     tiles' fields are cut before the first is submitted)."""
 
     def __init__(self, imd):
-        self.cut, self.add = imd._tile_fields, imd._weld_tile
+        from implicitmesh.distributed import _run
+
+        self.cut, self.add = _run.tile_fields, _run.weld_tile
         self.reset()
-        imd._tile_fields = self._cut
+        _run.tile_fields = self._cut
         phases = self
 
-        def add(weld, entry, tile):
-            nv, nbytes = entry["vertices"], entry["bytes"]
+        def add(weld, result, tile):
+            nv, nbytes = result.vertices, result.nbytes
             t, before = time.perf_counter(), weld.vertices
-            phases.add(weld, entry, tile)
+            phases.add(weld, result, tile)
             phases.weld_s += time.perf_counter() - t
             phases.tile_vertices += nv
             phases.welded_vertices += nv - (weld.vertices - before)
             phases.tile_bytes.append(nbytes)
 
-        imd._weld_tile = add
+        _run.weld_tile = add
 
     def reset(self) -> None:
         self.cut_s = self.weld_s = 0.0
@@ -220,9 +222,11 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
     with distributed.Client(cluster) as client:
         phases = Phases(imd)
         def run(res: int, t: int):
-            out = tempfile.mkdtemp(prefix="bench_distributed_tiles_") if to_dir else None
-            return imd.polygonize(field, bounds=box, resolution=res, method=method, client=client, tile=t,
-                                  output=out, **options)
+            if to_dir:
+                out = tempfile.mkdtemp(prefix="bench_distributed_tiles_")
+                return imd.write_tiles(field, out, bounds=box, resolution=res, method=method, client=client, tile=t,
+                                       **options)
+            return imd.polygonize(field, bounds=box, resolution=res, method=method, client=client, tile=t, **options)
 
         warm = run(16, 8)  # warm-up: the workers import implicitmesh
         if to_dir:
@@ -257,7 +261,7 @@ def one(name: str, setup: str, file: str, resolution: int, tile: int, runs: int)
             in_tiles = sum(e["vertices"] for e in manifest["tiles"])
             welded = (in_tiles, in_tiles - len(mesh.vertices))
         field_bytes = pickled_parts(field, box, lattice, tile)
-        tasks = [r for r in stream if str(r["key"]).startswith("_run_tile")]
+        tasks = [r for r in stream if str(r["key"]).startswith("run_tile")]
         compute = [sum(s["stop"] - s["start"] for s in r["startstops"] if s["action"] == "compute") for r in tasks]
         result_bytes = phases.tile_bytes
         peaks = client.run(vmhwm_mib)
@@ -399,7 +403,7 @@ def render(raw: dict) -> str:
         "all its threads. `dask-1`, `dask-2`: `implicitmesh.distributed.polygonize` on a `LocalCluster` of 1 or 2 "
         "worker processes of one Dask thread and one rayon thread each (`RAYON_NUM_THREADS=1`), so a worker uses "
         "one core: on 2 cores `dask-2` has the cores `single` has, and `dask-2` against `dask-1` shows how "
-        "independent the tasks are; `dask-2-dir` is `dask-2` with `output=DIR` on local disk (nothing gathered); the client welds each tile as it arrives (`weld(DIR)` with all its threads). Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
+        "independent the tasks are; `dask-2-dir` is `dask-2` with `write_tiles(field, DIR)` on local disk (nothing gathered); the client welds each tile as it arrives (`weld(DIR)` with all its threads). Blobs: centres uniform in [-0.8, 0.8]³ (seed 11), one radius (0.02 at "
         "200,000 primitives, scaled with the cube root of 1 / primitives), `method=\"sparse\"`. Variational: "
         "a partition fit of points sampled on `knot_hires` with their face normals (bench_scale's samples), "
         "`method=\"octree\"`, `normals=False`, at 256³ in tiles of 128³ and at 512³ in tiles of 256³. Bounds [-1, 1]³. "
@@ -409,10 +413,10 @@ def render(raw: dict) -> str:
         "Speed-up: `dask-1`'s time over this row's; overhead: this row's time over `single`'s, minus 1. "
         "Per tile: the task's compute seconds (Dask's task stream) and the megabytes of its field (pickled) "
         "and of its mesh, mean / max over tasks. The workers share the client's machine: `dask-2`'s fill its cores, so "
-        "its gathered run welds in place (`implicitmesh._weld_in_place`: the client plans the weld from each tile's "
+        "its gathered run welds in place (`implicitmesh.distributed._weld_in_place`: the client plans the weld from each tile's "
         "counts and boundary vertices, and the worker holding a tile writes its rows into the welded mesh's files in "
         "`/dev/shm`); `dask-1` leaves the client a core, so the client welds each tile as it arrives, the tiles passing "
-        "through files in `/dev/shm` (`implicitmesh._tile_files`). Client: seconds cutting the field per tile and "
+        "through files in `/dev/shm` (`implicitmesh.distributed._tile_files`). Client: seconds cutting the field per tile and "
         "welding (the sum over the tiles as they arrive: planning them, and writing the tiles under 8 MB "
         "(`_weld_in_place.MIN_KEPT_BYTES`), which come back whole, in place; "
         "welding them otherwise; for `dask-2-dir`, `weld(DIR)` after the run, not in its seconds). Welded: vertices joined by the weld, of the tiles' vertices. "

@@ -19,6 +19,7 @@ distributed = pytest.importorskip("distributed")
 
 import implicitmesh as im
 from implicitmesh import distributed as imd
+from implicitmesh.distributed import _plan, _run, _tile, _transport
 from implicitmesh import shapes
 
 from conftest import genus_of
@@ -122,8 +123,10 @@ def test_projected_vertices_equal_one_machine(client, knot, blobs):
 
 
 def test_projection_is_refused_with_output_and_checks_its_faces(client, blobs, tmp_path):
-    with pytest.raises(ValueError, match="project"):
+    with pytest.raises(ValueError, match="project"), pytest.warns(DeprecationWarning, match="write_tiles"):
         imd.polygonize(blobs, bounds=BOX, resolution=16, client=client, tile=8, project=True, output=tmp_path)
+    with pytest.raises(TypeError, match="project"):
+        imd.write_tiles(blobs, tmp_path, bounds=BOX, resolution=16, client=client, tile=8, project=True)
     with pytest.raises(ValueError, match="project"):
         imd.polygonize(blobs, bounds=BOX, resolution=16, client=client, tile=8, project="yes")
     with pytest.raises(ValueError, match="faces"):
@@ -175,7 +178,7 @@ def test_a_partition_cut_ships_only_its_part(knot):
 def test_larger_cuts_of_a_partition_fit_run_first(knot, blobs):
     """A partition fit's tiles get Dask priorities that grow with their cut's constraints, all
     below the weld's writes; blob tiles and shared fields keep window order (priority 0)."""
-    from implicitmesh import _weld_in_place
+    from implicitmesh.distributed import _weld_in_place
 
     surface = knot[1]
     cells, origin, cell = im._core.lattice(np.asarray(surface.bounds), 40)
@@ -183,12 +186,12 @@ def test_larger_cuts_of_a_partition_fit_run_first(knot, blobs):
              for lo, hi in imd.tiles(cells, (10,) * 3)]
     sizes = [len(p) for p in parts]
     assert len(set(sizes)) > 5
-    priorities = [imd._tile_priority(p) for p in parts]
+    priorities = [_plan.tile_priority(p) for p in parts]
     assert all(p < _weld_in_place.WRITE_PRIORITY for p in priorities)
     by_size = sorted(zip(sizes, priorities))
     assert all(a[1] < b[1] for a, b in zip(by_size, by_size[1:]) if a[0] < b[0])
-    assert imd._tile_priority(imd.cut_field(blobs, np.full(3, -0.5), np.full(3, 0.5))) == 0
-    assert imd._tile_priority(knot[0]) == 0
+    assert _plan.tile_priority(imd.cut_field(blobs, np.full(3, -0.5), np.full(3, 0.5))) == 0
+    assert _plan.tile_priority(knot[0]) == 0
 
 
 def test_a_cut_file_reads_back_the_cut_bit_for_bit(knot, tmp_path):
@@ -196,7 +199,7 @@ def test_a_cut_file_reads_back_the_cut_bit_for_bit(knot, tmp_path):
     loads as the same surface: the same bits at the tile's points, the same state; a process
     that does not see the file gets CutFileMissing, which the client answers by sending the cut
     through Dask."""
-    from implicitmesh import _cut_files
+    from implicitmesh.distributed import _cut_files
 
     surface = knot[1]
     lo, hi = np.array([-0.5, -0.2, 0.0]), np.array([0.1, 0.3, 0.4])
@@ -238,11 +241,11 @@ def test_cuts_reach_the_workers_through_files_or_dask(client, knot, blobs, monke
     do all tiles when the workers do not see the directory ("scattered"): the single machine's
     mesh each way, and the run's directory removed afterwards. Blob cuts of fewer than
     MIN_SENT_BLOBS primitives travel inside their tasks ("small-blobs")."""
-    from implicitmesh import _cut_files, _tile_files
+    from implicitmesh.distributed import _cut_files, _tile_files
 
     field, options = (knot[1], {"method": "octree"}) if kind == "partition" else (blobs, {"bounds": BOX, "method": "sparse"})
     if kind == "blobs":
-        monkeypatch.setattr(imd._SentCuts, "MIN_SENT_BLOBS", 0)
+        monkeypatch.setattr(_transport.SentCuts, "MIN_SENT_BLOBS", 0)
     made, original = [], _tile_files.make_directory
 
     def make_directory():
@@ -262,12 +265,12 @@ def test_cuts_reach_the_workers_through_files_or_dask(client, knot, blobs, monke
 
     monkeypatch.setattr(_cut_files, "write", counted_write)
     resent = []
-    collect = imd._collect
+    collect = _run._collect
 
     def counted_collect(distributed, futures, cuts, resend, weld, report):
         return collect(distributed, futures, cuts, lambda i: resent.append(i) or resend(i), weld, report)
 
-    monkeypatch.setattr(imd, "_collect", counted_collect)
+    monkeypatch.setattr(_run, "_collect", counted_collect)
     whole = im.polygonize(field, resolution=40, **options)
     scattered = []
     monkeypatch.setattr(client, "scatter", lambda *a, **k: scattered.append(1) or distributed.Client.scatter(client, *a, **k))
@@ -307,7 +310,7 @@ def test_tiles_get_the_primitives_cut_blobs_gives_them():
         field = im.BlobField(centers, radii, kernel="wendland")
         cells, origin, cell = im._core.lattice(bounds, resolution)
         origin, cell = np.asarray(origin), np.asarray(cell)
-        parts = imd._blob_tiles(field, cells, origin, cell, tile)
+        parts = _plan.blob_tiles(field, cells, origin, cell, tile)
         windows = list(imd.tiles(cells, tile))
         assert len(parts) == len(windows) > 1
         assert any(p is not None for p in parts)
@@ -409,7 +412,7 @@ def test_tiles_of_one_cell(client, blobs):
 
 def test_output_directory_and_weld(client, blobs, tmp_path):
     whole = im.polygonize(blobs, bounds=BOX, resolution=40, method="sparse")
-    out = imd.polygonize(blobs, bounds=BOX, resolution=40, client=client, tile=15, output=tmp_path / "run")
+    out = imd.write_tiles(blobs, tmp_path / "run", bounds=BOX, resolution=40, client=client, tile=15)
     assert out == tmp_path / "run"
     files = sorted(p.name for p in out.iterdir())
     assert "manifest.json" in files and any(f.endswith(".npz") for f in files)
@@ -440,7 +443,7 @@ def test_gathered_tiles_weld_as_the_core_welds_them(client, blobs, tmp_path, cas
     else:
         field, kw = (lambda p: np.abs(p).sum(axis=1) - 0.75), {"bounds": BOX, "resolution": 16, "method": "dense", "tile": 3}
     gathered = imd.polygonize(field, client=client, **kw)
-    out = imd.polygonize(field, client=client, output=tmp_path / "run", **kw)
+    out = imd.write_tiles(field, tmp_path / "run", client=client, **kw)
     welded = imd.weld(out)
     manifest = json.loads((out / "manifest.json").read_text())
     tiles = []
@@ -555,18 +558,18 @@ def test_a_welded_mesh_over_memory_limit_is_refused(client, blobs, tmp_path, mon
     in the client or in place) raises a ValueError naming memory_limit and cancels every task;
     weld(DIR) of the same tiles too; with the limit raised to the mesh's bytes, both give the
     one-machine mesh."""
-    from implicitmesh import _weld_in_place
+    from implicitmesh.distributed import _weld_in_place
 
     monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if weld_in == "place" else 1 << 62)
-    monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
+    monkeypatch.setattr(_run, "_worker_threads", lambda client: 1 << 20)
     whole = im.polygonize(blobs, bounds=BOX, resolution=96, method="sparse")
     need = whole.vertices.nbytes + whole.normals.nbytes + whole.faces.nbytes
     limit = need // 3
     with pytest.raises(ValueError, match=r"memory_limit: the welded mesh .*\(output=DIR\)"):
         imd.polygonize(blobs, bounds=BOX, resolution=96, client=client, tile=16, memory_limit=limit)
     assert tasks_left(client) == 0
-    out = imd.polygonize(blobs, bounds=BOX, resolution=96, client=client, tile=16, output=tmp_path / "run",
-                         memory_limit=limit)
+    out = imd.write_tiles(blobs, tmp_path / "run", bounds=BOX, resolution=96, client=client, tile=16,
+                          memory_limit=limit)
     with pytest.raises(ValueError, match="memory_limit"):
         imd.weld(out, memory_limit=limit)
     for bad in (0, -1, 2.5, True):
@@ -631,13 +634,13 @@ def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch, we
     next run is whole."""
     import _thread
 
-    from implicitmesh import _weld_in_place
+    from implicitmesh.distributed import _weld_in_place
 
     monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if weld_in == "place" else 1 << 62)
-    monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
+    monkeypatch.setattr(_run, "_worker_threads", lambda client: 1 << 20)
 
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    add = imd._weld_tile
+    add = _run.weld_tile
     welds = []
 
     def interrupted_add(weld, entry, tile):
@@ -646,7 +649,7 @@ def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch, we
         add(weld, entry, tile)
         time.sleep(1.0)  # the signal is handled here at the latest
 
-    monkeypatch.setattr(imd, "_weld_tile", interrupted_add)
+    monkeypatch.setattr(_run, "weld_tile", interrupted_add)
     try:
         with pytest.raises(KeyboardInterrupt):
             imd.polygonize(blobs, bounds=BOX, resolution=96, method="dense", client=client, tile=8, memory_limit=1 << 28)
@@ -654,7 +657,7 @@ def test_ctrl_c_during_the_weld_cancels_the_tasks(client, blobs, monkeypatch, we
         signal.signal(signal.SIGINT, previous)
     assert len(welds) == 1
     assert tasks_left(client) == 0
-    monkeypatch.setattr(imd, "_weld_tile", add)
+    monkeypatch.setattr(_run, "weld_tile", add)
     whole = im.polygonize(blobs, bounds=BOX, resolution=24, method="sparse")
     assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8), whole)
 
@@ -672,7 +675,7 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot, monkeypatch, cuts
     scattered to the killed worker (workers that do not see the run's directory), from the
     cuts the client sends again."""
     if cuts == "scattered":
-        from implicitmesh import _tile_files
+        from implicitmesh.distributed import _tile_files
 
         monkeypatch.setattr(_tile_files, "make_directory", lambda: None)
     surface = knot[1]
@@ -687,12 +690,12 @@ def test_a_worker_killed_mid_run_changes_nothing(client, knot, monkeypatch, cuts
             killed.append(pid)
 
     resent = []
-    collect = imd._collect
+    collect = _run._collect
 
     def counted_collect(distributed, futures, sent, resend, weld, report):
         return collect(distributed, futures, sent, lambda i: resent.append(i) or resend(i), weld, report)
 
-    monkeypatch.setattr(imd, "_collect", counted_collect)
+    monkeypatch.setattr(_run, "_collect", counted_collect)
     tiled = imd.polygonize(surface, resolution=40, method="dense", client=client, tile=8, progress=kill_one)
     assert killed
     assert_same_mesh(tiled, whole)
@@ -708,7 +711,7 @@ def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, mo
     pass them through files there ("files"); without one ("comms"), or where the workers do
     not see it ("files-unseen"), the tiles come through Dask: the same arrays each way, bit for
     bit, and the directory removed afterwards."""
-    from implicitmesh import _tile_files, _weld_in_place
+    from implicitmesh.distributed import _tile_files, _weld_in_place
 
     made, original = [], _tile_files.make_directory
 
@@ -723,8 +726,8 @@ def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, mo
     monkeypatch.setattr(_tile_files, "MIN_BYTES", 0)
     monkeypatch.setattr(_weld_in_place, "MIN_KEPT_BYTES", 1 << 40 if transport == "in-place-whole" else 0)
     monkeypatch.setattr(_weld_in_place, "MIN_TILE_CELLS", 0 if in_place else 1 << 62)
-    monkeypatch.setattr(imd, "_worker_threads", lambda client: 1 << 20)
-    read, write_rows, gathered = _tile_files.read, _weld_in_place.write_rows, imd._gathered_weld
+    monkeypatch.setattr(_run, "_worker_threads", lambda client: 1 << 20)
+    read, write_rows, gathered = _tile_files.read, _weld_in_place.write_rows, _run.gathered_weld
     files_read, client_writes = [], []
 
     def counted_read(directory, name):
@@ -738,7 +741,7 @@ def test_tiles_reach_the_client_in_place_through_files_or_dask(client, blobs, mo
     monkeypatch.setattr(_tile_files, "read", counted_read)
     monkeypatch.setattr(_weld_in_place, "write_rows", counted_write_rows)
     welds_in_place, entry_tasks, entry_task = [], [], _weld_in_place.WeldInPlace.entry_task
-    monkeypatch.setattr(imd, "_gathered_weld", lambda *a: welds_in_place.append(a[2] is not None) or gathered(*a))
+    monkeypatch.setattr(_run, "gathered_weld", lambda *a: welds_in_place.append(a[2] is not None) or gathered(*a))
 
     def counted_entry_task(self, i, fut):
         follow = entry_task(self, i, fut)
@@ -787,12 +790,12 @@ class _SyncClient:
             self.value = None
 
     def submit(self, fn, *args, **kwargs):
-        from implicitmesh import _weld_in_place
+        from implicitmesh.distributed import _weld_in_place
 
         args = [a.value if isinstance(a, self.Future) else a for a in args]
         if fn is _weld_in_place.write_kept:
-            v, f, n = (args[0][1][k] for k in ("v", "f", "n"))
-            return self.Future((v, f, n))
+            m = args[0].mesh
+            return self.Future((m.vertices, m.faces, m.normals))
         return self.Future(fn(*args))
 
     def gather(self, futures):
@@ -802,49 +805,54 @@ class _SyncClient:
 def test_a_weld_in_place_writes_the_rows_a_worker_elsewhere_returns(blobs, tmp_path):
     """Tiles whose workers cannot write the welded files (another machine) return their rows,
     which the client writes: the arrays of the weld in the client's memory, bit for bit."""
-    from implicitmesh import _weld_in_place
+    from implicitmesh.distributed import _weld_in_place
 
     cells, origin, cell = im._core.lattice(np.asarray(BOX, float), 30)
     fake, kept = _SyncClient(), {}
     weld = _weld_in_place.WeldInPlace(fake, str(tmp_path), kept, cells, origin, cell, True, None)
     stream = im._core.StreamedWeld(0, cells, origin, cell, True)
+    options = dict(ambiguity="separate", normals=True, batch_size=262144, memory_limit=None)
     for i, (lo, hi) in enumerate(imd.tiles(cells, (11, 11, 11))):
         # Every other tile comes back whole, and the client writes it.
-        keep = (_weld_in_place.KEEP, 0 if i % 2 else 1 << 40)
-        kept[i] = fake.submit(imd._run_tile, blobs, BOX, 30, (lo, hi), "dense", {}, None, keep)
+        keep = _transport.Transport.keep(0 if i % 2 else 1 << 40)
+        kept[i] = fake.submit(_tile.run_tile, blobs, BOX, 30, (lo, hi), "dense", options, keep)
         value = kept[i].value
-        assert isinstance(value, dict) == (i % 2 == 0)
-        entry = _weld_in_place.tile_entry(value)
-        a = value if i % 2 == 0 else value[1]
-        stream.add([list(lo), list(hi)], a["v"], a["f"], a["n"], a["b"], a["k"])
-        weld.add(entry, i)
+        assert isinstance(value, _tile.TileResult) == (i % 2 == 0)
+        result = _weld_in_place.tile_entry(value)
+        assert isinstance(result, _tile.TileResult) and result.kept == (i % 2 == 1)
+        m = value.mesh
+        assert (result.mesh is None) == result.kept and result.vertices == len(m.vertices)
+        stream.add([list(lo), list(hi)], *m.weld_arrays())
+        weld.add(result, i)
     assert not kept
     for a, b in zip(weld.result(), stream.result()):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
     # A worker that does not see the files, or cannot open them, returns the rows.
-    result = imd._run_tile(blobs, BOX, 30, ((0, 0, 0), (11, 11, 11)), "dense", {}, None, (_weld_in_place.KEEP, 0))
+    kept_tile = _tile.run_tile(blobs, BOX, 30, ((0, 0, 0), (11, 11, 11)), "dense", options, _transport.Transport.keep(0))
+    assert isinstance(kept_tile, _tile.KeptTile)
     for where in (tmp_path / "elsewhere", tmp_path):
         paths = {k: str(where / f"absent-{k}") for k in ("vertices", "faces", "normals")}
-        rows = _weld_in_place.write_kept(result, paths, 0, 0, np.zeros((0, 2), np.uint32))
-        assert rows is not None and rows[0] is result[1]["v"] and rows[1] is result[1]["f"]
+        rows = _weld_in_place.write_kept(kept_tile, paths, 0, 0, np.zeros((0, 2), np.uint32))
+        assert rows is not None and rows[0] is kept_tile.mesh.vertices and rows[1] is kept_tile.mesh.faces
 
 
 def test_tile_files_read_back_exactly_and_are_removed(tmp_path):
-    from implicitmesh import _tile_files
+    from implicitmesh.distributed import _tile_files
 
     rng = np.random.default_rng(3)
-    arrays = dict(v=rng.random((7, 3)), n=rng.random((7, 3)), k=rng.integers(0, 2**60, 5, dtype=np.uint64),
-                  f=rng.integers(0, 7, (9, 3), dtype=np.uint32), b=np.arange(5, dtype=np.uint32))
-    empty = {k: a[:0] for k, a in arrays.items()}
-    assert not _tile_files.write((str(tmp_path), 10**6), "small", arrays)
-    for name, tile in (("full", arrays), ("empty", empty)):
-        assert _tile_files.write((str(tmp_path), 0), name, tile)
-        with _tile_files.read(str(tmp_path), name) as back:
-            for k, a in tile.items():
-                assert back[k].dtype == a.dtype and back[k].shape == a.shape and np.array_equal(back[k], a)
-                assert a.size == 0 or (not back[k].flags.writeable and back[k].ctypes.data % a.itemsize == 0)
+    mesh = _tile.TileMesh(vertices=rng.random((7, 3)), faces=rng.integers(0, 7, (9, 3), dtype=np.uint32),
+                          normals=rng.random((7, 3)), boundary=np.arange(5, dtype=np.uint32),
+                          keys=rng.integers(0, 2**60, 5, dtype=np.uint64))
+    empty = _tile.TileMesh(*(a[:0] for a in mesh.weld_arrays()))
+    for name, tile in (("full", mesh), ("empty", empty)):
+        assert _tile_files.write(str(tmp_path), name, tile.file_arrays())
+        with _tile_files.read(str(tmp_path), name) as arrays:
+            back = _tile.TileMesh.from_file_arrays(arrays)
+            for a, b in zip(tile.weld_arrays(), back.weld_arrays()):
+                assert b.dtype == a.dtype and b.shape == a.shape and np.array_equal(b, a)
+                assert a.size == 0 or (not b.flags.writeable and b.ctypes.data % a.itemsize == 0)
         assert not (tmp_path / name).exists()
-    assert not _tile_files.write((str(tmp_path / "missing"), 0), "x", arrays)
+    assert not _tile_files.write(str(tmp_path / "missing"), "x", mesh.file_arrays())
     assert list(tmp_path.iterdir()) == []
     # A run directory whose client has ended is removed; a running client's is kept.
     import subprocess

@@ -9,8 +9,9 @@ polygonization. A worker that does not see the directory (another machine), or c
 file (shared memory full), returns the arrays as usual.
 
 The file holds the arrays in ``.npy`` format one after another, the 8-byte ones first so that
-every array's data is aligned (:func:`write_arrays`, :func:`mapped_arrays`; a partition fit's
-tile cuts travel the same way to the workers, see :mod:`implicitmesh._cut_files`).
+every array's data is aligned (:func:`write_arrays`, :func:`mapped_arrays`; the order is
+``TileMesh.FILE_ORDER``; a partition fit's tile cuts travel the same way to the workers, see
+:mod:`._cut_files`).
 """
 
 from __future__ import annotations
@@ -26,9 +27,6 @@ import numpy as np
 
 #: Tiles of fewer bytes go through Dask's comms (a file costs more than sending them).
 MIN_BYTES = 1 << 20
-
-#: The arrays of a tile's file, in their order in it (8-byte elements first).
-ORDER = ("v", "n", "k", "f", "b")
 
 #: Where the run's directory goes when the machine has shared memory.
 SHARED_MEMORY = "/dev/shm"
@@ -74,15 +72,13 @@ def remove_directory(directory: str | None) -> None:
         shutil.rmtree(directory, ignore_errors=True)
 
 
-def write(local: tuple[str, int], name: str, arrays: dict[str, np.ndarray]) -> bool:
-    """Writes the tile ``arrays`` (``ORDER``) to ``directory/name``, ``local = (directory,
-    min_bytes)``; False for a tile of fewer than ``min_bytes`` bytes, or when the directory is
-    not on this machine or the file cannot be written (nothing is left behind)."""
-    directory, min_bytes = local
-    if sum(a.nbytes for a in arrays.values()) < min_bytes or not os.path.isdir(directory):
+def write(directory: str, name: str, arrays: list[np.ndarray]) -> bool:
+    """Writes a tile's ``arrays`` to ``directory/name``; False when the directory is not on this
+    machine or the file cannot be written (nothing is left behind)."""
+    if not os.path.isdir(directory):
         return False
     try:
-        write_arrays(os.path.join(directory, name), [arrays[key] for key in ORDER])
+        write_arrays(os.path.join(directory, name), arrays)
     except OSError:
         return False
     return True
@@ -108,13 +104,13 @@ def write_arrays(path: str, arrays: list[np.ndarray]) -> None:
 
 
 @contextmanager
-def read(directory: str, name: str) -> Iterator[dict[str, np.ndarray]]:
-    """The tile arrays of ``directory/name``, read-only views of the file mapped in memory, valid
-    inside the ``with`` block; the file is deleted afterwards."""
+def read(directory: str, name: str) -> Iterator[list[np.ndarray]]:
+    """The tile arrays of ``directory/name``, in the order written, read-only views of the file
+    mapped in memory, valid inside the ``with`` block; the file is deleted afterwards."""
     path = os.path.join(directory, name)
     try:
         with mapped_arrays(path) as arrays:
-            yield dict(zip(ORDER, arrays))
+            yield arrays
     finally:
         os.remove(path)
 

@@ -4,10 +4,10 @@ directory in shared memory, and each tile's rows are written straight into them.
 The client plans the weld from each tile's counts and boundary vertices alone
 (``_core.WeldPlan``, in window order, as :class:`_core.StreamedWeld` welds): where the tile's
 kept vertices and its triangles go, and which of its vertices join an earlier tile's. A tile
-that a worker left in a file of the run's directory (:mod:`implicitmesh._tile_files`) is then
-written by a task on any worker of the machine, which reads the file and writes the tile's rows
-where the plan puts them (``_core.write_welded_tile``); a tile that came back through Dask's comms
-is written by the client. At the end the client maps the files: the mesh's arrays are those
+that its worker keeps (``Transport.keep``: a :class:`._tile.KeptTile`) is then written by a
+second task there, which writes the tile's rows where the plan puts them
+(``_core.write_welded_tile``); a tile that came back through Dask's comms is written by the
+client. At the end the client maps the files: the mesh's arrays are those
 pages, not a copy. So the client never copies the tiles, and the pages of the welded mesh are
 first written by the workers, in parallel; the result is :class:`_core.StreamedWeld`'s, array
 for array.
@@ -25,7 +25,9 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from . import _core, _tile_files
+from .. import _core
+from . import _tile_files
+from ._tile import KeptTile, TileResult
 
 #: The welded arrays, their dtypes (three columns each).
 ARRAYS = {"vertices": np.float64, "faces": np.int64, "normals": np.float64}
@@ -37,9 +39,6 @@ WRITE_PRIORITY = 1
 #: Runs of smaller tiles weld in the client (``_core.StreamedWeld``): their meshes are small, and
 #: the second task per tile that the weld in place needs costs more than it saves.
 MIN_TILE_CELLS = 64**3
-
-#: ``_run_tile``'s ``local`` when the tile's arrays stay on its worker.
-KEEP = "keep"
 
 #: Tiles of fewer bytes come back whole from their task and the client writes them: below this
 #: size, the two more tasks that keep a tile on its worker cost more than the client's writing
@@ -107,35 +106,41 @@ def write_rows(paths: dict[str, str], v, f, n, first_vertex: int, first_face: in
         rooms.clear()  # the maps close only without views of them
 
 
-def tile_entry(result: tuple | dict) -> dict:
-    """A task on the worker that holds a tile's ``(entry, arrays)``: the manifest entry the
-    client plans the weld with, its boundary vertices' indices, keys and positions. A tile that
-    came back whole (an entry with its arrays) is its own entry."""
-    if isinstance(result, dict):
+def tile_entry(result: KeptTile | TileResult) -> TileResult:
+    """A task on the worker that holds a tile (a :class:`KeptTile`): the result the client plans
+    the weld with, with its boundary vertices' indices, keys and positions. A tile that came back
+    whole is its own result."""
+    if isinstance(result, TileResult):
         return result
-    entry, a = result
-    return dict(entry, kept=True, b=a["b"], k=a["k"], p=a["v"][a["b"]])
+    m = result.mesh
+    return TileResult(**{**vars(result.result), "boundary": (m.boundary, m.keys, m.vertices[m.boundary])})
 
 
-def write_kept(result: tuple, paths: dict[str, str], first_vertex: int, first_face: int, joined) -> tuple | None:
-    """A task on the worker that holds a tile's ``(entry, arrays)``: writes its rows into the
+def write_kept(kept: KeptTile, paths: dict[str, str], first_vertex: int, first_face: int, joined) -> tuple | None:
+    """A task on the worker that holds a tile (a :class:`KeptTile`): writes its rows into the
     welded arrays' files ``paths``; a worker that does not see them (another machine) or cannot
     write them (another user, shared memory full) returns ``(vertices, faces, normals)`` for the
     client to write."""
-    a = result[1]
+    m = kept.mesh
     if not os.path.isdir(os.path.dirname(paths["vertices"])):
-        return a["v"], a["f"], a["n"]
+        return m.vertices, m.faces, m.normals
     try:
-        write_rows(paths, a["v"], a["f"], a["n"], first_vertex, first_face, joined)
+        write_rows(paths, m.vertices, m.faces, m.normals, first_vertex, first_face, joined)
     except OSError:
-        return a["v"], a["f"], a["n"]
+        return m.vertices, m.faces, m.normals
     return None
 
 
+#: How Dask names the type of a tile that came back whole (it reports a result's type without
+#: sending the result).
+_WHOLE = (TileResult, f"{TileResult.__module__}.{TileResult.__qualname__}")
+
+
 class WeldInPlace:
-    """The weld of a gathered run into files of its ``directory``: ``add`` each tile's manifest
-    entry in window order, then ``result``. ``kept`` holds the futures of the tiles' arrays by
-    tile (filled as they are submitted); each is released once its write is submitted."""
+    """The weld of a gathered run into files of its ``directory`` (a :class:`._weld.Weld`):
+    ``add`` each tile's result in window order, then ``result``. ``kept`` holds the futures of
+    the tiles' tasks by tile (filled as they are submitted); each is released once its write is
+    submitted."""
 
     def __init__(self, client: Any, directory: str, kept: dict, cells, origin, cell, normals: bool, memory_limit: int | None):
         self.client, self.kept = client, kept
@@ -152,9 +157,9 @@ class WeldInPlace:
 
     def entry_task(self, tile: int, fut: Any) -> Any:
         """For tile ``tile``'s finished task ``fut``: the future of a task on its worker giving
-        its entry when the tile left its arrays there, else None (the tile came back whole, its
-        result is its entry; Dask reports the result's type without sending it)."""
-        if self.kept.get(tile) is not fut or fut.type in ("dict", dict):
+        its :class:`TileResult` when the tile stays there (a :class:`KeptTile`), else None (the
+        tile came back whole)."""
+        if self.kept.get(tile) is not fut or fut.type in _WHOLE:
             return None
         return self.client.submit(tile_entry, fut, pure=False)
 
@@ -163,22 +168,23 @@ class WeldInPlace:
         """Welded vertices planned so far."""
         return self.plan.vertices
 
-    def add(self, entry: dict, tile: int) -> None:
-        """Plans tile number ``tile`` from its task's manifest ``entry`` and has its rows
-        written (the entry keeps its counts)."""
-        window = entry["window"]
-        if entry.pop("kept", False):
-            b, k, p = (entry.pop(x) for x in ("b", "k", "p"))
-            plan = self.plan.add(window, entry["vertices"], entry["faces"], b, k, p)
+    def add(self, result: TileResult, tile: int) -> None:
+        """Plans tile number ``tile`` from its task's ``result`` and has its rows written (the
+        result keeps its counts, not its arrays)."""
+        if result.boundary is not None:
+            b, k, p = result.boundary
+            result.boundary = None
+            plan = self.plan.add(result.window, result.vertices, result.faces, b, k, p)
             arrays = self.kept.pop(tile)
             fut = self.client.submit(write_kept, arrays, self.paths, *plan, pure=False, priority=WRITE_PRIORITY)
             # Released here, the tile's arrays stay on its worker until the write has run.
             arrays.release()
             self.writes.append((fut, plan))
             return
-        v, f, n, b, k = (entry.pop(x) for x in ("v", "f", "n", "b", "k"))
-        plan = self.plan.add(window, len(v), len(f), b, k, v[b])
-        write_rows(self.paths, v, f, n, *plan)
+        m, result.mesh = result.mesh, None
+        assert m is not None
+        plan = self.plan.add(result.window, len(m.vertices), len(m.faces), m.boundary, m.keys, m.vertices[m.boundary])
+        write_rows(self.paths, m.vertices, m.faces, m.normals, *plan)
         fut = self.kept.pop(tile, None)
         if fut is not None:
             fut.release()

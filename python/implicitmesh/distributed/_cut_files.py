@@ -2,7 +2,7 @@
 client's machine instead of Dask's comms.
 
 When every worker sees the run's directory (made by the client in shared memory, ``/dev/shm``,
-where there is one: see :mod:`implicitmesh._tile_files`), the client writes each tile's cut
+where there is one: see :mod:`._tile_files`), the client writes each tile's cut
 (:meth:`VariationalSurface.to_state`, or a blob field's constructor arguments: its arrays in
 ``.npy`` format one after another, then its other entries as JSON) into a file there, and the
 tile's task carries only a :class:`CutFile` naming it; the worker maps the file and builds the
@@ -22,7 +22,8 @@ import os
 
 import numpy as np
 
-from . import _core, _tile_files
+from .. import _core
+from . import _tile_files
 
 
 class CutFileMissing(Exception):
@@ -40,7 +41,7 @@ class CutFile:
     def __reduce__(self):
         return CutFile, (self.path,)
 
-    def load(self) -> "_core.VariationalSurface | _core.BlobField":
+    def load(self) -> _core.VariationalSurface | _core.BlobField:
         """The cut: the same bits as the field written. Raises :class:`CutFileMissing` when
         this process does not see the file."""
         try:
@@ -59,7 +60,7 @@ class CutFile:
 BLOB_FIELD = "blob_field"
 
 
-def write(directory: str, tile: int, field: "_core.VariationalSurface | _core.BlobField") -> CutFile | None:
+def write(directory: str, tile: int, field: _core.VariationalSurface | _core.BlobField) -> CutFile | None:
     """Writes ``field`` (a tile's cut) to a file in ``directory``; None when it cannot be
     written (nothing is left behind)."""
     if isinstance(field, _core.BlobField):
