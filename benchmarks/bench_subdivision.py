@@ -68,13 +68,13 @@ def measure(a: argparse.Namespace) -> dict:
         log(f"{name}: {len(s)} constraints, levels 1–{top}, {runs} runs")
         # Seconds per level: each run subdivides to the top level; the core times every level.
         per_level: list[list[float]] = [[] for _ in range(top + 1)]
-        t_all = timeit_median(lambda: im.subdivide(v, f, levels=top, surface=s), runs, 1)
+        t_all = timeit_median(lambda: im.subdivide(v, f, levels=top, field=s), runs, 1)
         levels = t_all.result
         for _ in range(runs):
-            for k, lv in enumerate(im.subdivide(v, f, levels=top, surface=s)):
+            for k, lv in enumerate(im.subdivide(v, f, levels=top, field=s)):
                 per_level[k].append(lv.stats["seconds"])
         # Level 2 in one call (fit excluded, as in Jin's Table 1) against marching cubes.
-        t_sub2 = timeit_median(lambda: im.subdivide(v, f, levels=2, surface=s), runs, 1)
+        t_sub2 = timeit_median(lambda: im.subdivide(v, f, levels=2, field=s), runs, 1)
         n2 = len(t_sub2.result[2].faces)
         res = closest_resolution(im, s, n2)
         log(f"{name}: level 2 has {n2:,} triangles; marching cubes at {res} cells")

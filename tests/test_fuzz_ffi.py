@@ -117,7 +117,7 @@ def test_degenerate_meshes(kind):
     s = survives(lambda: im.VariationalSurface.from_mesh(v, f))
     if s is not None:
         assert np.all(np.isfinite(s.evaluate(v)))
-    survives(lambda: im.subdivide(v, f, levels=1, surface=im.shapes.Sphere(radius=0.8)))
+    survives(lambda: im.subdivide(v, f, levels=1, field=im.shapes.Sphere(radius=0.8)))
     survives(lambda: im.butterfly(v, f, levels=1))
 
 

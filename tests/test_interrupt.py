@@ -134,7 +134,7 @@ def test_ctrl_c_stops_subdivision():
     try:
         with pytest.raises(KeyboardInterrupt):
             # Level 6 has 6.5 million triangles: tens of seconds of Newton steps.
-            im.subdivide(v, f, levels=6, surface=im.shapes.Torus(major=0.5, minor=0.2))
+            im.subdivide(v, f, levels=6, field=im.shapes.Torus(major=0.5, minor=0.2))
     finally:
         timer.cancel()
 
@@ -146,13 +146,13 @@ def test_ctrl_c_stops_a_subdivision_reporting_progress(surface):
     try:
         with pytest.raises(KeyboardInterrupt):
             # Level 5 has 2.5 million new vertices against 3,000 centres: seconds of Newton steps.
-            im.subdivide(control.vertices, control.faces, levels=5, surface=surface, progress=counts.append)
+            im.subdivide(control.vertices, control.faces, levels=5, field=surface, progress=counts.append)
     finally:
         timer.cancel()
     assert counts, "no progress was reported before the interrupt"
     assert counts == sorted(counts)
     assert counts[-1] < len(control.faces) * 4**5
-    levels = im.subdivide(control.vertices, control.faces, levels=1, surface=surface)
+    levels = im.subdivide(control.vertices, control.faces, levels=1, field=surface)
     assert levels[1].to_trimesh().is_watertight
 
 

@@ -91,7 +91,7 @@ def test_tracking_and_subdivision_on_a_partition_fit(knot_fits):
     with pytest.raises(ValueError, match="method"):
         im.polygonize(s, resolution=16, method="sparse")
     control = im.polygonize(s, resolution=16)
-    levels = im.subdivide(control.vertices, control.faces, levels=1, surface=s)
+    levels = im.subdivide(control.vertices, control.faces, levels=1, field=s)
     vertices = levels[-1].vertices
     assert len(levels) == 2 and len(vertices) > len(control.vertices)
     # The new vertices are on the zero set.
@@ -152,7 +152,7 @@ def test_fifty_thousand_scan_points():
     # Subdivision of a control mesh of 10⁵ vertices: the new vertices lie on the zero set.
     control = im.polygonize(s, resolution=232, method="octree", normals=False)
     assert len(control.vertices) >= 100_000
-    fine = im.subdivide(control.vertices, control.faces, levels=1, surface=s)[-1]
+    fine = im.subdivide(control.vertices, control.faces, levels=1, field=s)[-1]
     assert len(fine.faces) == 4 * len(control.faces)
     assert np.max(np.abs(s.evaluate(fine.vertices[len(control.vertices):]))) < 1e-6
     closed_with_genus(fine, 1)

@@ -35,7 +35,7 @@ def test_exported():
 
 def test_icosahedron_levels(icosahedron):
     v, f, s = icosahedron
-    levels = subdivide(v, f, levels=5, surface=s)
+    levels = subdivide(v, f, levels=5, field=s)
     assert [len(m.faces) for m in levels] == [20, 80, 320, 1280, 5120, 20480]
     for k, m in enumerate(levels):
         assert m.stats["level"] == k
@@ -69,7 +69,7 @@ def test_shared_meshes(shared, name):
     v, f = shared.arrays(name)
     s = shared.surface(name)
     genus = genus_of(shared.trimesh(name).euler_number)
-    levels = subdivide(v, f, levels=2, surface=s)
+    levels = subdivide(v, f, levels=2, field=s)
     assert len(levels) == 3
     for k, m in enumerate(levels):
         assert len(m.faces) == len(f) * 4**k
@@ -95,7 +95,7 @@ def test_newton_prediction_keeps_residual_and_normals(shared, name):
     3.2-3.8 before, with the flat midpoint and a confirming evaluation)."""
     v, f = shared.arrays(name)
     s = shared.surface(name)
-    levels = subdivide(v, f, levels=3, surface=s)
+    levels = subdivide(v, f, levels=3, field=s)
     for k in range(1, 4):
         m, prev = levels[k], levels[k - 1]
         new = m.vertices[len(prev.vertices) :]
@@ -122,7 +122,7 @@ def test_open_mesh_keeps_boundary(shared):
     _, counts = edges_of(f_open)
     boundary = int((counts == 1).sum())
     assert boundary > 0
-    levels = subdivide(v, f_open, levels=2, surface=s)
+    levels = subdivide(v, f_open, levels=2, field=s)
     for k, m in enumerate(levels):
         assert len(m.faces) == len(f_open) * 4**k
         _, c = edges_of(m.faces)
@@ -178,7 +178,7 @@ def subdivide_midpoints(v, f):
 
 def test_butterfly_and_implicit_share_connectivity(icosahedron):
     v, f, s = icosahedron
-    imp = subdivide(v, f, levels=3, surface=s)
+    imp = subdivide(v, f, levels=3, field=s)
     bf = butterfly(v, f, levels=3, w=0.0)
     for a, b in zip(imp, bf):
         assert np.array_equal(a.faces, b.faces)
@@ -192,7 +192,7 @@ def test_butterfly_and_implicit_share_connectivity(icosahedron):
 
 def test_blend_identities(icosahedron):
     v, f, s = icosahedron
-    a = subdivide(v, f, levels=2, surface=s)[2]
+    a = subdivide(v, f, levels=2, field=s)[2]
     b = butterfly(v, f, levels=2, w=0.05)[2]
     assert np.array_equal(blend(a, b, 0).vertices, a.vertices)
     assert np.array_equal(blend(a, b, 1.0).vertices, b.vertices)
@@ -210,9 +210,9 @@ def test_blend_identities(icosahedron):
 def test_bad_input(icosahedron):
     v, f, s = icosahedron
     with pytest.raises(ValueError, match="levels"):
-        subdivide(v, f, levels=-1, surface=s)
+        subdivide(v, f, levels=-1, field=s)
     with pytest.raises(ValueError, match="levels"):
-        subdivide(v, f, levels=20, surface=s)
+        subdivide(v, f, levels=20, field=s)
     with pytest.raises(ValueError, match="levels"):
         butterfly(v, f, levels=-1)
     with pytest.raises(ValueError, match="levels"):
@@ -220,26 +220,26 @@ def test_bad_input(icosahedron):
     bad = f.copy()
     bad[3, 1] = 99
     with pytest.raises(ValueError, match="faces"):
-        subdivide(v, bad, levels=1, surface=s)
+        subdivide(v, bad, levels=1, field=s)
     with pytest.raises(ValueError, match="faces"):
         butterfly(v, bad, levels=1)
     with pytest.raises(ValueError, match="faces"):
-        subdivide(v, np.vstack([f, [[0, 1, 2]]]), levels=1, surface=s)
+        subdivide(v, np.vstack([f, [[0, 1, 2]]]), levels=1, field=s)
     with pytest.raises(ValueError, match="vertices"):
-        subdivide(v[:, :2], f, levels=1, surface=s)
+        subdivide(v[:, :2], f, levels=1, field=s)
     with pytest.raises(ValueError, match="tolerance"):
-        subdivide(v, f, levels=1, surface=s, tolerance=-1.0)
+        subdivide(v, f, levels=1, field=s, tolerance=-1.0)
     with pytest.raises(ValueError, match="max_steps"):
-        subdivide(v, f, levels=1, surface=s, max_steps=0)
-    with pytest.raises(ValueError, match="surface"):
-        subdivide(v, f, levels=1, surface="sphere")
+        subdivide(v, f, levels=1, field=s, max_steps=0)
+    with pytest.raises(ValueError, match="field"):
+        subdivide(v, f, levels=1, field="sphere")
     with pytest.raises(ValueError, match="w"):
         butterfly(v, f, levels=1, w=float("nan"))
 
 
 def test_zero_levels_is_control_mesh(icosahedron):
     v, f, s = icosahedron
-    (m,) = subdivide(v, f, levels=0, surface=s)
+    (m,) = subdivide(v, f, levels=0, field=s)
     assert isinstance(m, Mesh)
     assert np.array_equal(m.vertices, v) and np.array_equal(m.faces, f)
     assert m.stats["projected"] == 0
@@ -251,13 +251,13 @@ def test_zero_levels_is_control_mesh(icosahedron):
 def test_progress_counts_the_vertices_placed(icosahedron):
     v, f, s = icosahedron
     counts: list[int] = []
-    levels = subdivide(v, f, levels=4, surface=s, progress=counts.append)
+    levels = subdivide(v, f, levels=4, field=s, progress=counts.append)
     assert counts and counts == sorted(counts)
     assert counts[-1] == len(levels[-1].vertices)
     # The fallback's vertices count too, and a callable field reports once, at the end.
     counts.clear()
     sphere = implicitmesh.shapes.Sphere(radius=float(np.linalg.norm(v, axis=1).mean()))
-    levels = subdivide(v, f, levels=3, surface=sphere, max_steps=1, progress=counts.append)
+    levels = subdivide(v, f, levels=3, field=sphere, max_steps=1, progress=counts.append)
     assert levels[1].stats["fallbacks"] > 0
     assert counts == [len(levels[-1].vertices)]
     counts.clear()
@@ -269,13 +269,13 @@ def test_progress_true_writes_a_line_or_a_bar(icosahedron, capsys):
     from implicitmesh.subdivision import _vertex_total
 
     v, f, s = icosahedron
-    levels = subdivide(v, f, levels=2, surface=s, progress=True)
+    levels = subdivide(v, f, levels=2, field=s, progress=True)
     assert _vertex_total(f, v, 2) == len(levels[-1].vertices)
     butterfly(v, f, levels=2, progress=True)
     err = capsys.readouterr().err
     assert "subdivide" in err and "butterfly" in err
     with pytest.raises(ValueError, match="progress"):
-        subdivide(v, f, levels=1, surface=s, progress="yes")
+        subdivide(v, f, levels=1, field=s, progress="yes")
     with pytest.raises(ValueError, match="progress"):
         butterfly(v, f, levels=1, progress=1)
 
@@ -287,7 +287,7 @@ def test_icosahedron_onto_sphere_callable(icosahedron):
     v, f, _ = icosahedron
     r = float(np.linalg.norm(v, axis=1).mean())
     sphere = implicitmesh.shapes.Sphere(radius=r)
-    levels = subdivide(v, f, levels=5, surface=sphere)
+    levels = subdivide(v, f, levels=5, field=sphere)
     assert [len(m.faces) for m in levels] == [20 * 4**k for k in range(6)]
     errors = []
     for k, m in enumerate(levels):
@@ -313,7 +313,7 @@ def test_torus_callable_and_call_batches():
     torus = implicitmesh.shapes.Torus()
     coarse = implicitmesh.polygonize(torus, resolution=12)
     counting = CountingField(torus)
-    levels = subdivide(coarse.vertices, coarse.faces, levels=2, surface=counting)
+    levels = subdivide(coarse.vertices, coarse.faces, levels=2, field=counting)
     assert not counting.bad_inputs
     # Batched: a few calls per Newton step for the whole level, never one per point.
     assert counting.calls < 100 and counting.points > 10 * counting.calls
@@ -329,7 +329,7 @@ def test_torus_callable_and_call_batches():
 def test_blob_field():
     blobs = implicitmesh.BlobField(np.array([[0.0, 0.0, 0.0], [0.35, 0.1, 0.0]]), radii=0.6)
     coarse = implicitmesh.polygonize(blobs, bounds=[[-1, -1, -1], [1.4, 1, 1]], resolution=14)
-    levels = subdivide(coarse.vertices, coarse.faces, levels=2, surface=blobs)
+    levels = subdivide(coarse.vertices, coarse.faces, levels=2, field=blobs)
     for m in levels[1:]:
         new = m.vertices[len(coarse.vertices) :]
         assert np.abs(blobs.evaluate(new)).max() <= 1e-6
@@ -342,26 +342,26 @@ def test_field_errors(icosahedron):
     v, f, s = icosahedron
     sphere = implicitmesh.shapes.Sphere(radius=1.0)
     for bad in (3, "sphere", np.zeros(3), object()):
-        with pytest.raises(ValueError, match="surface"):
-            subdivide(v, f, levels=1, surface=bad)
-    with pytest.raises(ValueError, match="surface.*shape"):
-        subdivide(v, f, levels=1, surface=lambda p: np.zeros(3))
+        with pytest.raises(ValueError, match="field"):
+            subdivide(v, f, levels=1, field=bad)
+    with pytest.raises(ValueError, match="field.*shape"):
+        subdivide(v, f, levels=1, field=lambda p: np.zeros(3))
     with pytest.raises(ValueError, match="non-finite"):
-        subdivide(v, f, levels=1, surface=lambda p: np.full(len(p), np.nan))
+        subdivide(v, f, levels=1, field=lambda p: np.full(len(p), np.nan))
     with pytest.raises(ZeroDivisionError):
-        subdivide(v, f, levels=1, surface=lambda p: 1 / 0)
+        subdivide(v, f, levels=1, field=lambda p: 1 / 0)
     for name, kw in (("d", {"d": 0.01}), ("w", {"w": 0.01}), ("kernel", {"kernel": "biharmonic"})):
         with pytest.raises(ValueError, match=name):
-            subdivide(v, f, levels=1, surface=sphere, **kw)
+            subdivide(v, f, levels=1, field=sphere, **kw)
     with pytest.raises(ValueError, match="step"):
-        subdivide(v, f, levels=1, surface=sphere, step=0.0)
+        subdivide(v, f, levels=1, field=sphere, step=0.0)
     with pytest.raises(ValueError, match="step"):
-        subdivide(v, f, levels=1, surface=s, step=1e-6)
+        subdivide(v, f, levels=1, field=s, step=1e-6)
     with pytest.raises(ValueError, match="step"):
         subdivide(v, f, levels=1, step=1e-6)
     # An explicit step works and gives the same mesh to rounding.
-    a = subdivide(v, f, levels=2, surface=sphere)[2].vertices
-    b = subdivide(v, f, levels=2, surface=sphere, step=1e-5)[2].vertices
+    a = subdivide(v, f, levels=2, field=sphere)[2].vertices
+    b = subdivide(v, f, levels=2, field=sphere, step=1e-5)[2].vertices
     assert np.abs(a - b).max() < 1e-9
 
 
@@ -444,7 +444,7 @@ def jin_quality(shared):
     for name in ("knot", "star", "spot"):
         v, f = shared.arrays(name)
         s = shared.surface(name)
-        levels = subdivide(v, f, levels=2, surface=s)
+        levels = subdivide(v, f, levels=2, field=s)
         mc = marching_cubes_near(s, len(levels[2].faces))
         out[name] = (levels[0].quality(), levels[2].quality(), mc.quality(), len(levels[2].faces), len(mc.faces))
     return out
@@ -481,3 +481,20 @@ def test_subdivision_keeps_control_quality_and_beats_mc_worst_triangles(jin_qual
     assert sub["min_angle_p5"] > 1.5 * mc["min_angle_p5"]
     # Subdivision inherits the control mesh's angles (Jin §7, limitation 2).
     assert abs(sub["min_angle_mean"] - control["min_angle_mean"]) < 1.5
+
+
+def test_surface_is_the_deprecated_name_of_field(icosahedron):
+    """``surface=`` still works, with a DeprecationWarning: the same levels, array for array, and
+    errors that name ``surface``; given with ``field=`` it is refused."""
+    v, f, s = icosahedron
+    with pytest.warns(DeprecationWarning, match="field="):
+        old = subdivide(v, f, levels=2, surface=s)
+    new = subdivide(v, f, levels=2, field=s)
+    assert len(old) == len(new) == 3
+    for a, b in zip(old, new):
+        for x, y in ((a.vertices, b.vertices), (a.faces, b.faces), (a.normals, b.normals)):
+            assert x.dtype == y.dtype and np.array_equal(x, y)
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="surface.*shape"):
+        subdivide(v, f, levels=1, surface=lambda p: np.zeros(3))
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="surface"):
+        subdivide(v, f, levels=1, surface=s, field=s)

@@ -9,7 +9,8 @@ Fields (negative inside, positive outside):
 Polygonizers: :func:`polygonize` with ``method="dense"`` (plain marching cubes, the reference),
 ``"sparse"`` (blob fields: blocks the field's bounds cannot rule out), ``"octree"`` (Cuno et al.)
 or ``"tracking"`` (Triquet et al.); :class:`Tessellator` keeps the tracking caches between calls
-for animation. Mesh refinement: :func:`subdivide` (1-to-4 with Newton projection onto the
+for animation; :class:`OctreeOptions` and :class:`TrackingOptions` hold a method's settings,
+:class:`PartitionOptions` the partition fit's. Mesh refinement: :func:`subdivide` (1-to-4 with Newton projection onto the
 field, Jin et al.), :func:`butterfly` and :func:`blend`.
 Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are;
 :func:`compare` counts the triangles two meshes do not share. Fitted fields pickle, and
@@ -19,10 +20,11 @@ simulation frames (``.npy``, ``.npz``, ``.ply``, meshio formats).
 
 from ._core import BlobField, VariationalSurface, __version__
 from .mesh import Mesh, compare
+from .options import OctreeOptions, PartitionOptions, TrackingOptions
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
 from .subdivision import blend, butterfly, subdivide
 from .io import load, save
 from .frames import read_particles
 
-__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "shapes", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "OctreeOptions", "TrackingOptions", "PartitionOptions", "shapes", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]

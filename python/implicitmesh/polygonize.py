@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
 from typing import Any, Callable, Sequence, Union
 
 import numpy as np
@@ -11,6 +10,7 @@ import numpy as np
 from . import _core
 from ._progress import reporter
 from .mesh import Mesh
+from .options import OctreeOptions, TrackingOptions, _method_keywords
 
 __all__ = ["Ambiguity", "polygonize", "Tessellator", "METHODS", "OctreeOptions", "TrackingOptions"]
 
@@ -29,84 +29,6 @@ class Ambiguity(str, enum.Enum):
     SEPARATE = "separate"
     #: The two inside corners are joined through the face: thin necks stay connected.
     JOIN = "join"
-
-
-@dataclass(frozen=True)
-class OctreeOptions:
-    """Settings of ``method="octree"`` (the core's ``OctreeSettings``), for :func:`polygonize`'s
-    ``options=``; the same as its keywords ``start_level``, ``safety`` and ``corner_test``.
-
-    Parameters
-    ----------
-    start_level : int, optional
-        Level of the first rejection test (non-negative; 1 tests the root's eight octants).
-        Default: the first level whose blocks span at most 1/8 of the lattice's longest side.
-    safety : float, optional
-        Factor on the circumradius in the rejection test ``|f(centre)| > safety × r``. Default
-        1.0, for a :class:`BlobField` a bound on ``|∇f|``.
-    corner_test : bool, optional
-        Also decide blocks and leaf cells with the values already known. Default True; False
-        samples exactly as Cuno et al. §4.3.
-    """
-
-    start_level: int | None = None
-    safety: float | None = None
-    corner_test: bool | None = None
-
-    def keywords(self) -> dict[str, Any]:
-        """The settings as :func:`polygonize`'s keywords."""
-        return {"start_level": self.start_level, "safety": self.safety, "corner_test": self.corner_test}
-
-
-@dataclass(frozen=True)
-class TrackingOptions:
-    """Settings of ``method="tracking"`` (the core's ``TrackingSettings``), for
-    :func:`polygonize`'s ``options=``; the same as its keyword ``seeds``.
-
-    Parameters
-    ----------
-    seeds : (K, 3) array_like of float, optional
-        Points inside or on each component of the surface to walk from. Default: the
-        primitives' centres of a :class:`BlobField`, the data points of a
-        :class:`VariationalSurface`; required for callables.
-    """
-
-    seeds: Any = None
-
-    def keywords(self) -> dict[str, Any]:
-        """The settings as :func:`polygonize`'s keywords."""
-        return {"seeds": self.seeds}
-
-
-#: The options class of each method that has settings of its own.
-_METHOD_OPTIONS = {"octree": OctreeOptions, "tracking": TrackingOptions}
-
-
-def _method_keywords(method: Any, options: Any, given: dict[str, Any]) -> dict[str, Any]:
-    """The per-method keywords for the core: ``given`` (the flat keywords, None when not
-    given), or those of ``options`` (an :class:`OctreeOptions` or :class:`TrackingOptions`
-    for ``method``), checked: a ValueError names ``options`` when it is of the wrong class or
-    given with flat keywords, and ``start_level``, ``safety`` or ``corner_test`` when of the
-    wrong type (the core refuses the ones that do not apply to ``method``)."""
-    if options is not None:
-        wanted = _METHOD_OPTIONS.get(method.lower()) if isinstance(method, str) else None
-        if wanted is None or not isinstance(options, wanted):
-            expected = f"{wanted.__name__} for method={method!r}" if wanted else f"None for method={method!r}"
-            raise ValueError(f"options: expected {expected}, got {type(options).__name__}")
-        flat = sorted(k for k, v in given.items() if v is not None)
-        if flat:
-            raise ValueError(f"options: given with the keywords {flat}; pass these in options only")
-        given = dict(given, **options.keywords())
-    start_level, safety, corner_test = given.get("start_level"), given.get("safety"), given.get("corner_test")
-    if start_level is not None and (
-        isinstance(start_level, bool) or not isinstance(start_level, (int, np.integer)) or start_level < 0
-    ):
-        raise ValueError(f"start_level: must be a non-negative integer, got {start_level!r}")
-    if safety is not None and (isinstance(safety, bool) or not isinstance(safety, (int, float, np.floating, np.integer))):
-        raise ValueError(f"safety: must be a positive number, got {safety!r}")
-    if corner_test is not None and not isinstance(corner_test, (bool, np.bool_)):
-        raise ValueError(f"corner_test: must be True or False, got {corner_test!r}")
-    return given
 
 
 Field = Union["_core.VariationalSurface", "_core.BlobField", Callable[[np.ndarray], np.ndarray]]

@@ -10,6 +10,7 @@ mixes the two, vertex by vertex (Jin §4).
 from __future__ import annotations
 
 import numbers
+import warnings
 from typing import Any, Callable
 
 import numpy as np
@@ -57,6 +58,7 @@ def subdivide(
     faces: Any,
     *,
     levels: int = 2,
+    field: VariationalSurface | BlobField | Callable[[np.ndarray], np.ndarray] | None = None,
     surface: VariationalSurface | BlobField | Callable[[np.ndarray], np.ndarray] | None = None,
     d: float | None = None,
     w: float | None = None,
@@ -85,14 +87,16 @@ def subdivide(
         traversed in opposite directions. Open meshes are fine (their boundary is kept).
     levels : int
         Subdivision levels, 0 to 8 (default 2). Level k has F × 4^k triangles.
-    surface : VariationalSurface, BlobField or callable, optional
+    field : VariationalSurface, BlobField or callable, optional
         The field to project on (negative inside). A callable takes (N, 3) float64 points and
         returns N values (e.g. :class:`implicitmesh.shapes.Sphere`); it is called in batches from
         the calling thread, and its gradient is taken by central differences (7 values per point
         and Newton step, all in one call). Default: ``VariationalSurface.from_mesh(vertices,
         faces, d=d, w=w, kernel=kernel)``, the surface that interpolates the control mesh.
+    surface : optional
+        Deprecated name of ``field`` (a ``DeprecationWarning``).
     d, w, kernel
-        Passed to :meth:`VariationalSurface.from_mesh` when ``surface`` is not given (kernel
+        Passed to :meth:`VariationalSurface.from_mesh` when ``field`` is not given (kernel
         default ``"triharmonic"``); refused when it is.
     tolerance : float, optional
         Newton stops when its step is below ``tolerance`` × the local edge length (default 1e-9).
@@ -112,7 +116,7 @@ def subdivide(
         callable is called with that count (an int) about every 50 ms from the calling thread,
         and once at the end with the finest level's vertex count. A vertex counts once its
         position is final: the control vertices once their normals are evaluated, a new vertex
-        once Newton (or the fallback) has placed it. With a callable as ``surface`` the work runs
+        once Newton (or the fallback) has placed it. With a callable as ``field`` the work runs
         on the calling thread, and the count is reported once, at the end. Default None (no
         report).
 
@@ -133,8 +137,8 @@ def subdivide(
     ValueError
         For wrong shapes, out-of-range or repeated indices, non-manifold or inconsistently
         oriented faces, ``levels`` outside [0, 8] or too large for memory, a bad ``tolerance``,
-        ``max_steps`` or ``step``, a ``surface`` that is not a field, ``d``/``w``/``kernel``
-        given with ``surface``, a callable returning the wrong shape or NaN, and everything
+        ``max_steps`` or ``step``, a ``field`` that is not a field, ``d``/``w``/``kernel``
+        given with ``field``, ``field`` and ``surface`` both given, a callable returning the wrong shape or NaN, and everything
         :meth:`VariationalSurface.from_mesh` refuses, and a ``progress`` that is neither a bool
         nor callable. An exception raised by the callable (or by ``progress``) propagates as it
         is.
@@ -149,29 +153,33 @@ def subdivide(
             raise ValueError(f"{name}: must be a number, got {value!r}")
     tolerance = None if tolerance is None else float(tolerance)
     step = None if step is None else float(step)
-    if surface is None:
+    name = "field"  # as the caller names it
+    if surface is not None:
+        warnings.warn("subdivide(surface=) is deprecated: use field=", DeprecationWarning, stacklevel=2)
+        if field is not None:
+            raise ValueError("surface: the deprecated name of field, given with field")
+        field, name = surface, "surface"
+    if field is None:
         if step is not None:
-            raise ValueError("step: applies to a callable surface only")
-        surface = VariationalSurface.from_mesh(vertices, faces, d=d, w=w, kernel="triharmonic" if kernel is None else kernel)
+            raise ValueError("step: applies to a callable field only")
+        field = VariationalSurface.from_mesh(vertices, faces, d=d, w=w, kernel="triharmonic" if kernel is None else kernel)
     else:
-        for name, value in (("d", d), ("w", w), ("kernel", kernel)):
+        for value_name, value in (("d", d), ("w", w), ("kernel", kernel)):
             if value is not None:
-                raise ValueError(f"{name}: applies only when surface is not given (it fits the default surface)")
-        if not isinstance(surface, (VariationalSurface, BlobField)) and not callable(surface):
+                raise ValueError(f"{value_name}: applies only when field is not given (it fits the default surface)")
+        if not isinstance(field, (VariationalSurface, BlobField)) and not callable(field):
             raise ValueError(
-                "surface: expected a VariationalSurface, a BlobField or a callable taking (N, 3) float64 "
-                f"points and returning (N,) values, got {type(surface).__name__}"
+                f"{name}: expected a VariationalSurface, a BlobField or a callable taking (N, 3) float64 "
+                f"points and returning (N,) values, got {type(field).__name__}"
             )
-        if step is not None and isinstance(surface, (VariationalSurface, BlobField)):
-            raise ValueError("step: applies to a callable surface only (this field has exact gradients)")
+        # ``step`` with a field of exact gradients: the core refuses it, naming ``step``.
     report, end = reporter(progress, "subdivide", _vertex_total(faces, vertices, levels) if progress is True else None, "vertices")
     try:
-        out = _core.subdivide(surface, vertices, faces, levels, tolerance=tolerance, max_steps=max_steps, step=step, progress=report)
+        out = _core.subdivide(field, vertices, faces, levels, tolerance=tolerance, max_steps=max_steps, step=step, progress=report)
     except ValueError as e:
-        # The core names a callable's bad output "field"; here that argument is `surface`.
-        msg = str(e)
-        if msg.startswith("field:"):
-            raise ValueError("surface:" + msg[len("field:") :]) from None
+        # The core names a callable's bad output "field"; with the deprecated name, `surface`.
+        if name == "surface" and str(e).startswith("field:"):
+            raise ValueError("surface:" + str(e)[len("field:") :]) from None
         raise
     finally:
         end()

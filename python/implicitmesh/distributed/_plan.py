@@ -10,7 +10,8 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from .. import _core
-from ..polygonize import _check_common, _method_keywords
+from ..options import _method_keywords
+from ..polygonize import _check_common
 
 #: Methods :func:`implicitmesh.distributed.polygonize` runs per tile (``"sparse"`` and
 #: ``"tracking"``: BlobField only).

@@ -18,7 +18,8 @@ import numpy as np
 from .. import _core
 from .._progress import reporter
 from ..mesh import Mesh
-from ..polygonize import Ambiguity, OctreeOptions, TrackingOptions, _check_positive
+from ..options import OctreeOptions, TrackingOptions
+from ..polygonize import Ambiguity, _check_positive
 from . import _cut_files, _tile_files, _weld_in_place
 from ._plan import Plan, Window, cut_field, cut_per_tile, make_plan, tile_fields, tile_priority
 from ._tile import SUMMED, TileResult, run_tile
