@@ -1,37 +1,58 @@
-"""Type stubs for the Rust extension module."""
+"""Type stubs for the Rust extension module (``src/python/``), hand-written and checked against
+the built module by ``python -m mypy.stubtest implicitmesh._core`` in CI (``.ci/run``): a name,
+a parameter or a default that differs fails it. Return types and property types are not checked
+by stubtest; they were checked by hand against the running module."""
 
-from typing import Any, Callable, Literal, Sequence, TypedDict
+from typing import Any, Callable, Literal, Sequence, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
 from typing_extensions import Unpack
 
+__all__ = [
+    "__version__",
+    "DEFAULT_MEMORY_LIMIT",
+    "VariationalSurface",
+    "BlobField",
+    "Tessellator",
+    "polygonize",
+    "lattice",
+    "project_mesh",
+    "weld_tiles",
+    "StreamedWeld",
+    "WeldPlan",
+    "write_welded_tile",
+    "subdivide",
+    "butterfly",
+]
+
 __version__: str
 #: Bytes a fit or a polygonization may estimate to need when no ``memory_limit`` is given (8 GiB).
 DEFAULT_MEMORY_LIMIT: int
 
-ArrayLike = npt.ArrayLike
-Kernel = Literal["triharmonic", "biharmonic", "thin_plate"]
-FitMethod = Literal["auto", "global", "partition"]
+_ArrayLike = npt.ArrayLike
+_Kernel = Literal["triharmonic", "biharmonic", "thin_plate"]
+_FitMethod = Literal["auto", "global", "partition"]
 
 class _FitOptions(TypedDict, total=False):
     """The keywords every fit takes; defaults: ``kernel="triharmonic"``, ``smoothing=0.0``,
     ``memory_limit=None`` (8 GiB), ``method="auto"``, ``progress=None``,
     ``partition_options=None``, ``merge_distance=None`` (0.1 % of the data's typical spacing)."""
 
-    kernel: Kernel
+    kernel: _Kernel
     smoothing: float
     memory_limit: int | None
-    method: FitMethod
+    method: _FitMethod
     progress: bool | Callable[[int], object] | None
     partition_options: dict[str, int | float] | None
     merge_distance: float | None
 
+@final
 class VariationalSurface:
     @staticmethod
     def fit(
-        points: ArrayLike,
-        normals: ArrayLike,
+        points: _ArrayLike,
+        normals: _ArrayLike,
         *,
         d: float | None = None,
         w: float | None = None,
@@ -40,8 +61,8 @@ class VariationalSurface:
     ) -> VariationalSurface: ...
     @staticmethod
     def from_mesh(
-        vertices: ArrayLike,
-        faces: ArrayLike,
+        vertices: _ArrayLike,
+        faces: _ArrayLike,
         *,
         d: float | None = None,
         w: float | None = None,
@@ -49,18 +70,18 @@ class VariationalSurface:
     ) -> VariationalSurface: ...
     @staticmethod
     def interpolate(
-        points: ArrayLike,
-        values: ArrayLike,
+        points: _ArrayLike,
+        values: _ArrayLike,
         *,
         tolerance: float | None = None,
         **options: Unpack[_FitOptions],
     ) -> VariationalSurface: ...
-    def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
-    def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
-    def __call__(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def evaluate(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
+    def gradient(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __call__(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
     def __len__(self) -> int: ...
     def to_state(self) -> dict[str, Any]: ...
-    def _cut(self, bounds: ArrayLike) -> VariationalSurface: ...
+    def _cut(self, bounds: _ArrayLike) -> VariationalSurface: ...
     @staticmethod
     def from_state(state: dict[str, Any]) -> VariationalSurface: ...
     def __reduce__(self) -> tuple[Callable[[dict[str, Any]], VariationalSurface], tuple[dict[str, Any]]]: ...
@@ -87,21 +108,22 @@ class VariationalSurface:
     @property
     def bounds(self) -> npt.NDArray[np.float64]: ...
 
+@final
 class BlobField:
-    def __init__(
-        self,
-        centers: ArrayLike,
-        radii: float | ArrayLike,
-        strengths: float | ArrayLike | None = None,
+    def __new__(
+        cls,
+        centers: _ArrayLike,
+        radii: float | _ArrayLike,
+        strengths: float | _ArrayLike | None = None,
         threshold: float = 0.5,
         *,
         voxel_size: float | None = None,
         kernel: str = "triquet",
         precision: str = "double",
-    ) -> None: ...
+    ) -> BlobField: ...
     @staticmethod
     def from_particles(
-        particles: ArrayLike,
+        particles: _ArrayLike,
         particle_radius: float,
         *,
         smoothing_length: float = 2.0,
@@ -113,20 +135,20 @@ class BlobField:
     ) -> BlobField: ...
     def update(
         self,
-        centers: ArrayLike,
-        radii: float | ArrayLike | None = None,
-        strengths: float | ArrayLike | None = None,
+        centers: _ArrayLike,
+        radii: float | _ArrayLike | None = None,
+        strengths: float | _ArrayLike | None = None,
     ) -> None: ...
-    def evaluate(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
-    def potential(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
-    def gradient(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
-    def __call__(self, points: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def evaluate(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
+    def potential(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
+    def gradient(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __call__(self, points: _ArrayLike) -> npt.NDArray[np.float64]: ...
     def __len__(self) -> int: ...
     def __getnewargs_ex__(self) -> tuple[tuple[Any, ...], dict[str, Any]]: ...
     def _tile_primitives(
         self,
-        origin: ArrayLike,
-        cell: ArrayLike,
+        origin: _ArrayLike,
+        cell: _ArrayLike,
         cells: Sequence[int],
         tile: Sequence[int],
         margin: float,
@@ -147,11 +169,11 @@ class BlobField:
     @property
     def voxel_size(self) -> float: ...
     @property
-    def voxel_dims(self) -> tuple[int, int, int]: ...
+    def voxel_dims(self) -> list[int]: ...
     @property
     def bounds(self) -> npt.NDArray[np.float64]: ...
 
-_Field = VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], ArrayLike]
+_Field = VariationalSurface | BlobField | Callable[[npt.NDArray[np.float64]], _ArrayLike]
 _MeshTuple = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], dict[str, Any]]
 
 class _PolygonizeOptions(TypedDict, total=False):
@@ -164,15 +186,16 @@ class _PolygonizeOptions(TypedDict, total=False):
     memory_limit: int | None
     progress: Callable[[int], object] | None
 
+@final
 class Tessellator:
-    def __init__(self) -> None: ...
+    def __new__(cls) -> Tessellator: ...
     def polygonize(
         self,
         field: _Field,
-        bounds: ArrayLike,
+        bounds: _ArrayLike,
         resolution: int | Sequence[int],
         *,
-        seeds: ArrayLike | None = None,
+        seeds: _ArrayLike | None = None,
         blocks: bool = True,
         **options: Unpack[_PolygonizeOptions],
     ) -> _MeshTuple: ...
@@ -181,7 +204,7 @@ class Tessellator:
 
 def polygonize(
     field: _Field,
-    bounds: ArrayLike,
+    bounds: _ArrayLike,
     resolution: int | Sequence[int],
     *,
     method: str = "dense",
@@ -189,8 +212,8 @@ def polygonize(
     start_level: int | None = None,
     safety: float | None = None,
     corner_test: bool | None = None,
-    seeds: ArrayLike | None = None,
-    window: ArrayLike | None = None,
+    seeds: _ArrayLike | None = None,
+    window: _ArrayLike | None = None,
     boundary: bool = False,
     **options: Unpack[_PolygonizeOptions],
 ) -> _MeshTuple | tuple[
@@ -198,10 +221,10 @@ def polygonize(
     npt.NDArray[np.uint32], npt.NDArray[np.uint64],
 ]: ...
 
-def lattice(bounds: ArrayLike, resolution: int | Sequence[int]) -> tuple[list[int], list[float], list[float]]: ...
-def project_mesh(field: _Field, bounds: ArrayLike, resolution: int | Sequence[int], vertices: ArrayLike, faces: ArrayLike, *, normals: bool = True, batch_size: int = 262144, progress: Callable[[int], object] | None = None) -> _MeshTuple: ...
+def lattice(bounds: _ArrayLike, resolution: int | Sequence[int]) -> tuple[list[int], list[float], list[float]]: ...
+def project_mesh(field: _Field, bounds: _ArrayLike, resolution: int | Sequence[int], vertices: _ArrayLike, faces: _ArrayLike, *, normals: bool = True, batch_size: int = 262144, progress: Callable[[int], object] | None = None) -> _MeshTuple: ...
 def weld_tiles(
-    tiles: Sequence[tuple[ArrayLike, ArrayLike, ArrayLike, ArrayLike, ArrayLike, ArrayLike]],
+    tiles: Sequence[tuple[_ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike]],
     cells: Sequence[int],
     origin: Sequence[float],
     cell: Sequence[float],
@@ -209,22 +232,24 @@ def weld_tiles(
     progress: Callable[[int], object] | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64]]: ...
 
+@final
 class StreamedWeld:
     """Tile meshes welded one at a time, in window order, into the mesh ``weld_tiles`` makes."""
 
-    def __init__(self, tiles: int, cells: Sequence[int], origin: Sequence[float], cell: Sequence[float], normals: bool | None = None, memory_limit: int | None = None) -> None: ...
-    def add(self, window: ArrayLike, vertices: ArrayLike, faces: ArrayLike, normals: ArrayLike, boundary: ArrayLike, keys: ArrayLike) -> None: ...
+    def __new__(cls, tiles: int, cells: Sequence[int], origin: Sequence[float], cell: Sequence[float], normals: bool | None = None, memory_limit: int | None = None) -> StreamedWeld: ...
+    def add(self, window: _ArrayLike, vertices: _ArrayLike, faces: _ArrayLike, normals: _ArrayLike, boundary: _ArrayLike, keys: _ArrayLike) -> None: ...
     @property
     def added(self) -> int: ...
     @property
     def vertices(self) -> int: ...
     def result(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64]]: ...
 
+@final
 class WeldPlan:
     """Where each tile's rows go in the welded mesh, from its counts and boundary vertices alone."""
 
-    def __init__(self, cells: Sequence[int], origin: Sequence[float], cell: Sequence[float], normals: bool, memory_limit: int | None = None) -> None: ...
-    def add(self, window: ArrayLike, vertices: int, faces: int, boundary: ArrayLike, keys: ArrayLike, positions: ArrayLike) -> tuple[int, int, npt.NDArray[np.uint32]]: ...
+    def __new__(cls, cells: Sequence[int], origin: Sequence[float], cell: Sequence[float], normals: bool, memory_limit: int | None = None) -> WeldPlan: ...
+    def add(self, window: _ArrayLike, vertices: int, faces: int, boundary: _ArrayLike, keys: _ArrayLike, positions: _ArrayLike) -> tuple[int, int, npt.NDArray[np.uint32]]: ...
     @property
     def added(self) -> int: ...
     @property
@@ -232,7 +257,7 @@ class WeldPlan:
     @property
     def faces(self) -> int: ...
 
-def write_welded_tile(vertices: ArrayLike, faces: ArrayLike, normals: ArrayLike, first_vertex: int, joined: ArrayLike, out_vertices: npt.NDArray[np.float64], out_faces: npt.NDArray[np.int64], out_normals: npt.NDArray[np.float64] | None = None) -> None: ...
+def write_welded_tile(vertices: _ArrayLike, faces: _ArrayLike, normals: _ArrayLike, first_vertex: int, joined: _ArrayLike, out_vertices: npt.NDArray[np.float64], out_faces: npt.NDArray[np.int64], out_normals: npt.NDArray[np.float64] | None = None) -> None: ...
 
-def subdivide(field: _Field, vertices: ArrayLike, faces: ArrayLike, levels: int, *, tolerance: float | None = None, max_steps: int | None = None, step: float | None = None, progress: Callable[[int], object] | None = None) -> list[_MeshTuple]: ...
-def butterfly(vertices: ArrayLike, faces: ArrayLike, levels: int, w: float, *, progress: Callable[[int], object] | None = None) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64]]]: ...
+def subdivide(field: _Field, vertices: _ArrayLike, faces: _ArrayLike, levels: int, *, tolerance: float | None = None, max_steps: int | None = None, step: float | None = None, progress: Callable[[int], object] | None = None) -> list[_MeshTuple]: ...
+def butterfly(vertices: _ArrayLike, faces: _ArrayLike, levels: int, w: float, *, progress: Callable[[int], object] | None = None) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64]]]: ...
