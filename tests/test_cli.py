@@ -184,3 +184,88 @@ def test_ply_point_set_without_normals_is_a_clean_error(tmp_path, capsys, binary
     assert code == 2
     err = capsys.readouterr().err
     assert "error" in err and "normals" in err
+
+
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--resolution", "0"], "--resolution"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--resolution", "-3"], "--resolution"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--resolution", "2000000"], "--resolution"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.foo"], "--output"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out"], "--output"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/missing/out.ply"], "--output"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--method", "sparse"], "--method"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--kernel", "gaussian"], "--kernel"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--d", "-0.01"], "--d"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--w", "0"], "--w"),
+        (["reconstruct", "{tmp}/absent.ply", "-o", "{tmp}/out.ply"], "absent.ply"),
+        (["demo", "-o", "{tmp}/demo", "--resolution", "0"], "--resolution"),
+        (["demo", "-o", "{tmp}/demo", "--method", "sparse"], "--method"),
+        (["demo", "-o", "{tmp}/demo", "--model", "bunny"], "--model"),
+        (["particles", "{tmp}/absent.npy", "-o", "{tmp}/out.ply", "--radius", "0.1"], "absent.npy"),
+        (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0"], "--radius"),
+        (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--cube-size", "-1"], "--cube-size"),
+        (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--smoothing-length", "0"], "--smoothing-length"),
+        (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--threshold", "nan"], "--threshold"),
+        (["particles", "{points}", "-o", "{tmp}/out.xyz.gz", "--radius", "0.1"], "--output"),
+    ],
+    ids=lambda a: " ".join(a) if isinstance(a, list) else a,
+)
+def test_every_argument_is_refused_before_any_work(mesh_dir, tmp_path, capsys, monkeypatch, args, option):
+    """A bad argument is refused before the input is read or anything fitted: exit 2 and one
+    line on standard error naming the option (or the missing file)."""
+    import implicitmesh.cli as cli
+
+    def no_work(*a, **k):
+        raise AssertionError("work started before the arguments were checked")
+
+    monkeypatch.setattr(cli, "_read_input", no_work)
+    monkeypatch.setattr(cli, "_fit_and_polygonize", no_work)
+    monkeypatch.setattr("implicitmesh.frames.read_particles", no_work)
+    points = tmp_path / "points.npy"
+    np.save(points, np.zeros((4, 3)))
+    argv = [a.format(mesh=mesh_dir / "torus2_800.ply", tmp=tmp_path, points=points) for a in args]
+    try:
+        code = cli.main(argv)
+    except SystemExit as e:  # argparse's own refusals (a choice, a number)
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("implicitmesh") and "error" in lines[0], err
+    assert option in lines[0]
+    assert not (tmp_path / "out.ply").exists() and not (tmp_path / "demo").exists()
+
+
+def test_every_option_has_help():
+    """Every option and argument of every command says what it is in --help."""
+    import argparse
+
+    import implicitmesh.cli as cli
+
+    parsers = []
+    original = argparse.ArgumentParser.parse_args
+
+    def keep(self, *a, **k):
+        parsers.append(self)
+        raise SystemExit(0)
+
+    argparse.ArgumentParser.parse_args = keep
+    try:
+        with pytest.raises(SystemExit):
+            cli.main(["demo"])
+    finally:
+        argparse.ArgumentParser.parse_args = original
+    (parser,) = parsers
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert sorted(sub.choices) == ["demo", "particles", "reconstruct"]
+    for name, command in sub.choices.items():
+        for action in command._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            assert action.help, f"{name} {action.option_strings or action.dest} has no help"
+    # Only the methods that fit the input: a fitted surface is never offered "sparse".
+    for name in ("demo", "reconstruct"):
+        method = next(a for a in sub.choices[name]._actions if "--method" in a.option_strings)
+        assert "sparse" not in method.choices and "octree" in method.choices

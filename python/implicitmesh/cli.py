@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import threading
 import time
@@ -13,9 +14,27 @@ from pathlib import Path
 import numpy as np
 
 from . import VariationalSurface, __version__, polygonize
-from .polygonize import METHODS
 
 __all__ = ["main"]
+
+#: The polygonizers offered for a fitted surface (``"sparse"`` takes blob fields only).
+FIT_METHODS = ("octree", "dense", "tracking")
+
+#: Mesh suffixes the output may have (the formats trimesh writes meshes in).
+MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf", ".3mf", ".dae")
+
+
+
+class UsageError(ValueError):
+    """A refused argument, found before any work: one line, naming the option."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose refusals are one line (``implicitmesh: error: ...``, exit 2),
+    with the usage left to ``--help``."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 @contextmanager
@@ -77,6 +96,52 @@ def _read_input(path: Path):
             return "points", np.asarray(loaded.vertices), normals
         raise ValueError(f"{path}: a point set needs normals (PLY properties nx, ny, nz)")
     raise ValueError(f"{path}: neither a triangle mesh nor a point set with normals")
+
+
+def _check_positive(option: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{option}: must be a positive number, got {value}")
+
+
+def _check_resolution(resolution: int) -> None:
+    """Refuses a ``--resolution`` the lattice refuses (not positive, or more cells per axis than
+    the core takes), before any work; a cube is the largest lattice of a resolution."""
+    from . import _core
+
+    try:
+        _core.lattice([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], resolution)
+    except ValueError as e:
+        raise UsageError("--" + str(e)) from None
+
+
+def _check_output_file(output: str) -> None:
+    """Refuses an output mesh whose format trimesh does not write, or whose folder is missing."""
+    path = Path(output)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise UsageError(f"--output: cannot write a {path.suffix or 'suffix-less'} mesh; use one of {', '.join(MESH_SUFFIXES)}")
+    if not path.parent.is_dir():
+        raise UsageError(f"--output: the folder {str(path.parent)!r} does not exist")
+
+
+def _check_input_file(path: str) -> None:
+    if not Path(path).is_file():
+        raise UsageError(f"input: no such file {path!r}")
+
+
+def _check(args) -> None:
+    """Every argument of the command, checked before anything is read or fitted."""
+    if args.command in ("demo", "reconstruct"):
+        _check_resolution(args.resolution)
+        if args.d is not None:
+            _check_positive("--d", args.d)
+        if args.w is not None and not (math.isfinite(args.w) and args.w != 0):
+            raise UsageError(f"--w: must be a finite number other than 0, got {args.w}")
+    if args.command in ("reconstruct", "particles"):
+        _check_input_file(args.input)
+        _check_output_file(args.output)
+    if args.command == "particles":
+        for option in ("radius", "cube_size", "smoothing_length", "threshold"):
+            _check_positive("--" + option.replace("_", "-"), getattr(args, option))
 
 
 def _summary(rows: list[tuple[str, str]]) -> str:
@@ -150,10 +215,6 @@ def cmd_particles(args) -> int:
     from . import BlobField
     from .frames import read_particles
 
-    if not args.radius > 0:
-        raise ValueError(f"--radius: must be positive, got {args.radius}")
-    if not args.cube_size > 0:
-        raise ValueError(f"--cube-size: must be positive, got {args.cube_size}")
     with step(f"reading {args.input}"):
         positions = read_particles(args.input, key=args.key) if args.key else read_particles(args.input)
     with step(f"colour field of {len(positions):,} particles"):
@@ -186,8 +247,13 @@ def cmd_particles(args) -> int:
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--resolution", type=int, default=128, help="cells per axis (default 128)")
-    p.add_argument("--method", choices=METHODS, default="octree", help="polygonizer (default octree)")
+    p.add_argument("--resolution", type=int, default=128, help="cells along the longest side of the box (default 128)")
+    p.add_argument(
+        "--method",
+        choices=FIT_METHODS,
+        default="octree",
+        help="polygonizer for the fitted surface: octree (default), dense (every lattice point) or tracking",
+    )
     p.add_argument(
         "--project",
         action=argparse.BooleanOptionalAction,
@@ -196,40 +262,51 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--d", type=float, default=None, help="normal constraint offset (default: 0.0075 x largest side, at most 6 x the point spacing)")
     p.add_argument("--w", type=float, default=None, help="normal constraint value (default 0.75 d)")
-    p.add_argument("--kernel", default="triharmonic", choices=["triharmonic", "biharmonic", "thin_plate"])
+    p.add_argument(
+        "--kernel",
+        default="triharmonic",
+        choices=["triharmonic", "biharmonic", "thin_plate"],
+        help="radial basis function of the fit: triharmonic r^3 (default), biharmonic r, thin_plate r^2 log r",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="implicitmesh", description="Implicit surfaces to triangle meshes.")
+    parser = _Parser(prog="implicitmesh", description="Implicit surfaces to triangle meshes.")
     parser.add_argument("--version", action="version", version=f"implicitmesh {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="fit a bundled model, polygonize it, write a PLY and a PNG")
-    demo.add_argument("--model", default="knot", choices=["knot", "spot"])
-    demo.add_argument("-o", "--output", default="implicitmesh-demo", help="output folder")
+    demo.add_argument("--model", default="knot", choices=["knot", "spot"], help="the bundled model (default knot)")
+    demo.add_argument("-o", "--output", default="implicitmesh-demo", help="output folder (default implicitmesh-demo)")
     _add_fit_options(demo)
     rec = sub.add_parser("reconstruct", help="fit a mesh or points with normals and polygonize it")
     rec.add_argument("input", help="a mesh (PLY/OBJ/STL/OFF...), a PLY point set with nx ny nz, .xyz/.txt with 6 columns, or .npz with points and normals")
-    rec.add_argument("-o", "--output", required=True, help="output mesh (format from the suffix)")
+    rec.add_argument("-o", "--output", required=True, help=f"output mesh, its format from the suffix ({', '.join(MESH_SUFFIXES)})")
     _add_fit_options(rec)
     par = sub.add_parser(
         "particles",
         help="mesh a frame of SPH particles (splashsurf's colour field, sparse marching cubes)",
     )
     par.add_argument("input", help="particle positions: .npy, .npz, .ply, or .vtk/.vtu and other meshio formats")
-    par.add_argument("-o", "--output", required=True, help="output mesh (format from the suffix)")
+    par.add_argument("-o", "--output", required=True, help=f"output mesh, its format from the suffix ({', '.join(MESH_SUFFIXES)})")
     par.add_argument("--radius", type=float, required=True, help="particle radius r")
     par.add_argument(
         "--smoothing-length", type=float, default=2.0, help="kernel support 2 x this x r (default 2.0)"
     )
     par.add_argument("--cube-size", type=float, default=0.5, help="cell side as a multiple of r (default 0.5)")
     par.add_argument("--threshold", type=float, default=0.6, help="iso-surface threshold (default 0.6)")
-    par.add_argument("--kernel", default="cubic_spline", choices=["cubic_spline", "wendland"])
+    par.add_argument(
+        "--kernel",
+        default="cubic_spline",
+        choices=["cubic_spline", "wendland"],
+        help="SPH kernel of the colour field: cubic_spline (default) or wendland",
+    )
     par.add_argument("--key", default=None, help=".npz only: the array of positions")
     par.add_argument(
         "--normals", action=argparse.BooleanOptionalAction, default=True, help="vertex normals (default: yes)"
     )
     args = parser.parse_args(argv)
     try:
+        _check(args)
         if args.command == "demo":
             return cmd_demo(args)
         if args.command == "particles":
