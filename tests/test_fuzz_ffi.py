@@ -6,7 +6,9 @@ same answer as its contiguous copy; and one field polygonized from 8 Python thre
 
 from __future__ import annotations
 
+import re
 import threading
+import warnings
 
 import numpy as np
 import pytest
@@ -54,6 +56,17 @@ def survives(call):
         return None
 
 
+def refused_naming(call, *names):
+    """Runs `call`; an error must be a ValueError or TypeError whose message names one of the
+    arguments `names` (as Python calls them); returns the result, or None when refused."""
+    try:
+        return call()
+    except (ValueError, TypeError) as e:
+        message = str(e)
+        assert any(re.search(rf"\b{name}\b", message) for name in names), f"{type(e).__name__} names none of {names}: {message}"
+        return None
+
+
 @pytest.fixture(scope="module")
 def surface():
     return im.VariationalSurface.fit(*im.shapes.fibonacci_sphere(60))
@@ -67,8 +80,42 @@ def blobs():
 @FUZZ
 @given(points=arrays(), normals=arrays())
 def test_fit_takes_anything(points, normals):
-    survives(lambda: im.VariationalSurface.fit(points, normals))
-    survives(lambda: im.VariationalSurface.interpolate(points, normals[:, 0] if normals.ndim == 2 and normals.shape[1] else normals))
+    """Any arrays: a fit, which evaluates to finite values at its points, or a refusal naming
+    the argument."""
+    values = normals[:, 0] if normals.ndim == 2 and normals.shape[1] else normals
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # merged points
+        for fit in (
+            refused_naming(lambda: im.VariationalSurface.fit(points, normals), "points", "normals"),
+            refused_naming(lambda: im.VariationalSurface.interpolate(points, values), "points", "values"),
+        ):
+            if fit is not None:
+                assert isinstance(fit, im.VariationalSurface) and len(fit) >= 4
+                p = np.asarray(points, dtype=np.float64)
+                out = fit.evaluate(p)
+                assert out.shape == (len(points),)
+                assert np.all(np.isfinite(out)) or np.abs(p).max() > 1e100
+
+
+SPHERE_POINTS, SPHERE_NORMALS = im.shapes.fibonacci_sphere(40)
+
+
+@FUZZ
+@given(
+    rows=st.lists(st.integers(0, 39), min_size=12, max_size=40, unique=True),
+    dtype=st.sampled_from([np.float64, np.float32]),
+    strided=st.booleans(),
+)
+def test_fit_takes_every_valid_layout(rows, dtype, strided):
+    """Valid points with normals, in any order, float64 or float32, strided or not: always a
+    fit, which interpolates its points (zero there) and is negative at the centre."""
+    p = _cast(SPHERE_POINTS[rows], dtype, strided)
+    n = _cast(SPHERE_NORMALS[rows], dtype, strided)
+    fit = im.VariationalSurface.fit(p, n)
+    values = fit.evaluate(np.asarray(p, dtype=np.float64))
+    assert values.shape == (len(rows),)
+    assert np.abs(values).max() < 1e-6
+    assert fit.evaluate(np.zeros((1, 3)))[0] < 0
 
 
 @FUZZ
@@ -91,8 +138,33 @@ def test_evaluate_takes_anything(surface, blobs, points):
     ),
 )
 def test_meshes_take_anything(vertices, faces):
-    survives(lambda: im.VariationalSurface.from_mesh(vertices, faces))
-    survives(lambda: im.butterfly(vertices, faces, levels=1))
+    """Any arrays: a fit of the mesh and its butterfly levels of the right shapes, or refusals
+    naming the argument."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # merged vertices
+        fit = refused_naming(lambda: im.VariationalSurface.from_mesh(vertices, faces), "vertices", "faces")
+    if fit is not None:
+        p = np.asarray(vertices, dtype=np.float64)
+        out = fit.evaluate(p)
+        assert out.shape == (len(vertices),)
+        assert np.all(np.isfinite(out)) or np.abs(p).max() > 1e100
+    levels = refused_naming(lambda: im.butterfly(vertices, faces, levels=1), "vertices", "faces")
+    if levels is not None:
+        assert len(levels) == 2
+        control, fine = levels
+        assert control.vertices.shape == (len(vertices), 3) and control.faces.shape == (len(faces), 3)
+        assert fine.faces.shape == (4 * len(faces), 3) and fine.faces.dtype == np.int64
+        assert fine.vertices.shape[1] == 3 and len(fine.vertices) >= len(vertices)
+        assert np.array_equal(fine.vertices[: len(vertices)], control.vertices)
+
+
+def test_meshes_take_a_valid_mesh():
+    """The shapes the two checks above assert, on a mesh that must be taken."""
+    v, f = _octahedron()
+    fit = im.VariationalSurface.from_mesh(v, f)
+    assert np.abs(fit.evaluate(v)).max() < 1e-6
+    control, fine = im.butterfly(v, f, levels=1)
+    assert fine.faces.shape == (32, 3) and len(fine.vertices) == 6 + 12
 
 
 def _octahedron():
