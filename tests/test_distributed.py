@@ -866,3 +866,33 @@ def test_tile_files_read_back_exactly_and_are_removed(tmp_path):
         (d / "tile-0-0-0").write_bytes(b"x")
     _tile_files.remove_orphans(str(tmp_path))
     assert sorted(p.name for p in tmp_path.iterdir()) == [alive.name]
+
+
+def test_one_call_shape_with_implicitmesh_polygonize(client, blobs, knot, tmp_path):
+    """distributed.polygonize takes implicitmesh.polygonize's keywords (its defaults but
+    method="sparse"); per-method options come flat or as OctreeOptions, checked before any
+    task; output=DIR still works, deprecated, as write_tiles."""
+    import inspect
+
+    ours, theirs = inspect.signature(imd.polygonize).parameters, inspect.signature(im.polygonize).parameters
+    for name, p in theirs.items():
+        assert name in ours and ours[name].kind == p.kind
+        if name != "method":
+            assert ours[name].default == p.default, name
+    assert ours["method"].default == "sparse"
+    surface = knot[1]
+    flat = imd.polygonize(surface, resolution=32, method="octree", safety=2.0, client=client, tile=11)
+    boxed = imd.polygonize(surface, resolution=32, method="octree", options=im.OctreeOptions(safety=2.0), client=client, tile=11)
+    assert_same_mesh(boxed, flat)
+    assert_same_mesh(flat, im.polygonize(surface, resolution=32, method="octree", safety=2.0))
+    for kw in ({"method": "dense", "safety": 2.0}, {"method": "dense", "options": im.OctreeOptions()},
+               {"method": "octree", "options": im.TrackingOptions()}):
+        with pytest.raises(ValueError, match="safety|options"):
+            imd.polygonize(surface, resolution=16, client=client, tile=8, **kw)
+    assert tasks_left(client) == 0
+    with pytest.warns(DeprecationWarning, match="write_tiles"):
+        out = imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8, output=tmp_path / "old")
+    assert out == tmp_path / "old"
+    assert_same_mesh(imd.weld(out), imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8))
+    with pytest.raises(ValueError, match="directory"):
+        imd.write_tiles(blobs, tmp_path / "old" / "manifest.json", bounds=BOX, resolution=24, client=client)

@@ -439,9 +439,9 @@ def write_tiles(
         corner_test=corner_test, seeds=seeds, options=options, progress=progress, client=client, tile=tile,
     )
     output = Path(directory)
-    output.mkdir(parents=True, exist_ok=True)
-    if not output.is_dir():
+    if output.exists() and not output.is_dir():
         raise ValueError(f"directory: {str(output)!r} is not a directory")
+    output.mkdir(parents=True, exist_ok=True)
     results, _ = _execute(plan, client, progress, output)
     manifest = dict(
         plan.info(), bounds=plan.bounds.tolist(), resolution=np.asarray(plan.resolution).tolist(),
