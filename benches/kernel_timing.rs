@@ -1,7 +1,7 @@
 //! Times the radial-basis kernel sums on one thread, for tuning the vector paths:
 //! `cargo bench --bench kernel_timing -- [centres] [blocks] [rounds]`
 //! (prints nanoseconds per point-centre pair for values, values with gradients, and gradients).
-use implicitmesh::field::kernel::{
+use implicitmesh::field::rbf::kernel::{
     block_gradients, block_values, block_values_gradients, Block, Centres, Triharmonic, LANES,
 };
 use std::time::Instant;

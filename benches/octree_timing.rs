@@ -4,7 +4,7 @@
 //! (over [-1, 1]³, d = 0.015 as in the benchmark; prints the octree's phases of its fastest run;
 //! `octree` skips dense, for profiles of the octree alone).
 use glam::DVec3;
-use implicitmesh::field::constraints;
+use implicitmesh::field::rbf::constraints;
 use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::lattice::Lattice;
 use implicitmesh::polygonize::{dense, octree, Settings};

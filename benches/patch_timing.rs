@@ -4,8 +4,8 @@
 //! alone at the same order: `cargo bench --bench patch_timing`.
 use faer::Par;
 use glam::DVec3;
-use implicitmesh::field::kernel::{values_by_point, Arithmetic, Centres, Triharmonic};
-use implicitmesh::field::saddle::SaddleSolver;
+use implicitmesh::field::rbf::kernel::{values_by_point, Arithmetic, Centres, Triharmonic};
+use implicitmesh::linalg::saddle::SaddleSolver;
 use std::time::Instant;
 
 fn cap(m: usize, seed: u64) -> (Vec<DVec3>, Vec<f64>) {
@@ -80,7 +80,7 @@ fn main() {
         for _ in 0..reps {
             work.copy_from_slice(&spd);
             let t = Instant::now();
-            let ok = implicitmesh::field::cholesky::factor_lower(
+            let ok = implicitmesh::linalg::cholesky::factor_lower(
                 faer::MatMut::from_column_major_slice_mut(&mut work, mm, mm),
             );
             tc += t.elapsed().as_secs_f64();

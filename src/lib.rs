@@ -50,10 +50,12 @@ pub mod cancel;
 pub mod error;
 pub mod field;
 pub mod lattice;
+pub mod linalg;
 pub(crate) mod memory;
 pub mod mesh;
 pub mod polygonize;
 pub(crate) mod simd;
+pub mod spatial;
 pub mod subdivision;
 
 #[cfg(feature = "python")]

@@ -5,8 +5,8 @@
 use glam::DVec3;
 use implicitmesh::field::analytic::Sphere;
 use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
-use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
-use implicitmesh::field::{constraints, Field};
+use implicitmesh::field::rbf::{constraints, FitSettings, VariationalSurface};
+use implicitmesh::field::Field;
 use implicitmesh::lattice::Lattice;
 use implicitmesh::mesh::Mesh;
 use implicitmesh::polygonize::{dense, octree, sparse, Settings};

@@ -7,22 +7,8 @@
 
 pub mod analytic;
 pub mod blob;
-pub mod blob_kernel;
-pub mod cholesky;
-pub mod constraints;
-pub mod densities;
 pub mod differences;
-pub mod duplicates;
-pub mod grid;
-pub mod kernel;
-pub mod particles;
-pub mod partition;
 pub mod rbf;
-pub mod reduction;
-pub mod saddle;
-pub mod small_dense;
-pub mod thin;
-pub mod voxels;
 
 use crate::lattice::Lattice;
 use glam::DVec3;

@@ -2,8 +2,8 @@
 
 use super::convert::{field_gradients, field_values, points, points_to_py, values, values_to_py};
 use crate::field::blob::{self, BlobField, PerPrimitive, Precision};
-use crate::field::blob_kernel::BlobKernel;
-use crate::field::particles::{self, ParticleSettings};
+use crate::field::blob::kernel::BlobKernel;
+use crate::field::blob::particles::{self, ParticleSettings};
 use glam::DVec3;
 use pyo3::prelude::*;
 

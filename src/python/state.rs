@@ -5,10 +5,10 @@
 use super::convert::{points, points_to_py, values, values_to_py};
 use super::errors::value_error;
 use super::variational::Fitted;
-use crate::field::constraints::Constraints;
-use crate::field::kernel::Kernel;
-use crate::field::partition::octree::Node;
-use crate::field::partition::{PartitionParts, PartitionSettings, PartitionSurface, PatchParts};
+use crate::field::rbf::constraints::Constraints;
+use crate::field::rbf::kernel::Kernel;
+use crate::field::rbf::partition::octree::Node;
+use crate::field::rbf::partition::{PartitionParts, PartitionSettings, PartitionSurface, PatchParts};
 use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use glam::DVec3;
 use numpy::{PyArray1, PyReadonlyArray1};

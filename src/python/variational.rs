@@ -5,11 +5,11 @@ use super::convert::{
 };
 use super::errors::value_error;
 use crate::error::Result;
-use crate::field::constraints::{self, Constraints};
-use crate::field::kernel::Kernel;
-use crate::field::partition::{self, PartitionSurface};
+use crate::field::rbf::constraints::{self, Constraints};
+use crate::field::rbf::kernel::Kernel;
+use crate::field::rbf::partition::{self, PartitionSurface};
 use crate::field::rbf::{self, VariationalSurface};
-use crate::field::reduction::{self, Reduction, ReductionSettings};
+use crate::field::rbf::reduction::{self, Reduction, ReductionSettings};
 use crate::field::Field;
 use glam::DVec3;
 use numpy::PyArray1;

@@ -24,8 +24,8 @@
 
 use super::{single, BlobField, BlockCoords, Precision};
 #[cfg(target_arch = "x86_64")]
-use crate::field::blob_kernel::LaneProfile;
-use crate::field::blob_kernel::{with_profile, Profile};
+use crate::field::blob::kernel::LaneProfile;
+use crate::field::blob::kernel::{with_profile, Profile};
 use crate::field::BLOCK_POINTS;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::lanes::{F64s, Lanes};
@@ -353,10 +353,10 @@ impl BlobField {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{BlobSettings, PerPrimitive};
+    use crate::field::blob::{BlobSettings, PerPrimitive};
     use super::*;
-    use crate::field::blob_kernel::BlobKernel;
-    use crate::field::particles::{colour_field, ParticleSettings};
+    use crate::field::blob::kernel::BlobKernel;
+    use crate::field::blob::particles::{colour_field, ParticleSettings};
     use crate::field::testing::jittered_cube;
     use crate::field::{Block, BlockField, BlockSign};
     use crate::lattice::Lattice;

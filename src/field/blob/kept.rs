@@ -478,7 +478,7 @@ mod tests {
     /// every kind of hint are recorded.
     #[test]
     fn stale_hints_give_the_meshes_of_new_fields() {
-        use super::super::hints::Proof;
+        use crate::field::blob::hints::Proof;
         let p0 = particles();
         let ball_from = 16 * 16 * 4;
         let lattice = lattice();

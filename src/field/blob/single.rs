@@ -23,8 +23,8 @@
 use super::{BlobField, BlockCoords, RowTerm};
 use crate::error::{Error, Result};
 #[cfg(target_arch = "x86_64")]
-use crate::field::blob_kernel::LaneProfile;
-use crate::field::blob_kernel::{with_profile, Profile};
+use crate::field::blob::kernel::LaneProfile;
+use crate::field::blob::kernel::{with_profile, Profile};
 use crate::lattice::Lattice;
 use crate::simd::Isa;
 use glam::DVec3;
@@ -256,9 +256,9 @@ impl BlobField {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{BlobSettings, PerPrimitive};
+    use crate::field::blob::{BlobSettings, PerPrimitive};
     use super::*;
-    use crate::field::blob_kernel::BlobKernel;
+    use crate::field::blob::kernel::BlobKernel;
     use crate::field::testing::jittered_cube;
     use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
 

@@ -3,8 +3,8 @@
 
 use super::VariationalSurface;
 use crate::error::{Error, Result};
-use crate::field::constraints::Constraints;
-use crate::field::kernel::{Centres, Kernel};
+use crate::field::rbf::constraints::Constraints;
+use crate::field::rbf::kernel::{Centres, Kernel};
 use glam::DVec3;
 
 /// Everything a [`VariationalSurface`] holds, as [`VariationalSurface::parts`] gives it and
@@ -129,7 +129,7 @@ impl VariationalSurface {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::constraints::ConstraintSettings;
+    use crate::field::rbf::constraints::ConstraintSettings;
     use crate::field::rbf::FitSettings;
     use crate::field::testing::fibonacci_sphere;
     use crate::field::Field;

@@ -1,11 +1,11 @@
-//! The fit of one patch of a partition-of-unity surface (see [`crate::field::partition`]): a
+//! The fit of one patch of a partition-of-unity surface (see [`crate::field::rbf::partition`]): a
 //! variational interpolant of some of the surface's constraints that keeps them as indices into
 //! the surface's constraint points, with its weights, and normalises them when it is evaluated,
 //! with the arithmetic of its fit, so that its values have the bits of the fitted interpolant.
 
 use super::{bad_state, sums_by_point, FitSettings, SurfaceParts, VariationalSurface};
 use crate::error::Result;
-use crate::field::kernel::{Centres, Kernel};
+use crate::field::rbf::kernel::{Centres, Kernel};
 use faer::Par;
 use glam::DVec3;
 
@@ -15,7 +15,7 @@ pub enum PatchCentres {
     /// Indices into the surface's constraint points (the caller's coordinates).
     Shared(Vec<u32>),
     /// Centres of its own, normalised: a plane patch's points, which are no constraints (see
-    /// [`crate::field::partition::empty`]), or a patch of a state saved in format 1.
+    /// [`crate::field::rbf::partition::empty`]), or a patch of a state saved in format 1.
     Own(Vec<DVec3>),
 }
 
@@ -135,7 +135,7 @@ impl PatchFit {
     }
 
     /// Values, and gradients when `gradients` is given, at `points` in the caller's coordinates,
-    /// on the calling thread, by point (see [`crate::field::kernel::values_by_point`]), so that a
+    /// on the calling thread, by point (see [`crate::field::rbf::kernel::values_by_point`]), so that a
     /// point's value and gradient have the same bits whatever other points are evaluated with
     /// it. `centres` are its centres as [`PatchFit::gather`] gives them.
     pub(crate) fn eval_gathered(

@@ -19,7 +19,7 @@
 //! cube wherever it does at π(x), since π does not lengthen distances to points of the cube.
 
 use super::PartitionSurface;
-use crate::field::kernel::Centres;
+use crate::field::rbf::kernel::Centres;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -1,5 +1,5 @@
 //! Dense kernels for the small systems of partition-of-unity patches (a few hundred unknowns,
-//! solved one per rayon task, see [`super::saddle`]): a symmetric matrix stored as its lower
+//! solved one per rayon task, see [`crate::linalg::saddle`]): a symmetric matrix stored as its lower
 //! triangle times four columns, a rank-8 update of a lower triangle, and the two triangular
 //! solves with a Cholesky factor. At these sizes a call to a general matrix library costs more
 //! in dispatch and packing than these loops do in flops. The product and the update take two

@@ -106,7 +106,7 @@ fn for_columns(a: &mut [f64], n: usize, par: Par, f: impl Fn(usize, &mut [f64]) 
 }
 
 /// The entries φ(|p_i − c_j|) of the matrix Φ, column by column. A closure of r² gives them
-/// as `phi(dx² + dy² + dz²)`; [`super::kernel::Arithmetic`] with the arithmetic of the
+/// as `phi(dx² + dy² + dz²)`; [`crate::field::rbf::kernel::Arithmetic`] with the arithmetic of the
 /// kernel sums, so that the matrix holds the numbers evaluation gives.
 pub trait Entries: Sync {
     /// `out[i]` = φ(|p_i − c|), p_i = (`xs[i]`, `ys[i]`, `zs[i]`).
@@ -194,16 +194,16 @@ fn subtract_lower(
 }
 
 /// Cholesky factorization in place of the lower triangle of `a` (faer's, which cannot be
-/// stopped; systems of at most [`super::cholesky::MAX_ORDER`] unknowns with `par` [`Par::Seq`] use
-/// [`super::cholesky`]), by blocks of [`COLUMNS_PER_STEP`] columns when `a` is larger than one block, with
+/// stopped; systems of at most [`crate::linalg::cholesky::MAX_ORDER`] unknowns with `par` [`Par::Seq`] use
+/// [`crate::linalg::cholesky`]), by blocks of [`COLUMNS_PER_STEP`] columns when `a` is larger than one block, with
 /// a check for interruption between blocks and, unless `par` is [`Par::Seq`] (a fit inside
 /// someone else's parallel loop, which reports its own progress), a progress report of the
 /// columns done. `Ok(false)` when `a` is not positive definite.
 fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
     let m = a.nrows();
     // A patch's system inside someone else's parallel loop: the small-system factorization.
-    if matches!(par, Par::Seq) && m <= super::cholesky::MAX_ORDER {
-        if let Some(ok) = super::cholesky::factor_lower(a.as_mut()) {
+    if matches!(par, Par::Seq) && m <= crate::linalg::cholesky::MAX_ORDER {
+        if let Some(ok) = crate::linalg::cholesky::factor_lower(a.as_mut()) {
             return Ok(ok);
         }
     }
@@ -248,7 +248,7 @@ fn cholesky_in_steps(mut a: MatMut<'_, f64>, par: Par) -> Result<bool> {
 
 impl SaddleSolver {
     /// Factorizes the system for `points` (already normalised). `phi` gives the kernel's
-    /// entries (a function of r², see [`super::kernel::RadialFn`], or [`Entries`]); `sign` is
+    /// entries (a function of r², see [`crate::field::rbf::kernel::RadialFn`], or [`Entries`]); `sign` is
     /// +1 for kernels conditionally positive definite of order 2 (r³, r² log r) and −1 for −r.
     pub fn new(points: &[DVec3], phi: impl Entries, smoothing: f64, sign: f64) -> Result<Self> {
         Self::with_parallelism(points, phi, smoothing, sign, faer::get_global_parallelism())
@@ -371,12 +371,12 @@ impl SaddleSolver {
         // QᵀAQ = A − V Zᵀ − Z Vᵀ with W = AV, S = Tᵀ(VᵀW)T, Z = WT − ½VS: one pass to read A
         // (W) and one to update it.
         // W = AV, with A symmetric and stored as its lower triangle L: W = LV + (L − D)ᵀV.
-        let small = matches!(par, Par::Seq) && n <= super::cholesky::MAX_ORDER;
+        let small = matches!(par, Par::Seq) && n <= crate::linalg::cholesky::MAX_ORDER;
         let mut wcols = vec![0.0; 4 * n];
         let vm = MatRef::from_column_major_slice(&v, n, 4);
         cancel::check()?;
         if small {
-            super::small_dense::symmetric_times_four(&a, n, &v, &mut wcols);
+            crate::linalg::small_dense::symmetric_times_four(&a, n, &v, &mut wcols);
         } else {
             let mut wm = MatMut::from_column_major_slice_mut(&mut wcols, n, 4);
             let lower = MatRef::from_column_major_slice(&a, n, n);
@@ -446,7 +446,7 @@ impl SaddleSolver {
         right[4 * n..].copy_from_slice(&v);
         // The lower triangle of A − [V Z][Z V]ᵀ, the only part read afterwards.
         if small {
-            super::small_dense::subtract_lower_rank8(&mut a, n, &left, &right);
+            crate::linalg::small_dense::subtract_lower_rank8(&mut a, n, &left, &right);
         } else {
             subtract_lower(
                 MatMut::from_column_major_slice_mut(&mut a, n, n),
@@ -547,7 +547,7 @@ impl SaddleSolver {
                     y[j] = sign * (qf[j] - b21y1);
                 }
                 // The factor of the trailing block starts at (4, 4).
-                super::small_dense::cholesky_solve(&l[4 * n + 4..], n, &mut y[4..]);
+                crate::linalg::small_dense::cholesky_solve(&l[4 * n + 4..], n, &mut y[4..]);
                 // R a = (Qᵀf)[..4] − B₁₁ y₁ − B₁₂ y₂ (back substitution).
                 let mut tv = [0.0; 4];
                 for (i, ti) in tv.iter_mut().enumerate() {

@@ -297,16 +297,16 @@ impl LaneProfile for Wendland {
 macro_rules! with_profile {
     ($kernel:expr, $K:ident => $body:expr) => {
         match $kernel {
-            $crate::field::blob_kernel::BlobKernel::Triquet => {
-                type $K = $crate::field::blob_kernel::Triquet;
+            $crate::field::blob::kernel::BlobKernel::Triquet => {
+                type $K = $crate::field::blob::kernel::Triquet;
                 $body
             }
-            $crate::field::blob_kernel::BlobKernel::CubicSpline => {
-                type $K = $crate::field::blob_kernel::CubicSpline;
+            $crate::field::blob::kernel::BlobKernel::CubicSpline => {
+                type $K = $crate::field::blob::kernel::CubicSpline;
                 $body
             }
-            $crate::field::blob_kernel::BlobKernel::Wendland => {
-                type $K = $crate::field::blob_kernel::Wendland;
+            $crate::field::blob::kernel::BlobKernel::Wendland => {
+                type $K = $crate::field::blob::kernel::Wendland;
                 $body
             }
         }

@@ -1,9 +1,9 @@
 //! Kernel sums Σⱼ w(|xᵢ − xⱼ|/H) of a particle set at its own particles (the SPH density pass of
-//! [`super::particles`]), over a cell list: the particles sorted by cells of side H (or more),
+//! [`crate::field::blob::particles`]), over a cell list: the particles sorted by cells of side H (or more),
 //! each particle's neighbours read from the nine runs of cells (three x-neighbours each) around
 //! its own, contiguous in memory.
 
-use super::blob_kernel::{with_profile, BlobKernel, Profile};
+use crate::field::blob::kernel::{with_profile, BlobKernel, Profile};
 use crate::error::Result;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -155,7 +155,7 @@ fn sum_at<K: Profile>(list: &CellList, p: DVec3, inv: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::testing::random_points;
+    use crate::field::testing::random_points;
     use super::*;
 
     /// The sums against the direct double loop, for each kernel, with particles on the box's

@@ -5,20 +5,26 @@
 //! largest half-side is 1), which keeps the system's entries of order one whatever the units of
 //! the data; the interpolant is similarity-equivariant, so this changes nothing but the rounding.
 
+pub mod constraints;
+pub mod duplicates;
+pub mod kernel;
 mod parts;
+pub mod partition;
 mod patch;
+pub mod reduction;
+pub mod thin;
 
 pub(crate) use parts::bad_state;
 pub use parts::SurfaceParts;
 pub use patch::{PatchCentres, PatchFit};
 
-use super::constraints::{self, bounding_box, Constraints};
-use super::kernel::{
+use constraints::{bounding_box, Constraints};
+use crate::field::rbf::kernel::{
     block_gradients, block_values, block_values_gradients, values_by_point,
     values_gradients_by_point, Arithmetic, Biharmonic, Block, Centres, Kernel, RadialFn, ThinPlate,
     Triharmonic, LANES,
 };
-use super::saddle::SaddleSolver;
+use crate::linalg::saddle::SaddleSolver;
 use super::Field;
 use crate::error::{Error, Result};
 use faer::Par;

@@ -9,19 +9,23 @@
 //! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
+pub mod densities;
 mod hints;
 mod interior;
 mod kept;
+pub mod kernel;
+pub mod particles;
 mod single;
 pub mod tiles;
+pub mod voxels;
 
 use hints::{Hints, Proof, ONE_SIGN_FRAMES};
 pub use single::Precision;
 
 #[cfg(target_arch = "x86_64")]
-use super::blob_kernel::LaneProfile;
-use super::blob_kernel::{with_profile, BlobKernel, Profile, Real, Triquet};
-use super::voxels::VoxelGrid;
+use crate::field::blob::kernel::LaneProfile;
+use crate::field::blob::kernel::{with_profile, BlobKernel, Profile, Real, Triquet};
+use crate::field::blob::voxels::VoxelGrid;
 use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
 use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;

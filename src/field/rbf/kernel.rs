@@ -686,7 +686,7 @@ pub fn values_gradients_by_point<K: RadialFn>(c: &Centres, pts: &[[f64; 3]], out
     }
 }
 
-/// The entries of an interpolation matrix with kernel `K` (see [`crate::field::saddle::Entries`]),
+/// The entries of an interpolation matrix with kernel `K` (see [`crate::linalg::saddle::Entries`]),
 /// computed as the sums compute their terms: with AVX-512 (r³ and r) each entry has the bits of
 /// the term φ(|p_i − c_j|) that evaluation at p_i adds for centre c_j.
 pub struct Arithmetic<K>(std::marker::PhantomData<K>);
@@ -697,7 +697,7 @@ impl<K> Default for Arithmetic<K> {
     }
 }
 
-impl<K: RadialFn> crate::field::saddle::Entries for Arithmetic<K> {
+impl<K: RadialFn> crate::linalg::saddle::Entries for Arithmetic<K> {
     fn column(&self, xs: &[f64], ys: &[f64], zs: &[f64], c: glam::DVec3, out: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
         if let Some(cube) = avx512_cube::<K>() {
@@ -833,7 +833,7 @@ mod tests {
     /// with a point, and a matrix column of [`Arithmetic`] holds the terms they add.
     #[test]
     fn sums_by_point_agree_and_do_not_depend_on_the_batch() {
-        use crate::field::saddle::Entries;
+        use crate::linalg::saddle::Entries;
         let c = centres();
         let mut q: Vec<[f64; 3]> = crate::field::testing::random_points(21, -1.2, 1.2, 4)
             .iter()

@@ -7,7 +7,7 @@
 //!   surface's default polygonization bounds.
 //! - [`patches`]: one patch per leaf, a ball of radius [`PartitionSettings::overlap`] × the leaf's
 //!   half-diagonal around its centre, fitted with r³ + linear (as
-//!   [`VariationalSurface`](super::rbf::VariationalSurface)) to every constraint in the ball
+//!   [`VariationalSurface`](crate::field::rbf::VariationalSurface)) to every constraint in the ball
 //!   (completed, when they are fewer than [`PartitionSettings::min_points`], by constraints spread over a
 //!   larger ball, from the subsampled levels of [`coarse`]; a ball with no constraint, in a
 //!   fit with normal constraints, gets a plane that carries the sign of space, [`empty`]);
@@ -54,7 +54,7 @@ pub struct PartitionSettings {
     pub min_points: usize,
     /// Each patch's fit (kernel, smoothing); its `memory_limit` refuses fits whose patches (kept,
     /// and the dense systems being solved) would need more bytes.
-    pub fit: super::rbf::FitSettings,
+    pub fit: crate::field::rbf::FitSettings,
 }
 
 impl Default for PartitionSettings {
@@ -64,7 +64,7 @@ impl Default for PartitionSettings {
             overlap: 1.15,
             max_patch: 256,
             min_points: 128,
-            fit: super::rbf::FitSettings::default(),
+            fit: crate::field::rbf::FitSettings::default(),
         }
     }
 }
@@ -151,7 +151,7 @@ impl PartitionSurface {
     }
 
     /// Fits a surface to the vertices of a triangle mesh, as
-    /// [`VariationalSurface::from_mesh`](super::rbf::VariationalSurface::from_mesh).
+    /// [`VariationalSurface::from_mesh`](crate::field::rbf::VariationalSurface::from_mesh).
     pub fn from_mesh(
         vertices: &[DVec3],
         faces: &[[u32; 3]],

@@ -8,7 +8,7 @@
 //! `t_i/2` from both sheets where they are parallel (and on the axis of a round leg), so the
 //! value's magnitude stays below the distance to the surface, as the normal constraints' does.
 
-use super::grid::Grid;
+use crate::spatial::Grid;
 use glam::DVec3;
 use rayon::prelude::*;
 

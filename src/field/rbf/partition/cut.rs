@@ -5,7 +5,7 @@
 //! constraints the kept patches' centres are, renumbered.
 
 use super::{patches, Constraints, PartitionSurface};
-use crate::field::constraints::bounding_box;
+use crate::field::rbf::constraints::bounding_box;
 use crate::field::rbf::PatchCentres;
 use glam::DVec3;
 
@@ -130,7 +130,7 @@ mod tests {
     /// Values and gradients in the box are the whole surface's bits, with fewer patches.
     #[test]
     fn a_cut_surface_evaluates_to_the_same_bits_in_its_box() {
-        let s = super::super::tests::torus_surface();
+        let s = crate::field::rbf::partition::tests::torus_surface();
         let (lo, hi) = (DVec3::new(-1.2, -0.3, 0.1), DVec3::new(-0.2, 0.4, 1.3));
         let cut = s.cut(lo, hi);
         assert!(cut.patches.len() < s.patches.len() && !cut.patches.is_empty());

@@ -8,7 +8,7 @@
 //! position is kept exactly (the fit interpolates it); the group's normals are summed, its values
 //! averaged.
 
-use super::grid::Grid;
+use crate::spatial::Grid;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -102,7 +102,7 @@ pub fn typical_spacing(points: &[DVec3], grid: &Grid) -> f64 {
     if n < 2 {
         return 0.0;
     }
-    let side = super::constraints::largest_side(points);
+    let side = crate::field::rbf::constraints::largest_side(points);
     if side <= 0.0 {
         return 0.0;
     }
@@ -141,7 +141,7 @@ pub fn typical_spacing(points: &[DVec3], grid: &Grid) -> f64 {
 /// The default merge tolerance: [`MERGE_FRACTION`] × [`typical_spacing`], at least
 /// [`COINCIDENT`] × the largest side.
 pub fn default_tolerance(points: &[DVec3], grid: &Grid) -> f64 {
-    let floor = COINCIDENT * super::constraints::largest_side(points);
+    let floor = COINCIDENT * crate::field::rbf::constraints::largest_side(points);
     (MERGE_FRACTION * typical_spacing(points, grid)).max(floor)
 }
 

@@ -9,9 +9,9 @@
 //! the points it used exactly and approximates the others within the tolerance when the rounds
 //! sufficed ([`Reduction::outside`] says).
 
-use super::duplicates::typical_spacing;
-use super::grid::Grid;
-use super::Field;
+use crate::field::rbf::duplicates::typical_spacing;
+use crate::spatial::Grid;
+use crate::field::Field;
 use crate::cancel;
 use crate::error::{Error, Result};
 use glam::DVec3;

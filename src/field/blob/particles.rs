@@ -8,9 +8,9 @@
 //! profile of [`BlobKernel`], 1 at the centre), (m/ρᵢ) W(d, H) = w(d/H) / Σⱼ w(|xᵢ − xⱼ|/H), so
 //! the strength of particle i is Aᵢ = 1 / Σⱼ w(|xᵢ − xⱼ|/H) and neither m, ρ₀ nor σ appears.
 
-use super::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
-use super::blob_kernel::BlobKernel;
-use super::densities::kernel_sums;
+use crate::field::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
+use crate::field::blob::kernel::BlobKernel;
+use crate::field::blob::densities::kernel_sums;
 use crate::error::{check_finite_points, Error, Result};
 use glam::DVec3;
 
@@ -95,7 +95,7 @@ fn compact_support(particle_radius: f64, settings: &ParticleSettings) -> Result<
 
 #[cfg(test)]
 mod tests {
-    use super::super::testing::random_points;
+    use crate::field::testing::random_points;
     use super::*;
 
     /// The colour field against the formula summed directly with splashsurf's normalised kernel

@@ -13,7 +13,7 @@
 //! does. (On the support, (x − q)·u ≥ |c − q| − R > 0, since q lies outside it.)
 
 use super::octree::Octree;
-use crate::field::constraints::Constraints;
+use crate::field::rbf::constraints::Constraints;
 use glam::DVec3;
 
 /// Data points that vote on the side of the surface a patch is on.

@@ -16,7 +16,7 @@ use super::empty;
 use super::octree::Octree;
 use super::PartitionSettings;
 use crate::error::{Error, Result};
-use crate::field::constraints::Constraints;
+use crate::field::rbf::constraints::Constraints;
 use crate::field::rbf::{self, PatchFit, VariationalSurface};
 use faer::Par;
 use glam::DVec3;

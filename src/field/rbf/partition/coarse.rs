@@ -19,7 +19,7 @@
 //! and an octree. Each coarser level has an octree over its own points.
 
 use super::octree::Octree;
-use crate::field::constraints::Constraints;
+use crate::field::rbf::constraints::Constraints;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -215,8 +215,8 @@ pub fn levels<'t>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::constraints;
-    use crate::field::partition::{PartitionSettings, PartitionSurface};
+    use crate::field::rbf::constraints;
+    use crate::field::rbf::partition::{PartitionSettings, PartitionSurface};
     use crate::field::testing::random_points;
 
     /// Every level, read from the fit's octree or from its own, finds exactly the constraints

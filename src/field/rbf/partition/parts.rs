@@ -6,7 +6,7 @@
 use super::octree::Node;
 use super::{patches, Octree, PartitionSettings, PartitionSurface, Patch};
 use crate::error::Result;
-use crate::field::constraints::{bounding_box, Constraints};
+use crate::field::rbf::constraints::{bounding_box, Constraints};
 use crate::field::rbf::{bad_state, PatchFit, SurfaceParts};
 use glam::DVec3;
 

@@ -20,7 +20,7 @@ fn torus_data(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
 fn patch_at(s: &PartitionSurface, i: usize, x: DVec3) -> (f64, DVec3) {
     let (mut v, mut g) = ([0.0], [DVec3::ZERO]);
     let all = &s.centres;
-    let scratch = &mut crate::field::kernel::Centres::default();
+    let scratch = &mut crate::field::rbf::kernel::Centres::default();
     let fit = &s.patches[i].fit;
     fit.eval_on_this_thread(all, scratch, &[x], &mut v, Some(&mut g));
     (v[0], g[0])

@@ -1,13 +1,13 @@
 //! Constraint placement for variational surfaces (Cuno et al. §4.1, Turk & O'Brien): every data
 //! point `q_i` is a boundary constraint (value 0) and `q_i + d_i n_i` a normal constraint (value
 //! `w_i`), with `d_i` shrunk until no other data point is closer to the normal constraint than
-//! `q_i` itself; in thin parts of the body also inner constraints ([`super::thin`]). Also the
+//! `q_i` itself; in thin parts of the body also inner constraints ([`crate::field::rbf::thin`]). Also the
 //! checks on the data (count, finiteness, duplicates, coplanarity) and vertex normals of
 //! triangle meshes.
 
-use super::duplicates;
-use super::grid::Grid;
-use super::thin;
+use crate::field::rbf::duplicates;
+use crate::spatial::Grid;
+use crate::field::rbf::thin;
 use crate::error::{check_finite_points, Error, Result};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -25,10 +25,10 @@ pub struct ConstraintSettings {
     pub w_over_d: f64,
     /// Apply Cuno's rule: shrink `d_i` until no other data point is nearer to the normal constraint.
     pub shrink: bool,
-    /// Data points at most this far apart are merged (see [`super::duplicates`]). `None`:
+    /// Data points at most this far apart are merged (see [`crate::field::rbf::duplicates`]). `None`:
     /// [`duplicates::default_tolerance`], 0.1 % of the data's typical spacing.
     pub merge_distance: Option<f64>,
-    /// Inner constraints in thin parts ([`super::thin`]): another sheet of the surface is looked
+    /// Inner constraints in thin parts ([`crate::field::rbf::thin`]): another sheet of the surface is looked
     /// for behind each data point within this multiple of `d`; 0 (default) places none. At 6
     /// they keep legs thinner than 4d whole, but on such legs the fit grows sheets far from the
     /// data (docs/variational.md, "Thin parts").
@@ -62,7 +62,7 @@ impl Default for ConstraintSettings {
 /// Constraint points and values: the first `boundary` entries are the data points (value 0), the
 /// next `normal_of.len()` the normal constraints (of every data point, or at scan scale of a
 /// subset, see [`ConstraintSettings::normal_cell_over_spacing`]), in the order of their data
-/// points, and the rest the inner constraints of thin parts ([`super::thin`]), in the order of
+/// points, and the rest the inner constraints of thin parts ([`crate::field::rbf::thin`]), in the order of
 /// their data points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Constraints {
@@ -73,9 +73,9 @@ pub struct Constraints {
     /// Number of boundary constraints (= data points, after merging near-duplicates).
     pub boundary: usize,
     /// The data point of each normal constraint, increasing (empty without normals; a
-    /// [`PartitionSurface::cut`](super::partition::PartitionSurface::cut) keeps none).
+    /// [`PartitionSurface::cut`](crate::field::rbf::partition::PartitionSurface::cut) keeps none).
     pub normal_of: Vec<u32>,
-    /// Number of data points merged into others (see [`super::duplicates`]).
+    /// Number of data points merged into others (see [`crate::field::rbf::duplicates`]).
     pub merged: usize,
 }
 
@@ -647,7 +647,7 @@ mod tests {
         let mut dup = pts.clone();
         dup.push(pts[2000] + DVec3::splat(1e-13));
         dup.push(pts[17]);
-        let m = super::duplicates::merge(&dup, Some(1e-12));
+        let m = crate::field::rbf::duplicates::merge(&dup, Some(1e-12));
         assert_eq!((m.into[3000], m.into[3001], m.merged()), (2000, 17, 2));
     }
 
