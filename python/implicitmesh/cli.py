@@ -33,7 +33,7 @@ class _Parser(argparse.ArgumentParser):
     """An argument parser whose refusals are one line (``implicitmesh: error: ...``, exit 2),
     with the usage left to ``--help``."""
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

@@ -61,7 +61,7 @@ class TrackingOptions:
 
 
 #: The options class of each method that has settings of its own.
-_METHOD_OPTIONS = {"octree": OctreeOptions, "tracking": TrackingOptions}
+_METHOD_OPTIONS: dict[str, type[OctreeOptions] | type[TrackingOptions]] = {"octree": OctreeOptions, "tracking": TrackingOptions}
 
 
 def _method_keywords(method: Any, options: Any, given: dict[str, Any]) -> dict[str, Any]:
@@ -72,7 +72,7 @@ def _method_keywords(method: Any, options: Any, given: dict[str, Any]) -> dict[s
     wrong type (the core refuses the ones that do not apply to ``method``)."""
     if options is not None:
         wanted = _METHOD_OPTIONS.get(method.lower()) if isinstance(method, str) else None
-        if wanted is None or not isinstance(options, wanted):
+        if wanted is None or not isinstance(options, (OctreeOptions, TrackingOptions)) or not isinstance(options, wanted):
             expected = f"{wanted.__name__} for method={method!r}" if wanted else f"None for method={method!r}"
             raise ValueError(f"options: expected {expected}, got {type(options).__name__}")
         flat = sorted(k for k, v in given.items() if v is not None)
