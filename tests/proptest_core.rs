@@ -50,11 +50,11 @@ proptest! {
     #[test]
     fn lattices_refuse_or_hold(min in point(), max in point(), a in 0u32..40, b in 0u32..40, c in 0u32..40, n in 0u32..40) {
         if let Ok(l) = Lattice::new(min, max, [a, b, c]) {
-            prop_assert_eq!(l.cells, [a, b, c]);
-            prop_assert!(l.cell.is_finite() && l.cell.min_element() > 0.0);
+            prop_assert_eq!(l.cells(), [a, b, c]);
+            prop_assert!(l.cell().is_finite() && l.cell().min_element() > 0.0);
         }
         if let Ok(l) = Lattice::cubic(min, max, n) {
-            prop_assert!(l.cells.iter().all(|&k| k >= 1));
+            prop_assert!(l.cells().iter().all(|&k| k >= 1));
         }
     }
 

@@ -159,7 +159,7 @@ fn plane_edges(
     vertices: &mut Vec<DVec3>,
     mut keys: Option<&mut Vec<u64>>,
 ) {
-    let [nx, ny, _] = lattice.cells;
+    let [nx, ny, _] = lattice.cells();
     let (nxu, px) = (nx as usize, nx as usize + 1);
     let b = Bits::new(px);
     for j in 0..=ny as usize {
@@ -215,7 +215,7 @@ fn layer_vertices(
     vertices: &mut Vec<DVec3>,
     mut keys: Option<&mut Vec<u64>>,
 ) {
-    let [nx, ny, _] = lattice.cells;
+    let [nx, ny, _] = lattice.cells();
     let (nxu, pxu, pyu) = (nx as usize, nx as usize + 1, ny as usize + 1);
     for (a, n) in [
         (&mut layer.x, nxu * pyu),
@@ -267,7 +267,7 @@ fn triangulate_layer(
     layer: &Layer,
     out: &mut Vec<[u32; 3]>,
 ) -> u64 {
-    let [nx, ny, _] = lattice.cells;
+    let [nx, ny, _] = lattice.cells();
     let (nxu, pxu) = (nx as usize, nx as usize + 1);
     let b = Bits::new(pxu);
     let (bx, by, bbase) = bottom;
@@ -442,7 +442,7 @@ fn return_workspace(w: Workspace) {
 /// The groups are balanced: 64 layers in batches of 62 make two groups of 32, not 62 and 2.
 fn layers_per_group(lattice: &Lattice, settings: &Settings) -> u32 {
     let [px, py, _] = lattice.points_per_axis();
-    let nz = lattice.cells[2] as u64;
+    let nz = lattice.cells()[2] as u64;
     let most = (settings.batch as u64 / (px as u64 * py as u64))
         .max(MIN_LAYERS_PER_GROUP as u64)
         .min(nz);
@@ -528,7 +528,7 @@ fn sweep<F: Field + ?Sized>(
     mesh: &mut Mesh,
     stats: &mut Stats,
 ) -> Result<Vec<u64>> {
-    let [nx, _, nz] = lattice.cells;
+    let [nx, _, nz] = lattice.cells();
     let [px, py, _] = lattice.points_per_axis();
     let (nxu, pxu, pyu) = (nx as usize, px as usize, py as usize);
     let plane = pxu * pyu;

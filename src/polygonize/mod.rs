@@ -60,7 +60,7 @@ pub const DIFFERENCE_STEP: f64 = 1e-3;
 /// [`DIFFERENCE_STEP`] on `lattice`: the step, in field units, of central differences for the
 /// normals of a field that only has values.
 pub fn difference_step(lattice: &Lattice) -> f64 {
-    DIFFERENCE_STEP * lattice.cell.min_element()
+    DIFFERENCE_STEP * lattice.cell().min_element()
 }
 
 /// Exact counts and timings of one polygonization.
@@ -114,7 +114,7 @@ const BYTES_PER_TRIANGLE: u64 = 12 + 24;
 /// A rough upper estimate of output triangles for a lattice: a surface as large as a few times
 /// the box's own surface. Used only to refuse absurd resolutions before running out of memory.
 pub fn estimate_triangles(l: &Lattice) -> u64 {
-    let [x, y, z] = l.cells.map(|c| c as u64);
+    let [x, y, z] = l.cells().map(|c| c as u64);
     8 * (x * y + y * z + z * x)
 }
 

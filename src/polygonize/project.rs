@@ -41,7 +41,7 @@ pub fn project_vertices<F: Field + ?Sized>(
         return Ok(());
     }
     let t = Instant::now();
-    let max_step = MAX_STEP_OVER_CELL * lattice.cell.min_element();
+    let max_step = MAX_STEP_OVER_CELL * lattice.cell().min_element();
     let per_vertex = 1 + field.values_per_gradient();
     let batch = (settings.batch / per_vertex as usize).max(1);
     let mut values = vec![0.0; batch.min(mesh.vertices.len())];

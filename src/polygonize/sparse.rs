@@ -89,7 +89,7 @@ pub(crate) type BlockGrid = Grid<STEP>;
 
 /// The blocks of `lattice`.
 pub(crate) fn block_grid(lattice: &Lattice) -> BlockGrid {
-    Grid::new(lattice.cells)
+    Grid::new(lattice.cells())
 }
 
 /// An evaluated block with points of both signs ([`evaluate_block`]): what triangulating it
@@ -1078,8 +1078,8 @@ mod tests {
 
     #[test]
     fn equals_dense_with_sph_kernels() {
-        use crate::field::blob::{BlobSettings, PerPrimitive};
         use crate::field::blob::kernel::BlobKernel;
+        use crate::field::blob::{BlobSettings, PerPrimitive};
         for kernel in [BlobKernel::CubicSpline, BlobKernel::Wendland] {
             for_each_blob_case(&BLOB_CASES[..4], |f, l| {
                 let settings = BlobSettings {
@@ -1104,9 +1104,9 @@ mod tests {
     /// it are ruled out, and the mesh is still the dense one, bit for bit.
     #[test]
     fn equals_dense_on_particles_with_inside_blocks() {
-        use crate::field::blob::{BlobSettings, PerPrimitive};
         use crate::field::blob::kernel::BlobKernel;
         use crate::field::blob::particles::{colour_field, ParticleSettings};
+        use crate::field::blob::{BlobSettings, PerPrimitive};
         let p = crate::field::testing::jittered_cube(14, 7);
         // Cells of 1/4 over the particles and their support (2) on every side, partial blocks.
         let l = Lattice::new(DVec3::splat(-2.3), DVec3::splat(15.2), [70, 69, 71]).unwrap();

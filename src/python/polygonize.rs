@@ -124,11 +124,11 @@ pub fn stats_to_py<'py>(
     }
     secs.set_item("total", s.total_seconds())?;
     d.set_item("seconds", secs)?;
-    d.set_item("resolution", PyTuple::new(py, lattice.cells)?)?;
+    d.set_item("resolution", PyTuple::new(py, lattice.cells())?)?;
     d.set_item(
         "bounds",
         [
-            [lattice.origin.x, lattice.origin.y, lattice.origin.z],
+            [lattice.origin().x, lattice.origin().y, lattice.origin().z],
             [lattice.max().x, lattice.max().y, lattice.max().z],
         ],
     )?;
@@ -145,7 +145,7 @@ pub fn lattice(
     resolution: &Bound<'_, PyAny>,
 ) -> PyResult<([u32; 3], [f64; 3], [f64; 3])> {
     let l = parse_lattice(bounds, resolution)?;
-    Ok((l.cells, l.base.to_array(), l.cell.to_array()))
+    Ok((l.cells(), l.base().to_array(), l.cell().to_array()))
 }
 
 /// Cell range `[[i0, j0, k0], [i1, j1, k1]]` of a window (checked against the lattice by
@@ -235,9 +235,9 @@ fn tracking_starts(
         Some(s) => {
             let p = points(s, "seeds")?;
             crate::error::check_finite_points("seeds", &p)?;
-            Ok((p, *lattice.cells.iter().max().unwrap()))
+            Ok((p, *lattice.cells().iter().max().unwrap()))
         }
-        None => field.default_starts(lattice.cell.min_element()).ok_or_else(|| {
+        None => field.default_starts(lattice.cell().min_element()).ok_or_else(|| {
             value_error(
                 "seeds",
                 "method=\"tracking\" with a callable needs seeds: points inside or on each component of the surface",
@@ -348,7 +348,7 @@ pub fn polygonize<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let mut lattice = parse_lattice(bounds, resolution)?;
-    let mut cells = [[0; 3], lattice.cells];
+    let mut cells = [[0; 3], lattice.cells()];
     if let Some(w) = window {
         cells = parse_window(w)?;
         lattice = lattice.window(cells[0], cells[1])?;

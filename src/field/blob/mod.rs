@@ -22,12 +22,12 @@ pub mod voxels;
 use hints::{Hints, Proof, ONE_SIGN_FRAMES};
 pub use single::Precision;
 
+use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
+use crate::error::{check_finite_points, Error, Result};
 #[cfg(target_arch = "x86_64")]
 use crate::field::blob::kernel::LaneProfile;
 use crate::field::blob::kernel::{with_profile, BlobKernel, Profile, Real, Triquet};
 use crate::field::blob::voxels::VoxelGrid;
-use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
-use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::lanes::{F64s, Lanes};
@@ -373,7 +373,7 @@ impl BlobField {
     ) {
         let (px, py) = (xs.len(), ys.len());
         slab.fill(T::of(0.0));
-        let inv_h = DVec3::ONE / lattice.cell;
+        let inv_h = DVec3::ONE / lattice.cell();
         // Index range of the lattice points in [c - r, c + r] along an axis, with a point of
         // margin for rounding (the exact test is t > 0 in the row loop); empty when outside.
         let range = |c: f64, r: f64, o: f64, inv_h: f64, n: usize| -> Option<(usize, usize)> {
@@ -398,7 +398,7 @@ impl BlobField {
             if 1.0 - dz2 * inv <= 0.0 {
                 continue;
             }
-            let Some((y0, y1)) = range(c.y, r, lattice.origin.y, inv_h.y, py) else {
+            let Some((y0, y1)) = range(c.y, r, lattice.origin().y, inv_h.y, py) else {
                 continue;
             };
             for y in y0..=y1 {
@@ -408,7 +408,7 @@ impl BlobField {
                 // Half the chord, from k = 1 − (dy² + dz²)/R² (the exact test is t > 0 in the
                 // row loop; `range` adds a point of margin).
                 let half = r * term.k.max(0.0).sqrt();
-                let Some((x0, x1)) = range(c.x, half, lattice.origin.x, inv_h.x, px) else {
+                let Some((x0, x1)) = range(c.x, half, lattice.origin().x, inv_h.x, px) else {
                     continue;
                 };
                 row_fn(&mut slab[y * px + x0..=y * px + x1], &xs[x0..=x1], &term);
@@ -1159,7 +1159,7 @@ impl BlockCoords {
             ys: coord(1),
             zs: coord(2),
             n,
-            inv_h: (DVec3::ONE / lattice.cell).to_array(),
+            inv_h: (DVec3::ONE / lattice.cell()).to_array(),
         }
     }
 
@@ -1400,9 +1400,9 @@ fn margin(r: f64) -> f64 {
 /// Candidate blocks along axis `a` for a sphere at `c` of radius `rm` (one more on each side
 /// for rounding), for the exact sphere-box test; `dims` blocks per axis.
 fn block_range(lattice: &Lattice, dims: [u32; 3], c: DVec3, rm: f64, a: usize) -> Range<u32> {
-    let span = lattice.cell[a] * (BLOCK_POINTS - 1) as f64;
-    let lo = floor((c[a] - rm - lattice.origin[a]) / span) - 1.0;
-    let hi = floor((c[a] + rm - lattice.origin[a]) / span) + 1.0;
+    let span = lattice.cell()[a] * (BLOCK_POINTS - 1) as f64;
+    let lo = floor((c[a] - rm - lattice.origin()[a]) / span) - 1.0;
+    let hi = floor((c[a] + rm - lattice.origin()[a]) / span) + 1.0;
     let hi = hi.min((dims[a] - 1) as f64);
     if hi < 0.0 || lo > hi {
         return 0..0;
@@ -1501,7 +1501,7 @@ fn block_sides(lattice: &Lattice, dims: [u32; 3]) -> [Vec<(f64, f64)>; 3] {
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
-    let last = lattice.cells;
+    let last = lattice.cells();
     let lo = [b[0] * step, b[1] * step, b[2] * step];
     let hi = std::array::from_fn(|a| (lo[a] + step).min(last[a]));
     (lattice.point(lo), lattice.point(hi))

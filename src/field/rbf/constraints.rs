@@ -5,10 +5,10 @@
 //! checks on the data (count, finiteness, duplicates, coplanarity) and vertex normals of
 //! triangle meshes.
 
-use crate::field::rbf::duplicates;
-use crate::spatial::Grid;
-use crate::field::rbf::thin;
 use crate::error::{check_finite_points, Error, Result};
+use crate::field::rbf::duplicates;
+use crate::field::rbf::thin;
+use crate::spatial::Grid;
 use glam::DVec3;
 use rayon::prelude::*;
 

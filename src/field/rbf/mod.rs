@@ -8,8 +8,8 @@
 pub mod constraints;
 pub mod duplicates;
 pub mod kernel;
-mod parts;
 pub mod partition;
+mod parts;
 mod patch;
 pub mod reduction;
 pub mod thin;
@@ -18,15 +18,15 @@ pub(crate) use parts::bad_state;
 pub use parts::SurfaceParts;
 pub use patch::{PatchCentres, PatchFit};
 
-use constraints::{bounding_box, Constraints};
+use super::Field;
+use crate::error::{Error, Result};
 use crate::field::rbf::kernel::{
     block_gradients, block_values, block_values_gradients, values_by_point,
     values_gradients_by_point, Arithmetic, Biharmonic, Block, Centres, Kernel, RadialFn, ThinPlate,
     Triharmonic, LANES,
 };
 use crate::linalg::saddle::SaddleSolver;
-use super::Field;
-use crate::error::{Error, Result};
+use constraints::{bounding_box, Constraints};
 use faer::Par;
 use glam::DVec3;
 use rayon::prelude::*;

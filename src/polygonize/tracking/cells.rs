@@ -190,7 +190,7 @@ impl CellTracking {
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<Vec<[u32; 3]>> {
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         let mut walkers = start_walkers(starts, lattice);
         let mut seeds = Vec::new();
         while !walkers.is_empty() {
@@ -221,7 +221,7 @@ impl CellTracking {
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<()> {
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         self.wave.clear();
         for &c in seeds {
             if c[0] < cells[0] && c[1] < cells[1] && c[2] < cells[2] && self.cache.queue(c) {
@@ -242,7 +242,7 @@ impl CellTracking {
         stats: &mut Stats,
     ) -> Result<()> {
         let table = CaseTable::get(settings.ambiguity);
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         let mut vertices = std::mem::take(&mut self.mesh.vertices);
         let mut triangles = std::mem::take(&mut self.mesh.triangles);
         while !self.wave.is_empty() {

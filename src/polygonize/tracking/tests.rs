@@ -60,7 +60,7 @@ fn tracking_equals_dense_on_blobs() {
             };
             let (d, _) = dense::polygonize(&b, &l, &s).unwrap();
             let counting = Counting::new(&b);
-            let max_walk = (r / l.cell.x).ceil() as u32 + 2;
+            let max_walk = (r / l.cell().x).ceil() as u32 + 2;
             let ts = TrackingSettings {
                 common: s,
                 ..walks(b.centers(), max_walk)
@@ -183,7 +183,7 @@ fn every_component_of_random_clusters() {
         let f = BlobField::new(&centers, one(r), one(1.0), 0.5, BlobSettings::default());
         let f = f.unwrap();
         let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
-        let max_walk = (r / l.cell.x).ceil() as u32 + 2;
+        let max_walk = (r / l.cell().x).ceil() as u32 + 2;
         let seeded = walks(&centers, max_walk);
         let (found, _) = tess.polygonize(&f, &l, &seeded).unwrap();
         let c = d.compare(found);
@@ -342,7 +342,7 @@ fn seeds_of(m: &Mesh, l: &Lattice) -> Vec<[u32; 3]> {
         .iter()
         .map(|t| {
             let c = t.iter().map(|&v| m.vertices[v as usize]).sum::<DVec3>() / 3.0;
-            ((c - l.origin) / l.cell)
+            ((c - l.origin()) / l.cell())
                 .floor()
                 .to_array()
                 .map(|v| v as u32)
@@ -488,5 +488,5 @@ fn blobs_apart_in_the_last_blocks_one_at_a_time() {
     assert!(all
         .vertices
         .iter()
-        .any(|v| v.max_element() > l.origin.x + 35.0 * l.cell.x));
+        .any(|v| v.max_element() > l.origin().x + 35.0 * l.cell().x));
 }

@@ -42,7 +42,7 @@ fn tiles_of(lattice: &Lattice, tile: u32) -> Vec<(Lattice, [[u32; 3]; 2])> {
             .step_by(tile as usize)
             .map(move |s| (s, (s + tile).min(n)))
     };
-    let [nx, ny, nz] = lattice.cells;
+    let [nx, ny, nz] = lattice.cells();
     let mut out = Vec::new();
     for (z0, z1) in starts(nz) {
         for (y0, y1) in starts(ny) {
