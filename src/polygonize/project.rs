@@ -117,9 +117,13 @@ mod tests {
             project: true,
             ..Default::default()
         };
-        let (projected, stats) = dense::polygonize(&Quartic, &lattice, &settings).unwrap();
-        assert_eq!(plain.0.triangles, projected.triangles);
-        let (before, after) = (radial_error(&plain.0), radial_error(&projected));
+        let crate::polygonize::Polygonized {
+            mesh: projected,
+            stats,
+            ..
+        } = dense::polygonize(&Quartic, &lattice, &settings).unwrap();
+        assert_eq!(plain.mesh.triangles, projected.triangles);
+        let (before, after) = (radial_error(&plain.mesh), radial_error(&projected));
         assert!(before > 1e-3, "{before}");
         assert!(after < before / 20.0, "{before} -> {after}");
         assert_eq!(

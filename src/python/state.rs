@@ -4,13 +4,13 @@
 
 use super::convert::{points, points_to_py, values, values_to_py};
 use super::errors::value_error;
-use super::variational::Fitted;
 use crate::field::rbf::constraints::Constraints;
 use crate::field::rbf::kernel::Kernel;
 use crate::field::rbf::partition::octree::Node;
 use crate::field::rbf::partition::{
     PartitionParts, PartitionSettings, PartitionSurface, PatchParts,
 };
+use crate::field::rbf::Fitted;
 use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use glam::DVec3;
 use numpy::{PyArray1, PyReadonlyArray1};

@@ -97,7 +97,9 @@ struct Packed {
 /// A scalar or one value per primitive.
 #[derive(Clone, Debug)]
 pub enum PerPrimitive<'a> {
+    /// The same value for every primitive.
     All(f64),
+    /// One value per primitive, in the primitives' order.
     Each(&'a [f64]),
 }
 
@@ -837,15 +839,19 @@ impl BlobField {
         unsafe { self.gradients_lanes::<std::arch::x86_64::__m256d>(list, points, out) }
     }
 
+    /// The primitives' centres.
     pub fn centers(&self) -> &[DVec3] {
         &self.centers
     }
+    /// The primitives' radii (each primitive acts up to this distance from its centre).
     pub fn radii(&self) -> &[f64] {
         &self.radii
     }
+    /// The primitives' strengths.
     pub fn strengths(&self) -> &[f64] {
         &self.strengths
     }
+    /// The threshold: the surface is where the summed potential equals it.
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
@@ -857,6 +863,7 @@ impl BlobField {
             grid
         })
     }
+    /// The settings the field was made with.
     pub fn settings(&self) -> BlobSettings {
         self.settings
     }
@@ -993,6 +1000,18 @@ unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
 }
 
 impl Field for BlobField {
+    /// The primitives' centres, each walking at most its largest radius in cells, plus 2.
+    fn starts(&self, cell: f64) -> Option<crate::field::Starts> {
+        let rmax = self.radii().iter().fold(0.0f64, |a, r| a.max(*r));
+        Some(crate::field::Starts {
+            points: self.centers().to_vec(),
+            max_walk: (rmax / cell).ceil() as u32 + 2,
+        })
+    }
+    /// A blob field bounds its values over blocks of the lattice.
+    fn block_field(&self) -> Option<&dyn crate::field::DynBlockField> {
+        Some(self)
+    }
     /// An upper bound on |∇f| over all space: one primitive's gradient is at most
     /// A·max|w′| / R (for the default profile at d = R/√3, where it is 8A / (3√3 R)); near any
     /// point only the primitives of its voxel list act, so the bound is the largest sum over one
@@ -1908,7 +1927,9 @@ mod tests {
                 normals,
                 ..Default::default()
             };
-            let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
+            let crate::polygonize::Polygonized {
+                mesh: m, stats: _, ..
+            } = sparse::polygonize(&b, &l, &settings).unwrap();
             assert!(!m.triangles.is_empty());
             assert_eq!(m.normals.len(), if normals { m.vertices.len() } else { 0 });
             assert!(b.grid.get().is_none() && b.packed.get().is_none());

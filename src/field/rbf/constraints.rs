@@ -66,7 +66,9 @@ impl Default for ConstraintSettings {
 /// their data points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Constraints {
+    /// The constraint points.
     pub points: Vec<DVec3>,
+    /// The value the surface takes at each point.
     pub values: Vec<f64>,
     /// The offset `d_i` used for each data point (after shrinking).
     pub offsets: Vec<f64>,

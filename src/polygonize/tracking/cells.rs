@@ -19,7 +19,7 @@
 use super::settings::BLOCKS_PER_BATCH;
 use super::walker::{start_walkers, step_walkers, FACE_STEP};
 use super::{Components, TrackingSettings};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::field::{BlockField, Field};
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
@@ -83,20 +83,15 @@ impl CellTracking {
             + self.signs.capacity() * std::mem::size_of::<(Option<BlockSigns>, u64)>()
     }
 
-    /// The components that hold a seed ([`Components::Seeded`]; [`Components::All`] needs a
-    /// [`BlockField`]: [`CellTracking::polygonize_bounded`]).
+    /// The components that hold a seed ([`Components::Seeded`]; [`Components::All`] is
+    /// [`CellTracking::polygonize_bounded`]'s).
     pub(super) fn polygonize<F: Field + ?Sized>(
         &mut self,
         field: &F,
         lattice: &Lattice,
         settings: &TrackingSettings,
     ) -> Result<(&Mesh, Stats)> {
-        if settings.components == Components::All {
-            return Err(Error::invalid(
-                "components",
-                "Components::All needs a field with block bounds (a BlockField)",
-            ));
-        }
+        debug_assert_eq!(settings.components, Components::Seeded);
         let mut stats = self.walk_from(field, lattice, settings)?;
         self.finish(field, lattice, &settings.common, &mut stats)?;
         Ok((&self.mesh, stats))
