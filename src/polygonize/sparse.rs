@@ -383,7 +383,7 @@ pub(crate) fn polygonize<F: BlockField + ?Sized>(
     })
 }
 
-/// The integer type of the vertex indices [`polygonize_with_keys`] writes: `u32` (as [`Mesh`] holds
+/// The integer type of the vertex indices the sparse polygonizer writes: `u32` (as [`Mesh`] holds
 /// them) or `i64` (as numpy and trimesh want faces).
 pub trait TriangleIndex: Copy + Send + Sync + 'static {
     /// `v` as this type.
