@@ -53,6 +53,7 @@
 pub mod cancel;
 pub mod error;
 pub mod field;
+pub mod knn;
 pub mod lattice;
 pub mod linalg;
 pub(crate) mod memory;

@@ -15,6 +15,7 @@ pub mod analytic;
 pub mod blob;
 pub mod differences;
 pub mod rbf;
+pub mod scan;
 
 use crate::lattice::Lattice;
 use glam::DVec3;
