@@ -9,6 +9,7 @@ use crate::field::rbf::kernel::Kernel;
 use crate::field::rbf::partition;
 use crate::field::rbf::reduction::{Reduction, ReductionSettings};
 use crate::field::rbf::{self, Fit, FitData, FitMethod, Fitted};
+use crate::field::scan::ScanSettings;
 use glam::DVec3;
 use numpy::PyArray1;
 use pyo3::exceptions::PyUserWarning;
@@ -83,6 +84,46 @@ fn fit_options<'a, 'py>(
 }
 
 impl<'a, 'py> FitOptions<'a, 'py> {
+    /// The scan fit of `points` with `normals` ([`Fit::run_scan`]) with the GIL released, the
+    /// cleaned points fitted with `tolerance` only as much as it needs; warns when every normal
+    /// was turned outward, or the rounds did not suffice.
+    fn run_scan(
+        self,
+        py: Python<'py>,
+        points: &[DVec3],
+        normals: &[DVec3],
+        tolerance: Option<f64>,
+    ) -> PyResult<PyVariationalSurface> {
+        let fit = self.fit;
+        let reduction = tolerance.map(|tolerance| ReductionSettings {
+            tolerance,
+            ..Default::default()
+        });
+        if let Some(r) = &reduction {
+            r.check()?;
+        }
+        let scan = ScanSettings::default();
+        let (report, end) = reporter(py, self.progress, "fit (scan)")?;
+        let fitted = super::interrupt::run(py, report.as_ref(), false, || {
+            fit.run_scan(points, normals, &scan, reduction.as_ref())
+        });
+        end.call0()?;
+        let (inner, r) = fitted?;
+        warn_merged(py, inner.merged())?;
+        if inner.scan().is_some_and(|s| s.report.turned_outward) {
+            let message = c"normals: most normals pointed into the body the points enclose; \
+                            all were turned outward (see VariationalSurface.report)";
+            PyErr::warn(py, &py.get_type::<PyUserWarning>(), message, 1)?;
+        }
+        if let (Some(r), Some(t)) = (&r, tolerance) {
+            warn_outside(py, r, t, points.len())?;
+        }
+        Ok(PyVariationalSurface {
+            inner,
+            reduction: r,
+        })
+    }
+
     /// Fits all of `data` ([`Fit::run`]) with the GIL released, or with `tolerance` only as
     /// much as it needs ([`Fit::run_within`]), warning when the rounds did not suffice.
     fn run(
@@ -116,23 +157,26 @@ impl<'a, 'py> FitOptions<'a, 'py> {
         end.call0()?;
         let (inner, r) = fitted?;
         warn_merged(py, inner.merged())?;
-        if r.outside > 0 {
-            let message = std::ffi::CString::new(format!(
-                "{} of {} data points are farther than tolerance={tolerance:e} from the surface \
-                 after {} fits (largest {:.3e}); see VariationalSurface.reduction",
-                r.outside,
-                data.data_points(),
-                r.rounds,
-                r.largest_residual
-            ))
-            .expect("no NUL in the message");
-            PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)?;
-        }
+        warn_outside(py, &r, tolerance, data.data_points())?;
         Ok(PyVariationalSurface {
             inner,
             reduction: Some(r),
         })
     }
+}
+
+/// A `UserWarning` when points stayed farther than `tolerance` from a reduced fit.
+fn warn_outside(py: Python<'_>, r: &Reduction, tolerance: f64, points: usize) -> PyResult<()> {
+    if r.outside == 0 {
+        return Ok(());
+    }
+    let message = std::ffi::CString::new(format!(
+        "{} of {points} data points are farther than tolerance={tolerance:e} from the surface \
+         after {} fits (largest {:.3e}); see VariationalSurface.reduction",
+        r.outside, r.rounds, r.largest_residual
+    ))
+    .expect("no NUL in the message");
+    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
 }
 
 /// The partition fit's patches: the defaults, with the keys of `options` (a dict) in place
@@ -313,12 +357,13 @@ impl PyVariationalSurface {
     ///     ``merge_distance``, zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
+    #[pyo3(signature = (points, normals, *, exact=false, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
         normals: &Bound<'_, PyAny>,
+        exact: bool,
         d: Option<f64>,
         w: Option<f64>,
         kernel: &str,
@@ -354,6 +399,9 @@ impl PyVariationalSurface {
                     p.len()
                 ),
             ));
+        }
+        if !exact {
+            return fit.run_scan(py, p, n, tolerance);
         }
         let data = FitData::Normals {
             points: p,
@@ -535,9 +583,9 @@ impl PyVariationalSurface {
     /// per patch (ValueError).
     #[getter]
     fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        match &self.inner {
+        match self.inner.interpolant() {
             Fitted::Global(s) => Ok(values_to_py(py, s.weights().to_vec())),
-            Fitted::Partition(_) => Err(global_only("weights")),
+            _ => Err(global_only("weights")),
         }
     }
 
@@ -545,9 +593,9 @@ impl PyVariationalSurface {
     /// partition fit has one polynomial per patch (ValueError).
     #[getter]
     fn polynomial<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        match &self.inner {
+        match self.inner.interpolant() {
             Fitted::Global(s) => Ok(values_to_py(py, s.polynomial().to_vec())),
-            Fitted::Partition(_) => Err(global_only("polynomial")),
+            _ => Err(global_only("polynomial")),
         }
     }
 
@@ -569,6 +617,42 @@ impl PyVariationalSurface {
         Ok(Some(d))
     }
 
+    /// (K,) int64 or None: the indices of the points a scan fit left out as outliers,
+    /// increasing; None for an exact fit.
+    #[getter]
+    fn outliers<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        let scan = self.inner.scan()?;
+        let o: Vec<i64> = scan.report.outliers.iter().map(|&i| i as i64).collect();
+        Some(PyArray1::from_vec(py, o).into_any())
+    }
+
+    /// dict or None: what a scan fit found in its data. ``"points"`` given, ``"outliers"``
+    /// (the number left out), ``"spacing"`` (median distance from a point to its 6th nearest
+    /// neighbour), ``"noise"`` (the estimated noise: the median root-mean-square distance of a
+    /// neighbourhood from its plane, in the points' units), ``"normals_corrected"`` (kept points
+    /// whose normal was turned to agree with its neighbours'), ``"turned_outward"`` (True when
+    /// the normals pointed inward and all were turned), and the distance from the kept points,
+    /// as given, to the surface: ``"distance_mean"``, ``"distance_p99"``,
+    /// ``"distance_max"``. None for an exact fit.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(scan) = self.inner.scan() else {
+            return Ok(None);
+        };
+        let r = &scan.report;
+        let d = PyDict::new(py);
+        d.set_item("points", r.points)?;
+        d.set_item("outliers", r.outliers.len())?;
+        d.set_item("spacing", r.spacing)?;
+        d.set_item("noise", r.noise)?;
+        d.set_item("normals_corrected", r.normals_corrected)?;
+        d.set_item("turned_outward", r.turned_outward)?;
+        d.set_item("distance_mean", r.distance_mean)?;
+        d.set_item("distance_p99", r.distance_p99)?;
+        d.set_item("distance_max", r.distance_max)?;
+        Ok(Some(d))
+    }
+
     /// str: ``"global"`` or ``"partition"``, the fit in use (what ``method="auto"`` chose).
     #[getter]
     fn method(&self) -> &'static str {
@@ -583,7 +667,7 @@ impl PyVariationalSurface {
     /// otherwise).
     #[getter]
     fn patches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let Fitted::Partition(s) = &self.inner else {
+        let Fitted::Partition(s) = self.inner.interpolant() else {
             return Err(value_error(
                 "patches",
                 "only a partition fit (method=\"partition\") has patches",
@@ -724,12 +808,16 @@ impl PyVariationalSurface {
     }
 
     fn __repr__(&self) -> String {
-        let patches = match &self.inner {
-            Fitted::Global(_) => String::new(),
+        let patches = match self.inner.interpolant() {
             Fitted::Partition(s) => format!(", patches={}", s.patches().len()),
+            _ => String::new(),
+        };
+        let scan = match self.inner.scan() {
+            Some(s) => format!(", scan=True, outliers={}", s.report.outliers.len()),
+            None => String::new(),
         };
         format!(
-            "VariationalSurface(method={:?}, kernel={:?}, centers={}{patches}, residual={:.2e})",
+            "VariationalSurface(method={:?}, kernel={:?}, centers={}{patches}, residual={:.2e}{scan})",
             self.inner.method().name(),
             self.inner.kernel().name(),
             self.inner.constraint_count(),

@@ -25,6 +25,7 @@ use super::partition::{PartitionSettings, PartitionSurface};
 use super::reduction::{self, Reduction, ReductionSettings};
 use super::{FitSettings, VariationalSurface};
 use crate::error::{Error, Result};
+use crate::field::scan::{self, ScanSettings, ScanSurface};
 use crate::field::{DynBlockField, Field, Starts};
 use crate::lattice::Lattice;
 use glam::DVec3;
@@ -201,6 +202,33 @@ impl Fit {
         Ok(Fitted::Global(Arc::new(surface?)))
     }
 
+    /// The scan fit of `points` with `normals` ([`crate::field::scan`]): the points cleaned by
+    /// `scan`, fitted by this fit (within `reduction`, when given, [`Fit::run_within`]), and
+    /// guarded by their winding number. Errors name the argument, as [`scan::clean`]'s and the
+    /// fit's do.
+    pub fn run_scan(
+        &self,
+        points: &[DVec3],
+        normals: &[DVec3],
+        scan: &ScanSettings,
+        reduction: Option<&ReductionSettings>,
+    ) -> Result<(Fitted, Option<Reduction>)> {
+        let cleaned = scan::clean(points, normals, scan)?;
+        let data = FitData::Normals {
+            points: &cleaned.points,
+            normals: &cleaned.normals,
+        };
+        let (fitted, r) = match reduction {
+            Some(settings) => {
+                let (f, r) = self.run_within(&data, settings)?;
+                (f, Some(r))
+            }
+            None => (self.run(&data)?, None),
+        };
+        let surface = ScanSurface::new(fitted, &cleaned, scan, points)?;
+        Ok((Fitted::Scan(Arc::new(surface)), r))
+    }
+
     /// Greedy fits to growing subsets of the points of `data` until every point is within
     /// `reduction.tolerance` ([`reduction::fit_within`]); each fit global or partition as
     /// [`Fit::method`] and the subset's constraints decide.
@@ -260,6 +288,9 @@ pub enum Fitted {
     Global(Arc<VariationalSurface>),
     /// Overlapping patches, blended.
     Partition(Arc<PartitionSurface>),
+    /// A global or partition fit of cleaned scan points, guarded by their winding number
+    /// ([`crate::field::scan`]); everything but its field is the inner fit's.
+    Scan(Arc<ScanSurface<Fitted>>),
 }
 
 impl Fitted {
@@ -268,6 +299,21 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.as_ref(),
             Fitted::Partition(s) => s.as_ref(),
+            Fitted::Scan(s) => &s.surface,
+        }
+    }
+    /// The scan fit's cleaning, guard and report, for a scan fit.
+    pub fn scan(&self) -> Option<&ScanSurface<Fitted>> {
+        match self {
+            Fitted::Scan(s) => Some(s),
+            _ => None,
+        }
+    }
+    /// The interpolating fit: the fit itself, or a scan fit's fit of its cleaned points.
+    pub fn interpolant(&self) -> &Fitted {
+        match self {
+            Fitted::Scan(s) => s.surface.fit().interpolant(),
+            f => f,
         }
     }
     /// [`FitMethod::Global`] or [`FitMethod::Partition`].
@@ -275,6 +321,7 @@ impl Fitted {
         match self {
             Fitted::Global(_) => FitMethod::Global,
             Fitted::Partition(_) => FitMethod::Partition,
+            Fitted::Scan(s) => s.surface.fit().method(),
         }
     }
     /// The constraints (for a partition fit, its points gathered into the constraints' order).
@@ -282,6 +329,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => Cow::Borrowed(s.constraints()),
             Fitted::Partition(s) => s.constraints(),
+            Fitted::Scan(s) => s.surface.fit().constraints(),
         }
     }
     /// The RBF centres: the constraint points, in the constraints' order.
@@ -289,6 +337,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => Cow::Borrowed(&s.constraints().points),
             Fitted::Partition(s) => s.constraint_points(),
+            Fitted::Scan(s) => s.surface.fit().centers(),
         }
     }
     /// The number of constraints.
@@ -296,6 +345,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.constraints().points.len(),
             Fitted::Partition(s) => s.constraint_count(),
+            Fitted::Scan(s) => s.surface.fit().constraint_count(),
         }
     }
     /// The kernel.
@@ -303,6 +353,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.kernel(),
             Fitted::Partition(s) => s.kernel(),
+            Fitted::Scan(s) => s.surface.fit().kernel(),
         }
     }
     /// Largest |f(c_i) − v_i| over the constraints after the fit (for a partition fit, over
@@ -311,6 +362,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.residual(),
             Fitted::Partition(s) => s.residual(),
+            Fitted::Scan(s) => s.surface.fit().residual(),
         }
     }
     /// Data points merged into others before the fit.
@@ -318,6 +370,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.constraints().merged,
             Fitted::Partition(s) => s.merged(),
+            Fitted::Scan(s) => s.surface.fit().merged(),
         }
     }
     /// The bounding box of the data.
@@ -325,6 +378,7 @@ impl Fitted {
         match self {
             Fitted::Global(s) => s.data_bounding_box(),
             Fitted::Partition(s) => s.data_bounding_box(),
+            Fitted::Scan(s) => s.surface.fit().data_bounding_box(),
         }
     }
     /// The surface as seen from the box `lo..hi`: for a partition fit, only the patches that
@@ -334,6 +388,11 @@ impl Fitted {
         match self {
             Fitted::Global(_) => self.clone(),
             Fitted::Partition(s) => Fitted::Partition(Arc::new(s.cut(lo, hi))),
+            Fitted::Scan(s) => Fitted::Scan(Arc::new(ScanSurface::from_parts(
+                s.surface.fit().cut(lo, hi),
+                s.surface.guard().clone(),
+                s.report.clone(),
+            ))),
         }
     }
 }

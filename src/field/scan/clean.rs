@@ -15,6 +15,8 @@
 //! 3. **Normals.** Each point takes its neighbourhood's normal, with the sign of its own normal.
 //!    Then, for [`ScanSettings::voting_rounds`] rounds, a point whose neighbours mostly face the
 //!    other way (more than 1.5 times as many) turns around.
+//!    If the normals, made consistent, point into the body the points enclose (their flux
+//!    about the points' mean is negative), all are turned.
 //! 4. **Projection.** Each point moves onto the quadric height field fitted over its
 //!    neighbourhood's plane, with Gaussian weights of width
 //!    `h = projection_width · max(spacing, 2 · noise)`, to itself and the neighbours that face
@@ -54,6 +56,9 @@ pub struct Cleaned {
     pub noise: f64,
     /// Kept points whose normal now points against the one they were given.
     pub normals_corrected: usize,
+    /// Whether the normals, made consistent, pointed into the body the points enclose (a
+    /// negative flux Σ aᵢ (pᵢ − c)·nᵢ about the points' mean c) and all were turned.
+    pub turned_outward: bool,
 }
 
 /// What principal component analysis tells about one point's neighbourhood.
@@ -297,6 +302,23 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         }
     }
     crate::cancel::check()?;
+    // Outward: the flux of the normals through the points' surface about their mean is the
+    // enclosed volume (times 3) when they point out, negative when they point in.
+    let kept_mean = (0..n).filter(|&i| valid[i]).map(|i| points[i]).sum::<DVec3>()
+        / (0..n).filter(|&i| valid[i]).count().max(1) as f64;
+    let flux: f64 = (0..n)
+        .filter(|&i| valid[i])
+        .map(|i| {
+            let r = row(i).1[AREA_NEIGHBOUR];
+            r * r * (points[i] - kept_mean).dot(oriented[i])
+        })
+        .sum();
+    let turned_outward = flux < 0.0;
+    if turned_outward {
+        for o in oriented.iter_mut() {
+            *o = -*o;
+        }
+    }
 
     // 4. Projection onto weighted planes of the neighbours facing the same way.
     let h = settings.projection_width * spacing.max(2.0 * noise);
@@ -338,6 +360,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         spacing,
         noise,
         normals_corrected,
+        turned_outward,
     };
     for (p, m, a) in projected {
         out.points.push(p);
@@ -395,6 +418,21 @@ mod tests {
         let after: f64 = c.points.iter().map(|q| (q.length() - 1.0).abs()).sum::<f64>();
         assert!(after < 0.6 * before, "{after} against {before}");
         assert!(c.noise > 0.0 && c.noise < 0.004, "noise {}", c.noise);
+    }
+
+    #[test]
+    fn normals_that_all_point_inward_are_turned_outward() {
+        let p = fibonacci_sphere(5_000);
+        let inward: Vec<DVec3> = p.iter().map(|q| -*q).collect();
+        let c = clean(&p, &inward, &ScanSettings::default()).unwrap();
+        assert!(c.turned_outward);
+        assert_eq!(c.normals_corrected, p.len());
+        for (q, m) in c.points.iter().zip(&c.normals) {
+            assert!(q.dot(*m) > 0.9);
+        }
+        let c = clean(&p, &p, &ScanSettings::default()).unwrap();
+        assert!(!c.turned_outward);
+        assert_eq!(c.normals_corrected, 0);
     }
 
     #[test]

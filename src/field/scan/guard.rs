@@ -13,61 +13,67 @@
 //! to the data beyond `far`, as the octree's rejection test needs.
 
 use super::winding::WindingNumber;
-use crate::field::Field;
+use crate::field::{Field, Starts};
 use crate::knn::PointTree;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Points per rayon task.
 const CHUNK: usize = 256;
 
-/// The fit `F` guarded by the winding number of its data (see the module's documentation).
-pub struct Guarded<F> {
-    fit: F,
+/// The data's side of the guard: its winding number, its points for distances, and the bands.
+pub struct Guard {
     winding: WindingNumber,
     tree: PointTree,
     points: Vec<DVec3>,
+    normals: Vec<DVec3>,
+    areas: Vec<f64>,
     near: f64,
     far: f64,
 }
 
-/// Where a point lies: its weight `s`, and `∇s` (zero where `s` is 0 or 1).
-#[derive(Clone, Copy, Debug, Default)]
-struct Blend {
-    s: f64,
-    ds: DVec3,
-}
-
-impl<F: Field> Guarded<F> {
-    /// Guards `fit` by the winding number of `points` (its data), over `tree` (built on them):
-    /// the fit alone within `near` of the data, the winding number alone beyond `far`.
+impl Guard {
+    /// The guard of `points` (over `tree`, built on them) with their unit `normals`, `areas`
+    /// and `winding` number: the fit alone within `near` of the data, the winding number alone
+    /// beyond `far`.
     pub fn new(
-        fit: F,
         winding: WindingNumber,
         tree: PointTree,
-        points: Vec<DVec3>,
+        (points, normals, areas): (Vec<DVec3>, Vec<DVec3>, Vec<f64>),
         near: f64,
         far: f64,
     ) -> Self {
         debug_assert!(0.0 <= near && near < far);
-        Guarded {
-            fit,
+        Guard {
             winding,
             tree,
             points,
+            normals,
+            areas,
             near,
             far,
         }
     }
 
-    /// The fit near the data.
-    pub fn fit(&self) -> &F {
-        &self.fit
-    }
-
     /// The winding number of the data.
     pub fn winding(&self) -> &WindingNumber {
         &self.winding
+    }
+
+    /// The data points.
+    pub fn points(&self) -> &[DVec3] {
+        &self.points
+    }
+
+    /// The data points' unit normals.
+    pub fn normals(&self) -> &[DVec3] {
+        &self.normals
+    }
+
+    /// The area each data point stands for.
+    pub fn areas(&self) -> &[f64] {
+        &self.areas
     }
 
     /// The distances within which the fit alone, and beyond which the winding number alone,
@@ -121,6 +127,37 @@ impl<F: Field> Guarded<F> {
             });
         b
     }
+}
+
+/// Where a point lies: its weight `s`, and `∇s` (zero where `s` is 0 or 1).
+#[derive(Clone, Copy, Debug, Default)]
+struct Blend {
+    s: f64,
+    ds: DVec3,
+}
+
+/// The fit `F` guarded by the winding number of its data (see the module's documentation).
+#[derive(Clone)]
+pub struct Guarded<F> {
+    fit: F,
+    guard: Arc<Guard>,
+}
+
+impl<F: Field> Guarded<F> {
+    /// Guards `fit` by `guard`, made from the fit's data.
+    pub fn new(fit: F, guard: Arc<Guard>) -> Self {
+        Guarded { fit, guard }
+    }
+
+    /// The fit near the data.
+    pub fn fit(&self) -> &F {
+        &self.fit
+    }
+
+    /// The data's side of the guard.
+    pub fn guard(&self) -> &Arc<Guard> {
+        &self.guard
+    }
 
     /// The points where the fit is needed (s > 0), and their positions in the batch.
     fn inner_points(points: &[DVec3], blends: &[Blend]) -> (Vec<u32>, Vec<DVec3>) {
@@ -136,16 +173,16 @@ impl<F: Field> Guarded<F> {
 
 impl<F: Field> Field for Guarded<F> {
     fn value(&self, p: DVec3) -> f64 {
-        let b = self.blend(p);
+        let b = self.guard.blend(p);
         let f = if b.s > 0.0 { self.fit.value(p) } else { 0.0 };
         if b.s >= 1.0 {
             return f;
         }
-        b.s * f + (1.0 - b.s) * self.outer(p).0
+        b.s * f + (1.0 - b.s) * self.guard.outer(p).0
     }
 
     fn gradient(&self, p: DVec3) -> DVec3 {
-        let b = self.blend(p);
+        let b = self.guard.blend(p);
         let (f, df) = if b.s > 0.0 {
             (self.fit.value(p), self.fit.gradient(p))
         } else {
@@ -154,13 +191,13 @@ impl<F: Field> Field for Guarded<F> {
         if b.s >= 1.0 {
             return df;
         }
-        let (o, d_o) = self.outer(p);
+        let (o, d_o) = self.guard.outer(p);
         b.s * df + (1.0 - b.s) * d_o + (f - o) * b.ds
     }
 
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
         assert_eq!(points.len(), out.len());
-        let blends = self.blends(points);
+        let blends = self.guard.blends(points);
         let (at, inner) = Self::inner_points(points, &blends);
         let mut f = vec![0.0; inner.len()];
         self.fit.values(&inner, &mut f);
@@ -176,7 +213,7 @@ impl<F: Field> Field for Guarded<F> {
                     *o = if b.s >= 1.0 {
                         *f
                     } else {
-                        b.s * f + (1.0 - b.s) * self.outer(*p).0
+                        b.s * f + (1.0 - b.s) * self.guard.outer(*p).0
                     };
                 }
             });
@@ -190,7 +227,7 @@ impl<F: Field> Field for Guarded<F> {
     fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
         assert_eq!(points.len(), values.len());
         assert_eq!(points.len(), gradients.len());
-        let blends = self.blends(points);
+        let blends = self.guard.blends(points);
         let (at, inner) = Self::inner_points(points, &blends);
         let mut f = vec![0.0; inner.len()];
         let mut df = vec![DVec3::ZERO; inner.len()];
@@ -211,12 +248,20 @@ impl<F: Field> Field for Guarded<F> {
                     if b.s >= 1.0 {
                         (*v, *g) = (f, df);
                     } else {
-                        let (o, d_o) = self.outer(*p);
+                        let (o, d_o) = self.guard.outer(*p);
                         *v = b.s * f + (1.0 - b.s) * o;
                         *g = b.s * df + (1.0 - b.s) * d_o + (f - o) * b.ds;
                     }
                 }
             });
+    }
+
+    fn fd_step(&self) -> f64 {
+        self.fit.fd_step()
+    }
+
+    fn starts(&self, cell: f64) -> Option<Starts> {
+        self.fit.starts(cell)
     }
 
     fn values_per_value_gradient(&self) -> u64 {

@@ -11,19 +11,19 @@
 //!    normals made consistent with their neighbours, and every point projected onto the plane
 //!    of its neighbourhood — the points the fit interpolates lie on the data's mean surface.
 //! 2. The variational fit of the cleaned points (global or partition of unity).
-//! 3. [`guard`]: beyond a few spacings from the data the field is the data's
+//! 3. [`guard`] ([`ScanSurface`]): beyond a few spacings from the data the field is the data's
 //!    [`winding::WindingNumber`], which closes unseen regions and has no surface elsewhere.
 
 pub mod clean;
 pub mod guard;
+pub mod surface;
 pub mod winding;
 
 pub use clean::{clean, Cleaned};
-pub use guard::Guarded;
+pub use guard::{Guard, Guarded};
+pub use surface::{ScanReport, ScanSurface};
 pub use winding::WindingNumber;
 
-use crate::error::Result;
-use crate::knn::PointTree;
 
 /// Settings of the scan fit's cleaning and guard.
 #[derive(Clone, Debug, PartialEq)]
@@ -54,32 +54,6 @@ impl Default for ScanSettings {
             far: 12.0,
         }
     }
-}
-
-/// Guards `fit`, a fit of `cleaned`'s points, by their winding number ([`Guarded`]), with the
-/// bands of `settings` in multiples of the data's spacing.
-pub fn guard<F: crate::field::Field>(
-    fit: F,
-    cleaned: &Cleaned,
-    settings: &ScanSettings,
-) -> Result<Guarded<F>> {
-    let tree = PointTree::new(&cleaned.points)?;
-    let eps = 0.5 * cleaned.spacing;
-    let winding = WindingNumber::new(
-        &tree,
-        &cleaned.points,
-        &cleaned.normals,
-        &cleaned.areas,
-        eps,
-    )?;
-    Ok(Guarded::new(
-        fit,
-        winding,
-        tree,
-        cleaned.points.clone(),
-        settings.near * cleaned.spacing,
-        settings.far * cleaned.spacing,
-    ))
 }
 
 #[cfg(test)]
@@ -132,10 +106,14 @@ mod tests {
             &PartitionSettings::default(),
         )
         .unwrap();
-        let field = guard(fit, &cleaned, &settings).unwrap();
+        let scan = ScanSurface::new(fit, &cleaned, &settings, &p).unwrap();
+        assert_eq!(scan.report.outliers, cleaned.outliers);
+        assert!(scan.report.distance_p99 < 0.01, "{:?}", scan.report);
+        let field = &scan.surface;
         let lattice = Lattice::new(DVec3::splat(-1.5), DVec3::splat(1.5), [48, 48, 48]).unwrap();
-        let (mesh, _) =
-            octree::polygonize(&field, &lattice, &octree::OctreeSettings::default()).unwrap();
+        let mesh = octree::polygonize(field, &lattice, &octree::OctreeSettings::default())
+            .unwrap()
+            .mesh;
         assert!(mesh.is_closed_oriented());
         assert_eq!(mesh.euler_characteristic(), 2, "one sphere");
         // Where the scan saw the sphere the surface is on it; the unseen cap is closed near it.
