@@ -7,7 +7,9 @@
 //!
 //! 1. **Spacing and isolation.** The spacing is the median distance to the 6th neighbour. A
 //!    point whose 10th neighbour is farther than [`ScanSettings::isolation`] times the median
-//!    of that distance stands alone: an outlier.
+//!    of that distance stands alone: an outlier. So is a point whose 3rd neighbour is farther
+//!    than [`LOCAL_RATIO`] times the median of its neighbours' own such distances: it lies off
+//!    the surface they sample.
 //! 2. **Local planes and noise.** Principal component analysis of each point's neighbours (the
 //!    point itself left out) gives a normal, the plane through the neighbourhood's mean, and the root-mean-square distance of
 //!    the neighbourhood from that plane; the data's noise is the median of the latter. A point
@@ -33,6 +35,10 @@ use rayon::prelude::*;
 const SPACING_NEIGHBOUR: usize = 6;
 /// The neighbour whose distance measures isolation.
 const ISOLATION_NEIGHBOUR: usize = 10;
+/// The neighbour whose distance, against its neighbours' own, tells a point off the surface.
+const LOCAL_NEIGHBOUR: usize = 3;
+/// How many times farther than its neighbours' own that distance may be.
+pub const LOCAL_RATIO: f64 = 3.0;
 /// The neighbour whose distance gives a point's area, π r² / AREA_NEIGHBOUR.
 const AREA_NEIGHBOUR: usize = 8;
 
@@ -250,9 +256,20 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     };
     let noise = bulk(|l| l.rms);
     let typical_offset = bulk(|l| l.offset);
+    // A point much farther from its own neighbours than they are from theirs (a local outlier
+    // factor over the distance to the 3rd neighbour) lies off the surface they sample.
+    let near_of = |i: usize| row(i).1[LOCAL_NEIGHBOUR];
+    let crowded: Vec<bool> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut others: Vec<f64> = row(i).0[1..].iter().map(|&j| near_of(j as usize)).collect();
+            near_of(i) <= LOCAL_RATIO * median(&mut others)
+        })
+        .collect();
     let valid: Vec<bool> = (0..n)
         .map(|i| {
             !isolated[i]
+                && crowded[i]
                 && local[i].offset <= 3.0 * local[i].rms + 6.0 * typical_offset + 3.0 * noise
         })
         .collect();
