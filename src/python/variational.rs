@@ -617,6 +617,27 @@ impl PyVariationalSurface {
         Ok(Some(d))
     }
 
+    /// The distance from each point to the nearest data point: the points a scan fit kept, or
+    /// the data points of an exact fit (what ``polygonize(..., trim=)`` measures).
+    ///
+    /// Parameters
+    /// ----------
+    /// points : (N, 3) float64
+    ///
+    /// Returns
+    /// -------
+    /// (N,) float64
+    fn distance_to_data<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let p = points_arg(points, "points")?;
+        let (p, inner) = (p.as_slice(), &self.inner);
+        let d = super::interrupt::run(py, None, false, || inner.distances_to_data(p))?;
+        Ok(values_to_py(py, d))
+    }
+
     /// (K,) int64 or None: the indices of the points a scan fit left out as outliers,
     /// increasing; None for an exact fit.
     #[getter]

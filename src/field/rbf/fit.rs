@@ -26,6 +26,8 @@ use super::reduction::{self, Reduction, ReductionSettings};
 use super::{FitSettings, VariationalSurface};
 use crate::error::{Error, Result};
 use crate::field::scan::{self, ScanSettings, ScanSurface};
+use crate::knn::PointTree;
+use rayon::prelude::*;
 use crate::field::{DynBlockField, Field, Starts};
 use crate::lattice::Lattice;
 use glam::DVec3;
@@ -380,6 +382,23 @@ impl Fitted {
             Fitted::Partition(s) => s.data_bounding_box(),
             Fitted::Scan(s) => s.surface.fit().data_bounding_box(),
         }
+    }
+    /// The distance from each of `points` to the nearest data point: a scan fit's kept points,
+    /// or the data points of a fit (its boundary constraints). Errors name `points` (not
+    /// finite).
+    pub fn distances_to_data(&self, points: &[DVec3]) -> Result<Vec<f64>> {
+        crate::error::check_finite_points("points", points)?;
+        if let Fitted::Scan(s) = self {
+            let guard = s.surface.guard();
+            return Ok(points
+                .par_iter()
+                .map(|p| guard.distance_to_data(*p))
+                .collect());
+        }
+        let c = self.constraints();
+        let tree = PointTree::new(&c.points[..c.boundary])?;
+        let (_, d) = tree.k_nearest(points, 1)?;
+        Ok(d)
     }
     /// The surface as seen from the box `lo..hi`: for a partition fit, only the patches that
     /// values and gradients in the box use ([`PartitionSurface::cut`], the same bits there); a
