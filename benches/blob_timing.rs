@@ -5,7 +5,7 @@ use glam::DVec3;
 use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
 use implicitmesh::lattice::Lattice;
 use implicitmesh::polygonize::tracking::{Components, TrackingSettings};
-use implicitmesh::polygonize::{dense, sparse, tracking, Settings};
+use implicitmesh::polygonize::{polygonize, tracking, Method, Polygonized, Settings};
 use std::time::Instant;
 
 fn main() {
@@ -66,7 +66,7 @@ fn main() {
         let (tris, stats) = match method {
             "tracking" => {
                 let (m, s) = tess
-                    .polygonize_bounded(&field, &lattice, &tracking_settings)
+                    .polygonize(&field, &lattice, &tracking_settings)
                     .unwrap();
                 (m.triangles.len(), s)
             }
@@ -77,11 +77,15 @@ fn main() {
                 (t.len(), s)
             }
             "sparse" => {
-                let (m, s) = sparse::polygonize(&field, &lattice, &settings).unwrap();
+                let Polygonized {
+                    mesh: m, stats: s, ..
+                } = polygonize(&field, &lattice, &Method::Sparse(settings)).unwrap();
                 (m.triangles.len(), s)
             }
             _ => {
-                let (m, s) = dense::polygonize(&field, &lattice, &settings).unwrap();
+                let Polygonized {
+                    mesh: m, stats: s, ..
+                } = polygonize(&field, &lattice, &Method::Dense(settings)).unwrap();
                 (m.triangles.len(), s)
             }
         };

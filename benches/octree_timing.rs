@@ -7,7 +7,7 @@ use glam::DVec3;
 use implicitmesh::field::rbf::constraints;
 use implicitmesh::field::rbf::{FitSettings, VariationalSurface};
 use implicitmesh::lattice::Lattice;
-use implicitmesh::polygonize::{dense, octree, Settings};
+use implicitmesh::polygonize::{octree, polygonize, Method, Polygonized, Settings};
 use std::time::Instant;
 
 #[path = "common/ply.rs"]
@@ -35,11 +35,13 @@ fn main() {
     let (mut ratios, mut best) = (Vec::new(), None::<(f64, _)>);
     for _ in 0..rounds {
         let t = Instant::now();
-        let (m, st) = octree::polygonize(&s, &lattice, &oct).unwrap();
+        let Polygonized {
+            mesh: m, stats: st, ..
+        } = polygonize(&s, &lattice, &Method::Octree(oct)).unwrap();
         let to = t.elapsed().as_secs_f64();
         if !alone {
             let t = Instant::now();
-            let (d, _) = dense::polygonize(&s, &lattice, &set).unwrap();
+            let d = polygonize(&s, &lattice, &Method::Dense(set)).unwrap().mesh;
             let td = t.elapsed().as_secs_f64();
             assert_eq!(m.triangles.len(), d.triangles.len());
             ratios.push(td / to);

@@ -7,23 +7,46 @@
 pub enum Error {
     /// An argument has a value the function cannot use (the message says which and why).
     #[error("{name}: {reason}")]
-    InvalidArgument { name: &'static str, reason: String },
+    InvalidArgument {
+        /// The argument, as the caller named it.
+        name: &'static str,
+        /// What is wrong with its value.
+        reason: String,
+    },
     /// A coordinate or value that must be finite is NaN or infinite.
     #[error("{name}: entry {index} is not finite (NaN or infinity)")]
-    NotFinite { name: &'static str, index: usize },
+    NotFinite {
+        /// The argument.
+        name: &'static str,
+        /// The first entry that is not finite.
+        index: usize,
+    },
     /// A request whose memory estimate exceeds the allowed limit.
     #[error("{name}: this needs about {needed_mib} MiB, over the limit of {limit_mib} MiB (memory_limit); lower it or raise `memory_limit`")]
     TooMuchMemory {
+        /// The argument that asks for the memory.
         name: &'static str,
+        /// The estimate, in MiB.
         needed_mib: u64,
+        /// The limit, in MiB.
         limit_mib: u64,
     },
     /// The interpolation system could not be solved to the required accuracy.
     #[error("the interpolation system is singular or too ill-conditioned (residual {residual:.3e}); points much closer together than the rest (merge them with a larger `merge_distance`) or degenerate data cause this")]
-    SingularSystem { residual: f64 },
+    SingularSystem {
+        /// The largest residual of the solution found.
+        residual: f64,
+    },
     /// A field returned NaN or infinity at a point the polygonizer needed.
     #[error("field: returned a non-finite value at point ({x}, {y}, {z})")]
-    FieldNotFinite { x: f64, y: f64, z: f64 },
+    FieldNotFinite {
+        /// x of the point.
+        x: f64,
+        /// y of the point.
+        y: f64,
+        /// z of the point.
+        z: f64,
+    },
     /// The call was told to stop (see [`crate::cancel`]).
     #[error("interrupted")]
     Interrupted,

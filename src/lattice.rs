@@ -17,17 +17,21 @@ pub const MAX_CELLS_PER_AXIS: u32 = (1 << 20) - 1;
 
 /// Axis-aligned box with a regular grid of cells.
 #[derive(Clone, Copy, Debug, PartialEq)]
+///
+/// Its fields are private: every lattice comes from a checked constructor ([`Lattice::new`],
+/// [`Lattice::cubic`], [`Lattice::from_cells`], [`Lattice::window`]), so a lattice always has
+/// finite corners, positive finite cells and 1 to [`MAX_CELLS_PER_AXIS`] cells per axis.
 pub struct Lattice {
     /// Corner of the box with the smallest coordinates (lattice point `[0, 0, 0]`).
-    pub origin: DVec3,
+    origin: DVec3,
     /// Size of one cell along each axis.
-    pub cell: DVec3,
+    cell: DVec3,
     /// Number of cells along each axis.
-    pub cells: [u32; 3],
+    cells: [u32; 3],
     /// Origin of the whole lattice this one is a window of (`origin` itself when it is whole).
-    pub base: DVec3,
+    base: DVec3,
     /// Indices in the whole lattice of this lattice's point `[0, 0, 0]` (zero when whole).
-    pub offset: [u32; 3],
+    offset: [u32; 3],
 }
 
 /// A point as Python writes a list of floats: `[1.0, -0.5, 2.0]`.
@@ -69,6 +73,64 @@ impl Lattice {
             base: min,
             offset: [0; 3],
         })
+    }
+
+    /// The whole lattice of `cells` cells of size `cell` from `origin`: lattice point `[i, j, k]`
+    /// is at `origin + [i, j, k] * cell` (one product and one sum per coordinate).
+    ///
+    /// Errors (naming `cells`, `origin` or `cell`) unless every cell count is in
+    /// 1..=[`MAX_CELLS_PER_AXIS`], `origin` is finite and `cell` positive and finite on every
+    /// axis.
+    pub fn from_cells(origin: DVec3, cell: DVec3, cells: [u32; 3]) -> Result<Self> {
+        if cells.iter().any(|&c| c == 0 || c > MAX_CELLS_PER_AXIS) {
+            return Err(Error::invalid(
+                "cells",
+                format!("cells per axis must be in 1..={MAX_CELLS_PER_AXIS}, got {cells:?}"),
+            ));
+        }
+        if !origin.is_finite() {
+            return Err(Error::invalid("origin", "must be finite"));
+        }
+        if !(cell.is_finite() && cell.cmpgt(DVec3::ZERO).all()) {
+            return Err(Error::invalid("cell", "must be positive and finite"));
+        }
+        Ok(Lattice {
+            origin,
+            cell,
+            cells,
+            base: origin,
+            offset: [0; 3],
+        })
+    }
+
+    /// Corner of the box with the smallest coordinates (lattice point `[0, 0, 0]`).
+    #[inline]
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// Size of one cell along each axis.
+    #[inline]
+    pub fn cell(&self) -> DVec3 {
+        self.cell
+    }
+
+    /// Number of cells along each axis.
+    #[inline]
+    pub fn cells(&self) -> [u32; 3] {
+        self.cells
+    }
+
+    /// Origin of the whole lattice this one is a window of ([`Lattice::origin`] when whole).
+    #[inline]
+    pub fn base(&self) -> DVec3 {
+        self.base
+    }
+
+    /// Indices in the whole lattice of this lattice's point `[0, 0, 0]` (zero when whole).
+    #[inline]
+    pub fn offset(&self) -> [u32; 3] {
+        self.offset
     }
 
     /// The window of this lattice over the cells `lo[a] ≤ i < hi[a]` on each axis: a lattice of

@@ -3,7 +3,8 @@
 //! Turns implicit surfaces into triangle meshes. Every surface is the zero set of a
 //! [`field::Field`] — negative inside, positive outside — and every polygonizer takes a field and
 //! a [`lattice::Lattice`] and returns a [`mesh::Mesh`] with [`polygonize::Stats`] (exact evaluation
-//! counts, cells, seconds per phase).
+//! counts, cells, seconds per phase): one entry, [`polygonize::polygonize`], with the algorithm
+//! a [`polygonize::Method`] names.
 //!
 //! - [`field::rbf::VariationalSurface`]: radial-basis-function surfaces fitted to points with
 //!   normals or to a mesh (Turk & O'Brien; Cuno et al.), with batched, vectorised, parallel
@@ -32,11 +33,13 @@
 //! use glam::DVec3;
 //! use implicitmesh::field::analytic::Sphere;
 //! use implicitmesh::lattice::Lattice;
-//! use implicitmesh::polygonize::{dense, Settings};
+//! use implicitmesh::polygonize::{polygonize, Method, Settings};
 //!
 //! let sphere = Sphere { center: DVec3::ZERO, radius: 0.8 };
 //! let lattice = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [32, 32, 32]).unwrap();
-//! let (mesh, stats) = dense::polygonize(&sphere, &lattice, &Settings::default()).unwrap();
+//! let method = Method::Dense(Settings::default());
+//! let polygonized = polygonize(&sphere, &lattice, &method).unwrap();
+//! let (mesh, stats) = (polygonized.mesh, polygonized.stats);
 //! assert!(mesh.is_closed_oriented());
 //! assert_eq!(mesh.euler_characteristic(), 2);
 //! assert_eq!(stats.evaluations, 33 * 33 * 33);
@@ -45,10 +48,12 @@
 // The numeric kernels index several arrays with one loop variable (a lane, a column, a row),
 // which reads as the mathematics does; iterator chains over zipped slices would not.
 #![allow(clippy::needless_range_loop)]
+#![warn(missing_docs)]
 
 pub mod cancel;
 pub mod error;
 pub mod field;
+pub mod knn;
 pub mod lattice;
 pub mod linalg;
 pub(crate) mod memory;

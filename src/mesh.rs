@@ -7,7 +7,9 @@ use std::collections::HashMap;
 /// A triangle mesh: triangles index `vertices`, counter-clockwise seen from outside.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
+    /// Vertex positions.
     pub vertices: Vec<DVec3>,
+    /// Vertex indices of each triangle.
     pub triangles: Vec<[u32; 3]>,
     /// Unit vertex normals (empty when not computed).
     pub normals: Vec<DVec3>,

@@ -9,7 +9,7 @@ use implicitmesh::field::rbf::{constraints, FitSettings, VariationalSurface};
 use implicitmesh::field::Field;
 use implicitmesh::lattice::Lattice;
 use implicitmesh::mesh::Mesh;
-use implicitmesh::polygonize::{dense, octree, sparse, Settings};
+use implicitmesh::polygonize::{octree, polygonize, Method, Settings};
 use implicitmesh::subdivision;
 use proptest::prelude::*;
 
@@ -50,11 +50,11 @@ proptest! {
     #[test]
     fn lattices_refuse_or_hold(min in point(), max in point(), a in 0u32..40, b in 0u32..40, c in 0u32..40, n in 0u32..40) {
         if let Ok(l) = Lattice::new(min, max, [a, b, c]) {
-            prop_assert_eq!(l.cells, [a, b, c]);
-            prop_assert!(l.cell.is_finite() && l.cell.min_element() > 0.0);
+            prop_assert_eq!(l.cells(), [a, b, c]);
+            prop_assert!(l.cell().is_finite() && l.cell().min_element() > 0.0);
         }
         if let Ok(l) = Lattice::cubic(min, max, n) {
-            prop_assert!(l.cells.iter().all(|&k| k >= 1));
+            prop_assert!(l.cells().iter().all(|&k| k >= 1));
         }
     }
 
@@ -77,8 +77,8 @@ proptest! {
             return Ok(());
         };
         let s = Settings::default();
-        let (d, _) = dense::polygonize(&blobs, &l, &s).unwrap();
-        let (m, _) = sparse::polygonize(&blobs, &l, &s).unwrap();
+        let d = polygonize(&blobs, &l, &Method::Dense(s)).unwrap().mesh;
+        let m = polygonize(&blobs, &l, &Method::Sparse(s)).unwrap().mesh;
         let cmp = d.compare(&m);
         prop_assert_eq!((cmp.missing, cmp.extra), (0, 0));
         prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.vertices.len()));
@@ -89,8 +89,8 @@ proptest! {
         let sphere = Sphere { center: DVec3::new(0.01, -0.02, 0.03), radius: r };
         let s = Settings::default();
         let o = octree::OctreeSettings { common: s, safety: Some(safety), start_level: start, corner_test };
-        if let Ok((m, _)) = octree::polygonize(&sphere, &l, &o) {
-            let (d, _) = dense::polygonize(&sphere, &l, &s).unwrap();
+        if let Ok(m) = polygonize(&sphere, &l, &Method::Octree(o)).map(|p| p.mesh) {
+            let d = polygonize(&sphere, &l, &Method::Dense(s)).unwrap().mesh;
             let cmp = d.compare(&m);
             // Only the dense mesh's triangles, and never a hole: what the octree finds of a
             // component, it finds whole (the repair walks on from it).

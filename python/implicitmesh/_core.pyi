@@ -216,9 +216,13 @@ def polygonize(
     window: _ArrayLike | None = None,
     boundary: bool = False,
     **options: Unpack[_PolygonizeOptions],
-) -> _MeshTuple | tuple[
-    npt.NDArray[np.float64], npt.NDArray[np.uint32], npt.NDArray[np.float64], dict[str, Any],
-    npt.NDArray[np.uint32], npt.NDArray[np.uint64],
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.int64] | npt.NDArray[np.uint32],
+    npt.NDArray[np.float64],
+    dict[str, Any],
+    npt.NDArray[np.uint32] | None,
+    npt.NDArray[np.uint64] | None,
 ]: ...
 
 def lattice(bounds: _ArrayLike, resolution: int | Sequence[int]) -> tuple[list[int], list[float], list[float]]: ...

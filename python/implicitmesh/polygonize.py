@@ -200,7 +200,7 @@ def _mesh(polygonizer, what: str, progress, *args, **kwargs) -> Mesh:
     :class:`Mesh` whose stats also count the triangles and vertices."""
     report, end = reporter(progress, what)
     try:
-        v, f, n, stats = polygonizer(*args, progress=report, **kwargs)
+        v, f, n, stats, *_ = polygonizer(*args, progress=report, **kwargs)
     finally:
         end()
     stats["triangles"] = len(f)

@@ -6,7 +6,9 @@ use glam::DVec3;
 /// Signed distance to a sphere.
 #[derive(Clone, Copy, Debug)]
 pub struct Sphere {
+    /// Centre of the sphere.
     pub center: DVec3,
+    /// Radius of the sphere.
     pub radius: f64,
 }
 
@@ -23,8 +25,11 @@ impl Field for Sphere {
 /// tube's centre line, `minor` the tube radius.
 #[derive(Clone, Copy, Debug)]
 pub struct Torus {
+    /// Centre of the torus (its axis is z).
     pub center: DVec3,
+    /// Distance from the centre to the tube's centre line.
     pub major: f64,
+    /// Radius of the tube.
     pub minor: f64,
 }
 

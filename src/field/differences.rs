@@ -9,8 +9,13 @@ use glam::DVec3;
 /// one [`Field::values`] call on 6 points per point (± `step` along x, y and z), which
 /// [`Field::values_per_gradient`] reports, and every batch of values with gradients one call on
 /// 7 (the point, then the same 6), which [`Field::values_per_value_gradient`] reports.
+///
+/// Values, lattice values and [`Field::starts`] are the wrapped field's; it has no gradient
+/// bound and no block bounds (its gradients are differences, not the field's own).
 pub struct Differences<F> {
+    /// The field whose values are differenced.
     pub field: F,
+    /// The step of the central differences, in field units.
     pub step: f64,
 }
 
@@ -68,6 +73,19 @@ impl<F: Field> Field for Differences<F> {
     }
     fn values_per_gradient(&self) -> u64 {
         6
+    }
+    fn lattice_values(
+        &self,
+        lattice: &crate::lattice::Lattice,
+        z0: u32,
+        z1: u32,
+        points: &mut Vec<DVec3>,
+        out: &mut [f64],
+    ) {
+        self.field.lattice_values(lattice, z0, z1, points, out)
+    }
+    fn starts(&self, cell: f64) -> Option<super::Starts> {
+        self.field.starts(cell)
     }
 }
 

@@ -4,11 +4,18 @@
 //! polygonizers gather the points they need into batches and call it from the thread that called
 //! them (never from inside a rayon worker), so a field may itself split a batch over rayon — and a
 //! field backed by a foreign runtime (the Python binding's callable field) may lock that runtime.
+//!
+//! A field also says where surface tracking may start ([`Field::starts`]) and whether it bounds
+//! its values over blocks of the lattice ([`Field::block_field`], a [`BlockField`]): the
+//! polygonizers take these decisions from the field. The wrappers (`&F`, [`Counting`]) forward
+//! every method of the trait; [`Differences`] replaces the gradients and forwards the rest but
+//! the gradient bound and the block bounds, which are not those of its gradients.
 
 pub mod analytic;
 pub mod blob;
 pub mod differences;
 pub mod rbf;
+pub mod scan;
 
 use crate::lattice::Lattice;
 use glam::DVec3;
@@ -112,6 +119,30 @@ pub trait Field: Sync {
         }
         self.values(points, out);
     }
+
+    /// Points near the surface from which surface tracking walks to it when no seeds are given
+    /// (blob centres, a fit's data points), and how far a walk may go, for lattices of cells of
+    /// smallest side `cell`; `None` (the default) when the field knows none.
+    fn starts(&self, cell: f64) -> Option<Starts> {
+        let _ = cell;
+        None
+    }
+
+    /// The field with its block bounds ([`BlockField`], erased to [`DynBlockField`]) when it has
+    /// them: what lets the polygonizers that need bounds (sparse, tracking of every component)
+    /// take a field known only as a [`Field`]. `None` by default.
+    fn block_field(&self) -> Option<&dyn DynBlockField> {
+        None
+    }
+}
+
+/// Where surface tracking starts when the caller gives no seeds ([`Field::starts`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Starts {
+    /// Points each walk starts from, to the first cell the surface crosses.
+    pub points: Vec<DVec3>,
+    /// Cells a walk goes at most in one direction.
+    pub max_walk: u32,
 }
 
 /// Points per axis of one block of the sparse polygonizer: blocks of 7³ cells, 8³ points, so that
@@ -198,6 +229,120 @@ pub trait BlockField: Field {
     }
 }
 
+/// What a [`BlockField`] prepares for a lattice ([`BlockField::Blocks`]), behind `dyn Any`.
+pub type AnyBlocks = Box<dyn std::any::Any + Send + Sync>;
+
+/// A [`BlockField`] with its prepared blocks erased to [`AnyBlocks`], so that it can be used as
+/// a trait object (`dyn DynBlockField` is itself a [`BlockField`]). Implemented for every
+/// `BlockField` whose blocks are `'static`; [`Field::block_field`] returns it. Each method is the
+/// `BlockField` method of the same name without `dyn_`, on the blocks that
+/// [`DynBlockField::dyn_blocks`] or [`DynBlockField::dyn_blocks_by_layers`] of the same field
+/// made.
+#[allow(missing_docs)]
+pub trait DynBlockField: Field {
+    fn dyn_blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks;
+    fn dyn_blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks;
+    fn dyn_keep_layers(&self, blocks: &mut AnyBlocks, lattice: &Lattice, layers: Range<u32>);
+    fn dyn_block_sign(&self, blocks: &AnyBlocks, lattice: &Lattice, block: &Block) -> BlockSign;
+    fn dyn_block_values(
+        &self,
+        blocks: &AnyBlocks,
+        lattice: &Lattice,
+        block: &Block,
+        out: &mut [f64; 512],
+    ) -> BlockSign;
+    fn dyn_block_gradients(
+        &self,
+        blocks: &AnyBlocks,
+        block: &Block,
+        points: &[DVec3],
+        out: &mut [DVec3],
+    );
+}
+
+/// The blocks `blocks` as `B` made them.
+fn blocks_of<B: BlockField>(blocks: &AnyBlocks) -> &B::Blocks
+where
+    B::Blocks: 'static,
+{
+    blocks
+        .downcast_ref()
+        .expect("the blocks come from the same field's dyn_blocks")
+}
+
+impl<B: BlockField> DynBlockField for B
+where
+    B::Blocks: 'static,
+{
+    fn dyn_blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks {
+        Box::new(self.blocks(lattice, blocks))
+    }
+    fn dyn_blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks {
+        Box::new(self.blocks_by_layers(lattice, blocks))
+    }
+    fn dyn_keep_layers(&self, blocks: &mut AnyBlocks, lattice: &Lattice, layers: Range<u32>) {
+        let blocks = blocks
+            .downcast_mut()
+            .expect("the blocks come from the same field's dyn_blocks");
+        self.keep_layers(blocks, lattice, layers)
+    }
+    fn dyn_block_sign(&self, blocks: &AnyBlocks, lattice: &Lattice, block: &Block) -> BlockSign {
+        self.block_sign(blocks_of::<B>(blocks), lattice, block)
+    }
+    fn dyn_block_values(
+        &self,
+        blocks: &AnyBlocks,
+        lattice: &Lattice,
+        block: &Block,
+        out: &mut [f64; 512],
+    ) -> BlockSign {
+        self.block_values(blocks_of::<B>(blocks), lattice, block, out)
+    }
+    fn dyn_block_gradients(
+        &self,
+        blocks: &AnyBlocks,
+        block: &Block,
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) {
+        self.block_gradients(blocks_of::<B>(blocks), block, points, out)
+    }
+}
+
+impl BlockField for dyn DynBlockField + '_ {
+    type Blocks = AnyBlocks;
+    fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks {
+        self.dyn_blocks(lattice, blocks)
+    }
+    fn blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks {
+        self.dyn_blocks_by_layers(lattice, blocks)
+    }
+    fn keep_layers(&self, blocks: &mut AnyBlocks, lattice: &Lattice, layers: Range<u32>) {
+        self.dyn_keep_layers(blocks, lattice, layers)
+    }
+    fn block_sign(&self, blocks: &AnyBlocks, lattice: &Lattice, block: &Block) -> BlockSign {
+        self.dyn_block_sign(blocks, lattice, block)
+    }
+    fn block_values(
+        &self,
+        blocks: &AnyBlocks,
+        lattice: &Lattice,
+        block: &Block,
+        out: &mut [f64; 512],
+    ) -> BlockSign {
+        self.dyn_block_values(blocks, lattice, block, out)
+    }
+    fn block_gradients(
+        &self,
+        blocks: &AnyBlocks,
+        block: &Block,
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) {
+        self.dyn_block_gradients(blocks, block, points, out)
+    }
+}
+
 impl<F: Field + ?Sized> Field for &F {
     fn value(&self, p: DVec3) -> f64 {
         (**self).value(p)
@@ -236,6 +381,12 @@ impl<F: Field + ?Sized> Field for &F {
     ) {
         (**self).lattice_values(lattice, z0, z1, points, out)
     }
+    fn starts(&self, cell: f64) -> Option<Starts> {
+        (**self).starts(cell)
+    }
+    fn block_field(&self) -> Option<&dyn DynBlockField> {
+        (**self).block_field()
+    }
 }
 
 /// Gradients by central differences using only batched [`Field::values`] calls: one batch of
@@ -262,42 +413,19 @@ pub fn gradients_by_differences<F: Field + ?Sized>(
     }
 }
 
-/// A field shifted by an iso level: `value(p) = inner(p) - level`. The surface becomes
-/// `inner = level`.
-pub struct IsoLevel<F> {
-    pub inner: F,
-    pub level: f64,
-}
-
-impl<F: Field> Field for IsoLevel<F> {
-    fn value(&self, p: DVec3) -> f64 {
-        self.inner.value(p) - self.level
-    }
-    fn gradient(&self, p: DVec3) -> DVec3 {
-        self.inner.gradient(p)
-    }
-    fn fd_step(&self) -> f64 {
-        self.inner.fd_step()
-    }
-    fn gradient_bound(&self) -> Option<f64> {
-        self.inner.gradient_bound()
-    }
-    fn values(&self, points: &[DVec3], out: &mut [f64]) {
-        self.inner.values(points, out);
-        out.iter_mut().for_each(|v| *v -= self.level);
-    }
-    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
-        self.inner.gradients(points, out)
-    }
-}
-
-/// A field that counts the points it is asked to evaluate (values only), for tests and stats.
+/// A field that counts the values it is asked for (values only, including those of
+/// [`Field::values_gradients`], [`Field::lattice_values`] and block values), for tests and stats.
+/// It forwards every method of [`Field`] to the field it wraps; with a [`BlockField`] inside,
+/// [`Field::block_field`] gives the counting field itself.
 pub struct Counting<F> {
+    /// The field counted.
     pub inner: F,
+    /// Values computed so far.
     pub count: std::sync::atomic::AtomicU64,
 }
 
 impl<F> Counting<F> {
+    /// `inner`, counted from zero.
     pub fn new(inner: F) -> Self {
         Counting {
             inner,
@@ -308,12 +436,24 @@ impl<F> Counting<F> {
     pub fn evaluations(&self) -> u64 {
         self.count.load(std::sync::atomic::Ordering::Relaxed)
     }
+    fn add(&self, n: u64) {
+        self.count
+            .fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    }
+    /// The inner field's block bounds; only asked for after [`Field::block_field`] gave some.
+    fn inner_blocks(&self) -> &dyn DynBlockField
+    where
+        F: Field,
+    {
+        self.inner
+            .block_field()
+            .expect("Counting::block_field is Some only when the inner field's is")
+    }
 }
 
 impl<F: Field> Field for Counting<F> {
     fn value(&self, p: DVec3) -> f64 {
-        self.count
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.add(1);
         self.inner.value(p)
     }
     fn gradient(&self, p: DVec3) -> DVec3 {
@@ -326,9 +466,21 @@ impl<F: Field> Field for Counting<F> {
         self.inner.gradient_bound()
     }
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
-        self.count
-            .fetch_add(points.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        self.add(points.len() as u64);
         self.inner.values(points, out)
+    }
+    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
+        self.inner.gradients(points, out)
+    }
+    fn values_gradients(&self, points: &[DVec3], values: &mut [f64], gradients: &mut [DVec3]) {
+        self.add(points.len() as u64);
+        self.inner.values_gradients(points, values, gradients)
+    }
+    fn values_per_value_gradient(&self) -> u64 {
+        self.inner.values_per_value_gradient()
+    }
+    fn values_per_gradient(&self) -> u64 {
+        self.inner.values_per_gradient()
     }
     fn lattice_values(
         &self,
@@ -338,53 +490,56 @@ impl<F: Field> Field for Counting<F> {
         points: &mut Vec<DVec3>,
         out: &mut [f64],
     ) {
-        self.count
-            .fetch_add(out.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        self.add(out.len() as u64);
         self.inner.lattice_values(lattice, z0, z1, points, out)
     }
-    fn gradients(&self, points: &[DVec3], out: &mut [DVec3]) {
-        self.inner.gradients(points, out)
+    fn starts(&self, cell: f64) -> Option<Starts> {
+        self.inner.starts(cell)
+    }
+    fn block_field(&self) -> Option<&dyn DynBlockField> {
+        self.inner.block_field()?;
+        Some(self)
     }
 }
 
-impl<F: BlockField> BlockField for Counting<F> {
-    type Blocks = F::Blocks;
-    fn blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
-        self.inner.blocks(lattice, blocks)
+impl<F: Field> DynBlockField for Counting<F> {
+    fn dyn_blocks(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks {
+        self.inner_blocks().dyn_blocks(lattice, blocks)
     }
-    fn blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> Self::Blocks {
-        self.inner.blocks_by_layers(lattice, blocks)
+    fn dyn_blocks_by_layers(&self, lattice: &Lattice, blocks: [u32; 3]) -> AnyBlocks {
+        self.inner_blocks().dyn_blocks_by_layers(lattice, blocks)
     }
-    fn keep_layers(&self, blocks: &mut Self::Blocks, lattice: &Lattice, layers: Range<u32>) {
-        self.inner.keep_layers(blocks, lattice, layers)
+    fn dyn_keep_layers(&self, blocks: &mut AnyBlocks, lattice: &Lattice, layers: Range<u32>) {
+        self.inner_blocks().dyn_keep_layers(blocks, lattice, layers)
     }
-    fn block_sign(&self, blocks: &Self::Blocks, lattice: &Lattice, block: &Block) -> BlockSign {
-        self.inner.block_sign(blocks, lattice, block)
+    fn dyn_block_sign(&self, blocks: &AnyBlocks, lattice: &Lattice, block: &Block) -> BlockSign {
+        self.inner_blocks().dyn_block_sign(blocks, lattice, block)
     }
     /// Counts the block's points when their values are written.
-    fn block_values(
+    fn dyn_block_values(
         &self,
-        blocks: &Self::Blocks,
+        blocks: &AnyBlocks,
         lattice: &Lattice,
         block: &Block,
         out: &mut [f64; 512],
     ) -> BlockSign {
-        let sign = self.inner.block_values(blocks, lattice, block, out);
+        let sign = self
+            .inner_blocks()
+            .dyn_block_values(blocks, lattice, block, out);
         if sign == BlockSign::Mixed {
-            let points = block.n.iter().map(|&v| v as u64).product::<u64>();
-            self.count
-                .fetch_add(points, std::sync::atomic::Ordering::Relaxed);
+            self.add(block.n.iter().map(|&v| v as u64).product::<u64>());
         }
         sign
     }
-    fn block_gradients(
+    fn dyn_block_gradients(
         &self,
-        blocks: &Self::Blocks,
+        blocks: &AnyBlocks,
         block: &Block,
         points: &[DVec3],
         out: &mut [DVec3],
     ) {
-        self.inner.block_gradients(blocks, block, points, out)
+        self.inner_blocks()
+            .dyn_block_gradients(blocks, block, points, out)
     }
 }
 
@@ -475,6 +630,9 @@ pub(crate) mod testing {
     impl Field for Lying {
         fn value(&self, p: DVec3) -> f64 {
             self.0.value(p)
+        }
+        fn block_field(&self) -> Option<&dyn DynBlockField> {
+            Some(self)
         }
     }
 

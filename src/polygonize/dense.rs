@@ -17,7 +17,9 @@
 //! with one group of planes, not with the lattice.
 
 use super::bits::{for_each_set_bit, sign_word};
-use super::{check_memory, estimate_triangles, finish_mesh, gather, CaseTable, Settings, Stats};
+use super::{
+    check_memory, estimate_triangles, finish_mesh, gather, CaseTable, Polygonized, Settings, Stats,
+};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
@@ -159,7 +161,7 @@ fn plane_edges(
     vertices: &mut Vec<DVec3>,
     mut keys: Option<&mut Vec<u64>>,
 ) {
-    let [nx, ny, _] = lattice.cells;
+    let [nx, ny, _] = lattice.cells();
     let (nxu, px) = (nx as usize, nx as usize + 1);
     let b = Bits::new(px);
     for j in 0..=ny as usize {
@@ -215,7 +217,7 @@ fn layer_vertices(
     vertices: &mut Vec<DVec3>,
     mut keys: Option<&mut Vec<u64>>,
 ) {
-    let [nx, ny, _] = lattice.cells;
+    let [nx, ny, _] = lattice.cells();
     let (nxu, pxu, pyu) = (nx as usize, nx as usize + 1, ny as usize + 1);
     for (a, n) in [
         (&mut layer.x, nxu * pyu),
@@ -267,7 +269,7 @@ fn triangulate_layer(
     layer: &Layer,
     out: &mut Vec<[u32; 3]>,
 ) -> u64 {
-    let [nx, ny, _] = lattice.cells;
+    let [nx, ny, _] = lattice.cells();
     let (nxu, pxu) = (nx as usize, nx as usize + 1);
     let b = Bits::new(pxu);
     let (bx, by, bbase) = bottom;
@@ -442,40 +444,22 @@ fn return_workspace(w: Workspace) {
 /// The groups are balanced: 64 layers in batches of 62 make two groups of 32, not 62 and 2.
 fn layers_per_group(lattice: &Lattice, settings: &Settings) -> u32 {
     let [px, py, _] = lattice.points_per_axis();
-    let nz = lattice.cells[2] as u64;
+    let nz = lattice.cells()[2] as u64;
     let most = (settings.batch as u64 / (px as u64 * py as u64))
         .max(MIN_LAYERS_PER_GROUP as u64)
         .min(nz);
     nz.div_ceil(nz.div_ceil(most)) as u32
 }
 
-/// Polygonizes `field` over every cell of `lattice` with plain marching cubes.
-pub fn polygonize<F: Field + ?Sized>(
+/// Polygonizes `field` over every cell of `lattice` with plain marching cubes, with the
+/// vertices' edge keys when [`Settings::keys`] asks for them ([`super::polygonize`] with
+/// [`super::Method::Dense`]).
+pub(crate) fn polygonize<F: Field + ?Sized>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
-) -> Result<(Mesh, Stats)> {
-    let (mesh, _, stats) = polygonize_with_keys(field, lattice, settings, false)?;
-    Ok((mesh, stats))
-}
-
-/// [`polygonize`], with the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]),
-/// one per vertex.
-pub fn polygonize_keyed<F: Field + ?Sized>(
-    field: &F,
-    lattice: &Lattice,
-    settings: &Settings,
-) -> Result<(Mesh, Vec<u64>, Stats)> {
-    polygonize_with_keys(field, lattice, settings, true)
-}
-
-/// [`polygonize`], and the vertices' edge keys when `keyed` (else none).
-fn polygonize_with_keys<F: Field + ?Sized>(
-    field: &F,
-    lattice: &Lattice,
-    settings: &Settings,
-    keyed: bool,
-) -> Result<(Mesh, Vec<u64>, Stats)> {
+) -> Result<Polygonized> {
+    let keyed = settings.keys;
     let plane = lattice.points_per_axis()[..2]
         .iter()
         .map(|&p| p as u64)
@@ -515,7 +499,11 @@ fn polygonize_with_keys<F: Field + ?Sized>(
         .flatten()
         .all(|&v| (v as usize) < mesh.vertices.len()));
     finish_mesh(field, &mut mesh, lattice, settings, &mut stats)?;
-    Ok((mesh, keys, stats))
+    Ok(Polygonized {
+        mesh,
+        keys: keyed.then_some(keys),
+        stats,
+    })
 }
 
 /// The sweep over the groups of planes (see the module documentation); returns the vertices'
@@ -528,7 +516,7 @@ fn sweep<F: Field + ?Sized>(
     mesh: &mut Mesh,
     stats: &mut Stats,
 ) -> Result<Vec<u64>> {
-    let [nx, _, nz] = lattice.cells;
+    let [nx, _, nz] = lattice.cells();
     let [px, py, _] = lattice.points_per_axis();
     let (nxu, pxu, pyu) = (nx as usize, px as usize, py as usize);
     let plane = pxu * pyu;
@@ -707,7 +695,9 @@ mod tests {
                 batch: 1000, // several planes per batch and a partial last batch
                 ..Default::default()
             };
-            let (m, st) = polygonize(&s, &cube(64, 1.0), &settings).unwrap();
+            let crate::polygonize::Polygonized {
+                mesh: m, stats: st, ..
+            } = polygonize(&s, &cube(64, 1.0), &settings).unwrap();
             assert!(m.is_closed_oriented());
             assert_eq!(m.euler_characteristic(), 2);
             let exact = 4.0 * std::f64::consts::PI * 0.49;
@@ -725,7 +715,9 @@ mod tests {
             major: 0.6,
             minor: 0.25,
         };
-        let (m, _) = polygonize(&t, &cube(48, 1.0), &Settings::default()).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: m, stats: _, ..
+        } = polygonize(&t, &cube(48, 1.0), &Settings::default()).unwrap();
         assert!(m.is_closed_oriented());
         assert_eq!(m.euler_characteristic(), 0);
     }
@@ -742,7 +734,9 @@ mod tests {
             [37, 23, 19],
         )
         .unwrap();
-        let (m, _) = polygonize(&s, &l, &Settings::default()).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: m, stats: _, ..
+        } = polygonize(&s, &l, &Settings::default()).unwrap();
         assert!(m.is_closed_oriented());
         assert_eq!(m.euler_characteristic(), 2);
     }
@@ -753,7 +747,9 @@ mod tests {
             center: DVec3::ZERO,
             radius: 1.2,
         };
-        let (m, _) = polygonize(&s, &cube(16, 1.0), &Settings::default()).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: m, stats: _, ..
+        } = polygonize(&s, &cube(16, 1.0), &Settings::default()).unwrap();
         assert!(!m.triangles.is_empty());
         assert!(!m.is_closed_oriented());
     }

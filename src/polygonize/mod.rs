@@ -1,8 +1,30 @@
 //! Polygonizers: from a [`Field`] and a [`Lattice`] to a [`Mesh`] and [`Stats`].
 //!
+//! One entry, [`polygonize`], runs the algorithm a [`Method`] names with that method's
+//! settings (each holds the shared [`Settings`]) and returns a [`Polygonized`]: the mesh, the
+//! key of each vertex's lattice edge when [`Settings::keys`] asks for them, and the stats. The
+//! algorithms live in their modules: [`dense`] (the reference), [`sparse`], [`octree`] and
+//! [`tracking`]. Sparse and tracking of every component use the field's block bounds, which
+//! [`Field::block_field`] gives; a field without them is refused, never polygonized another way.
+//!
 //! All of them share the lattice, the case table (`table`) and the edge-vertex arithmetic
 //! (`cell`), so they produce the same triangles wherever they find the surface: the dense
 //! polygonizer is the reference the others are tested against.
+//!
+//! ```
+//! use glam::DVec3;
+//! use implicitmesh::field::analytic::Sphere;
+//! use implicitmesh::lattice::Lattice;
+//! use implicitmesh::polygonize::{polygonize, octree::OctreeSettings, Method, Settings};
+//!
+//! let sphere = Sphere { center: DVec3::ZERO, radius: 0.8 };
+//! let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 32).unwrap();
+//! let dense = polygonize(&sphere, &lattice, &Method::Dense(Settings::default())).unwrap();
+//! let octree = polygonize(&sphere, &lattice, &Method::Octree(OctreeSettings::default())).unwrap();
+//! assert_eq!(octree.mesh.triangles.len(), dense.mesh.triangles.len());
+//! assert!(octree.stats.evaluations < dense.stats.evaluations);
+//! assert!(dense.keys.is_none());
+//! ```
 
 pub(crate) mod bits;
 pub(crate) mod bricks;
@@ -39,6 +61,9 @@ pub struct Settings {
     /// Move each vertex onto the zero set by one bounded Newton step ([`project`]) before the
     /// normals are computed.
     pub project: bool,
+    /// Also return the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]), in
+    /// [`Polygonized::keys`]: what welds the meshes of windows of one lattice.
+    pub keys: bool,
 }
 
 impl Default for Settings {
@@ -49,8 +74,95 @@ impl Default for Settings {
             batch: 1 << 18,
             memory_limit: crate::memory::DEFAULT_MEMORY_LIMIT,
             project: false,
+            keys: false,
         }
     }
+}
+
+/// The polygonizer [`polygonize`] runs, with its settings.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Method {
+    /// Plain marching cubes over every cell ([`dense`]): the reference.
+    Dense(Settings),
+    /// The dense mesh from only the blocks the field's bounds cannot rule out ([`sparse`]);
+    /// needs a field with block bounds ([`Field::block_field`], a blob field).
+    Sparse(Settings),
+    /// Hierarchical sampling with the rejection test ([`octree`]).
+    Octree(octree::OctreeSettings),
+    /// Surface tracking from seeds ([`tracking`]); [`tracking::Components::All`] needs a field
+    /// with block bounds. [`tracking::TrackingSettings::for_field`] makes the settings the field
+    /// calls for.
+    Tracking(tracking::TrackingSettings),
+}
+
+impl Method {
+    /// The settings every method shares.
+    pub fn settings(&self) -> &Settings {
+        match self {
+            Method::Dense(s) | Method::Sparse(s) => s,
+            Method::Octree(o) => &o.common,
+            Method::Tracking(t) => &t.common,
+        }
+    }
+
+    /// The method's name, as the Python package spells it: `"dense"`, `"sparse"`, `"octree"`
+    /// or `"tracking"`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::Dense(_) => "dense",
+            Method::Sparse(_) => "sparse",
+            Method::Octree(_) => "octree",
+            Method::Tracking(_) => "tracking",
+        }
+    }
+}
+
+/// What [`polygonize`] returns.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Polygonized {
+    /// The mesh (normals empty unless [`Settings::normals`]).
+    pub mesh: Mesh,
+    /// With [`Settings::keys`], the key of each vertex's lattice edge
+    /// ([`Lattice::whole_edge_key`]), one per vertex; `None` otherwise.
+    pub keys: Option<Vec<u64>>,
+    /// Counts and timings.
+    pub stats: Stats,
+}
+
+/// Polygonizes `field` over `lattice` with `method`.
+///
+/// Errors for [`Method::Sparse`], and [`Method::Tracking`] with
+/// [`tracking::Components::All`], when the field has no block bounds
+/// ([`Field::block_field`]); for a lattice whose estimated memory exceeds
+/// [`Settings::memory_limit`]; when the field gives a value that is not finite; and when
+/// interrupted ([`crate::cancel`]).
+pub fn polygonize<F: Field + ?Sized>(
+    field: &F,
+    lattice: &Lattice,
+    method: &Method,
+) -> Result<Polygonized> {
+    match method {
+        Method::Dense(s) => dense::polygonize(field, lattice, s),
+        Method::Octree(o) => octree::polygonize(field, lattice, o),
+        Method::Sparse(s) => sparse::polygonize(needs_bounds(field, "sparse")?, lattice, s),
+        Method::Tracking(t) => tracking::polygonize(field, lattice, t),
+    }
+}
+
+/// The field's block bounds, or the error saying that `method` needs them.
+pub(crate) fn needs_bounds<'a, F: Field + ?Sized>(
+    field: &'a F,
+    method: &str,
+) -> Result<&'a dyn crate::field::DynBlockField> {
+    field.block_field().ok_or_else(|| {
+        Error::invalid(
+            "method",
+            format!(
+                "{method:?} needs a field with block bounds such as a BlobField (it bounds the \
+                 field over blocks of the lattice); use \"dense\" or \"octree\""
+            ),
+        )
+    })
 }
 
 /// The step of central differences for the normals of a field that only has values (a Python
@@ -60,7 +172,7 @@ pub const DIFFERENCE_STEP: f64 = 1e-3;
 /// [`DIFFERENCE_STEP`] on `lattice`: the step, in field units, of central differences for the
 /// normals of a field that only has values.
 pub fn difference_step(lattice: &Lattice) -> f64 {
-    DIFFERENCE_STEP * lattice.cell.min_element()
+    DIFFERENCE_STEP * lattice.cell().min_element()
 }
 
 /// Exact counts and timings of one polygonization.
@@ -114,7 +226,7 @@ const BYTES_PER_TRIANGLE: u64 = 12 + 24;
 /// A rough upper estimate of output triangles for a lattice: a surface as large as a few times
 /// the box's own surface. Used only to refuse absurd resolutions before running out of memory.
 pub fn estimate_triangles(l: &Lattice) -> u64 {
-    let [x, y, z] = l.cells.map(|c| c as u64);
+    let [x, y, z] = l.cells().map(|c| c as u64);
     8 * (x * y + y * z + z * x)
 }
 
@@ -380,7 +492,8 @@ mod tests {
         let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 16).unwrap();
         let counted = crate::field::Counting::new(&sphere);
         let f = crate::field::Differences::new(&counted, difference_step(&lattice)).unwrap();
-        let (mesh, stats) = dense::polygonize(&f, &lattice, &Settings::default()).unwrap();
+        let Polygonized { mesh, stats, .. } =
+            polygonize(&f, &lattice, &Method::Dense(Settings::default())).unwrap();
         assert!(!mesh.vertices.is_empty());
         assert_eq!(stats.normal_evaluations, 6 * mesh.vertices.len() as u64);
         assert_eq!(

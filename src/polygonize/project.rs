@@ -41,7 +41,7 @@ pub fn project_vertices<F: Field + ?Sized>(
         return Ok(());
     }
     let t = Instant::now();
-    let max_step = MAX_STEP_OVER_CELL * lattice.cell.min_element();
+    let max_step = MAX_STEP_OVER_CELL * lattice.cell().min_element();
     let per_vertex = 1 + field.values_per_gradient();
     let batch = (settings.batch / per_vertex as usize).max(1);
     let mut values = vec![0.0; batch.min(mesh.vertices.len())];
@@ -117,9 +117,13 @@ mod tests {
             project: true,
             ..Default::default()
         };
-        let (projected, stats) = dense::polygonize(&Quartic, &lattice, &settings).unwrap();
-        assert_eq!(plain.0.triangles, projected.triangles);
-        let (before, after) = (radial_error(&plain.0), radial_error(&projected));
+        let crate::polygonize::Polygonized {
+            mesh: projected,
+            stats,
+            ..
+        } = dense::polygonize(&Quartic, &lattice, &settings).unwrap();
+        assert_eq!(plain.mesh.triangles, projected.triangles);
+        let (before, after) = (radial_error(&plain.mesh), radial_error(&projected));
         assert!(before > 1e-3, "{before}");
         assert!(after < before / 20.0, "{before} -> {after}");
         assert_eq!(

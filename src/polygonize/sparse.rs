@@ -39,7 +39,7 @@
 //! use glam::DVec3;
 //! use implicitmesh::field::blob::{BlobField, PerPrimitive, BlobSettings};
 //! use implicitmesh::lattice::Lattice;
-//! use implicitmesh::polygonize::{dense, sparse, Settings};
+//! use implicitmesh::polygonize::{polygonize, Method, Settings};
 //!
 //! let centers = [DVec3::new(-0.2, 0.0, 0.0), DVec3::new(0.25, 0.05, 0.0)];
 //! let blobs = BlobField::new(
@@ -51,8 +51,11 @@
 //! )
 //! .unwrap();
 //! let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 48).unwrap();
-//! let (mesh, stats) = sparse::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
-//! let (reference, _) = dense::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
+//! let sparse = polygonize(&blobs, &lattice, &Method::Sparse(Settings::default())).unwrap();
+//! let (mesh, stats) = (sparse.mesh, sparse.stats);
+//! let reference = polygonize(&blobs, &lattice, &Method::Dense(Settings::default()))
+//!     .unwrap()
+//!     .mesh;
 //! assert_eq!(mesh.triangles.len(), reference.triangles.len());
 //! assert!(mesh.is_closed_oriented());
 //! assert!(stats.evaluations < stats.lattice_points / 2);
@@ -65,7 +68,7 @@ use super::bits::{
 use super::bricks::Grid;
 use super::{
     check_memory, estimate_triangles, fill_vanishing_normals, finish_mesh, normalize, CaseTable,
-    Settings, Stats,
+    Polygonized, Settings, Stats,
 };
 use crate::error::{Error, Result};
 use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
@@ -89,7 +92,7 @@ pub(crate) type BlockGrid = Grid<STEP>;
 
 /// The blocks of `lattice`.
 pub(crate) fn block_grid(lattice: &Lattice) -> BlockGrid {
-    Grid::new(lattice.cells)
+    Grid::new(lattice.cells())
 }
 
 /// An evaluated block with points of both signs ([`evaluate_block`]): what triangulating it
@@ -363,21 +366,29 @@ impl Workspace {
 }
 
 /// Polygonizes `field` over the blocks of `lattice` it cannot rule out; the mesh equals
-/// [`super::dense::polygonize`]'s (up to the order of vertices and triangles).
-pub fn polygonize<F: BlockField + ?Sized>(
+/// [`super::dense`]'s (up to the order of vertices and triangles). With the vertices' edge keys
+/// when [`Settings::keys`] asks for them ([`super::polygonize`] with [`super::Method::Sparse`]).
+pub(crate) fn polygonize<F: BlockField + ?Sized>(
     field: &F,
     lattice: &Lattice,
     settings: &Settings,
-) -> Result<(Mesh, Stats)> {
-    let (mut mesh, triangles, stats) = polygonize_as::<F, u32>(field, lattice, settings)?;
+) -> Result<Polygonized> {
+    let (mut mesh, triangles, keys, stats) =
+        polygonize_with_keys::<F, u32>(field, lattice, settings, settings.keys)?;
     mesh.triangles = triangles;
-    Ok((mesh, stats))
+    Ok(Polygonized {
+        mesh,
+        keys: settings.keys.then_some(keys),
+        stats,
+    })
 }
 
-/// The integer type of the vertex indices [`polygonize_as`] writes: `u32` (as [`Mesh`] holds
+/// The integer type of the vertex indices the sparse polygonizer writes: `u32` (as [`Mesh`] holds
 /// them) or `i64` (as numpy and trimesh want faces).
 pub trait TriangleIndex: Copy + Send + Sync + 'static {
+    /// `v` as this type.
     fn from_u32(v: u32) -> Self;
+    /// This index as `u32` (it came from one).
     fn to_u32(self) -> u32;
 }
 
@@ -404,30 +415,8 @@ impl TriangleIndex for i64 {
 }
 
 /// [`polygonize`] with the triangles' vertex indices as `I`, written straight into their final
-/// buffer (each block knows its number of triangles after the first pass): a caller that wants
-/// 64-bit indices gets them without a second copy. The returned mesh has no triangles; they
-/// come beside it.
-pub fn polygonize_as<F: BlockField + ?Sized, I: TriangleIndex>(
-    field: &F,
-    lattice: &Lattice,
-    settings: &Settings,
-) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
-    let (mesh, triangles, _, stats) = polygonize_with_keys(field, lattice, settings, false)?;
-    Ok((mesh, triangles, stats))
-}
-
-/// [`polygonize_as`], with the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]),
-/// one per vertex.
-#[allow(clippy::type_complexity)]
-pub fn polygonize_as_keyed<F: BlockField + ?Sized, I: TriangleIndex>(
-    field: &F,
-    lattice: &Lattice,
-    settings: &Settings,
-) -> Result<(Mesh, Vec<[I; 3]>, Vec<u64>, Stats)> {
-    polygonize_with_keys(field, lattice, settings, true)
-}
-
-/// [`polygonize_as`], and the vertices' edge keys when `keyed` (else none).
+/// buffer (each block knows its number of triangles after the first pass), and the vertices'
+/// edge keys when `keyed` (else none). The returned mesh has no triangles; they come beside it.
 #[allow(clippy::type_complexity)]
 fn polygonize_with_keys<F: BlockField + ?Sized, I: TriangleIndex>(
     field: &F,
@@ -1055,8 +1044,12 @@ mod tests {
             ambiguity,
             ..Default::default()
         };
-        let (a, st) = polygonize(field, lattice, &s).unwrap();
-        let (b, _) = dense::polygonize(field, lattice, &s).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: a, stats: st, ..
+        } = polygonize(field, lattice, &s).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: b, stats: _, ..
+        } = dense::polygonize(field, lattice, &s).unwrap();
         assert_eq!(a.vertices.len(), b.vertices.len());
         assert_eq!(canonical(&a), canonical(&b));
         // Normals are the field's gradient at the same vertex: the same bits.
@@ -1078,8 +1071,8 @@ mod tests {
 
     #[test]
     fn equals_dense_with_sph_kernels() {
-        use crate::field::blob::{BlobSettings, PerPrimitive};
         use crate::field::blob::kernel::BlobKernel;
+        use crate::field::blob::{BlobSettings, PerPrimitive};
         for kernel in [BlobKernel::CubicSpline, BlobKernel::Wendland] {
             for_each_blob_case(&BLOB_CASES[..4], |f, l| {
                 let settings = BlobSettings {
@@ -1104,9 +1097,9 @@ mod tests {
     /// it are ruled out, and the mesh is still the dense one, bit for bit.
     #[test]
     fn equals_dense_on_particles_with_inside_blocks() {
-        use crate::field::blob::{BlobSettings, PerPrimitive};
         use crate::field::blob::kernel::BlobKernel;
         use crate::field::blob::particles::{colour_field, ParticleSettings};
+        use crate::field::blob::{BlobSettings, PerPrimitive};
         let p = crate::field::testing::jittered_cube(14, 7);
         // Cells of 1/4 over the particles and their support (2) on every side, partial blocks.
         let l = Lattice::new(DVec3::splat(-2.3), DVec3::splat(15.2), [70, 69, 71]).unwrap();
@@ -1156,8 +1149,12 @@ mod tests {
         let f = blobs(60, 0.2, 12);
         let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [61, 47, 90]).unwrap();
         let s = Settings::default();
-        let (m, st) = polygonize(&f, &l, &s).unwrap();
-        let (m64, t64, st64) = polygonize_as::<_, i64>(&f, &l, &s).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: m, stats: st, ..
+        } = polygonize(&f, &l, &s).unwrap();
+        let (m64, t64, st64) = polygonize_with_keys::<_, i64>(&f, &l, &s, false)
+            .map(|(m, t, _, st)| (m, t, st))
+            .unwrap();
         assert!(m64.triangles.is_empty() && !m.triangles.is_empty());
         let t: Vec<[u32; 3]> = t64
             .iter()
@@ -1174,7 +1171,9 @@ mod tests {
     fn skips_most_blocks_and_is_closed() {
         let f = blobs(20, 0.3, 11);
         let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 96).unwrap();
-        let (m, st) = polygonize(&f, &l, &Settings::default()).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: m, stats: st, ..
+        } = polygonize(&f, &l, &Settings::default()).unwrap();
         assert!(m.is_closed_oriented());
         assert!(
             st.evaluations * 3 < st.lattice_points,
@@ -1217,13 +1216,13 @@ mod tests {
             memory_limit: limit,
             ..Default::default()
         };
-        assert!(polygonize_as::<_, u32>(&field, &lattice, &settings).is_ok());
-        assert!(polygonize_as::<_, i64>(&field, &lattice, &settings).is_err());
+        assert!(polygonize_with_keys::<_, u32>(&field, &lattice, &settings, false).is_ok());
+        assert!(polygonize_with_keys::<_, i64>(&field, &lattice, &settings, false).is_err());
         let no_normals = Settings {
             normals: false,
             ..settings
         };
-        assert!(polygonize_as::<_, i64>(&field, &lattice, &no_normals).is_ok());
+        assert!(polygonize_with_keys::<_, i64>(&field, &lattice, &no_normals, false).is_ok());
     }
 
     #[test]
@@ -1231,7 +1230,9 @@ mod tests {
         let f = blobs(3, 0.2, 12);
         // A box far from every blob.
         let l = Lattice::cubic(DVec3::splat(5.0), DVec3::splat(6.0), 16).unwrap();
-        let (m, st) = polygonize(&f, &l, &Settings::default()).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: m, stats: st, ..
+        } = polygonize(&f, &l, &Settings::default()).unwrap();
         assert!(m.triangles.is_empty() && m.vertices.is_empty());
         assert_eq!(st.evaluations, 0);
     }

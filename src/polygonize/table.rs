@@ -1060,17 +1060,30 @@ mod tests {
         }
     }
 
+    /// Each case is polygons over its crossed edges, one vertex per edge, each polygon of at
+    /// least 3 vertices fanned into (vertices − 2) triangles: with E crossed edges and P
+    /// polygons, E − 2P triangles, so E/3 ≤ triangles ≤ E − 2 and of E's parity; and
+    /// `max_triangles` is the largest case.
     #[test]
-    fn report_statistics() {
+    fn triangle_counts_follow_the_crossed_edges() {
         for amb in BOTH {
             let table = CaseTable::get(amb);
-            let total: usize = (0..=255u8).map(|c| table.triangles(c).len()).sum();
-            println!(
-                "{amb:?}: classes {}, max triangles {}, total {}",
-                base_cases().len(),
-                table.max_triangles(),
-                total
-            );
+            let mut largest = 0;
+            for case in 0..=255u8 {
+                let crossed = EDGES
+                    .iter()
+                    .filter(|[a, b]| (case >> a & 1) != (case >> b & 1))
+                    .count();
+                let t = table.triangles(case).len();
+                largest = largest.max(t);
+                if crossed == 0 {
+                    assert_eq!(t, 0, "{amb:?} case {case}");
+                    continue;
+                }
+                assert_eq!((crossed - t) % 2, 0, "{amb:?} case {case}");
+                assert!(3 * t >= crossed && t + 2 <= crossed, "{amb:?} case {case}");
+            }
+            assert_eq!(table.max_triangles(), largest);
         }
     }
 }

@@ -1,9 +1,9 @@
 //! `BlobField`: the Python class over the core's blob field.
 
 use super::convert::{field_gradients, field_values, points, points_to_py, values, values_to_py};
-use crate::field::blob::{self, BlobField, PerPrimitive, Precision};
 use crate::field::blob::kernel::BlobKernel;
 use crate::field::blob::particles::{self, ParticleSettings};
+use crate::field::blob::{self, BlobField, PerPrimitive, Precision};
 use glam::DVec3;
 use pyo3::prelude::*;
 

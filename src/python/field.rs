@@ -3,7 +3,8 @@
 //! that called the polygonizer (never from a rayon worker), with the GIL re-acquired for the call.
 
 use super::blob::PyBlobField;
-use super::variational::{Fitted, PyVariationalSurface};
+use super::variational::PyVariationalSurface;
+use crate::field::rbf::Fitted;
 use crate::field::Field;
 use glam::DVec3;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
@@ -121,22 +122,6 @@ impl<'py> FieldArg<'py> {
             FieldArg::Variational(v) => v.as_field(),
             FieldArg::Blob(b) => &b.inner,
             FieldArg::Callable(c) => c.as_ref(),
-        }
-    }
-
-    /// Where tracking starts walking when no seeds are given: blob centres, or the data points
-    /// of a variational surface; with the number of cells a walk may take (None: no default).
-    pub fn default_starts(&self, cell: f64) -> Option<(Vec<glam::DVec3>, u32)> {
-        match self {
-            FieldArg::Blob(b) => {
-                let rmax = b.inner.radii().iter().fold(0.0f64, |a, r| a.max(*r));
-                Some((b.inner.centers().to_vec(), (rmax / cell).ceil() as u32 + 2))
-            }
-            FieldArg::Variational(v) => {
-                let c = v.constraints();
-                Some((c.points[..c.boundary].to_vec(), 16))
-            }
-            FieldArg::Callable(_) => None,
         }
     }
 

@@ -9,7 +9,7 @@ use crate::lattice::Lattice;
 use crate::polygonize::tracking::{Components, TrackingSettings};
 use crate::polygonize::weld::boundary_edges;
 use crate::polygonize::{
-    dense, difference_step, octree, sparse, tracking, Ambiguity, Settings, Stats,
+    difference_step, octree, tracking, Ambiguity, Method, Polygonized, Settings, Stats,
 };
 use numpy::PyArrayMethods;
 use pyo3::prelude::*;
@@ -124,11 +124,11 @@ pub fn stats_to_py<'py>(
     }
     secs.set_item("total", s.total_seconds())?;
     d.set_item("seconds", secs)?;
-    d.set_item("resolution", PyTuple::new(py, lattice.cells)?)?;
+    d.set_item("resolution", PyTuple::new(py, lattice.cells())?)?;
     d.set_item(
         "bounds",
         [
-            [lattice.origin.x, lattice.origin.y, lattice.origin.z],
+            [lattice.origin().x, lattice.origin().y, lattice.origin().z],
             [lattice.max().x, lattice.max().y, lattice.max().z],
         ],
     )?;
@@ -145,7 +145,7 @@ pub fn lattice(
     resolution: &Bound<'_, PyAny>,
 ) -> PyResult<([u32; 3], [f64; 3], [f64; 3])> {
     let l = parse_lattice(bounds, resolution)?;
-    Ok((l.cells, l.base.to_array(), l.cell.to_array()))
+    Ok((l.cells(), l.base().to_array(), l.cell().to_array()))
 }
 
 /// Cell range `[[i0, j0, k0], [i1, j1, k1]]` of a window (checked against the lattice by
@@ -188,6 +188,7 @@ fn shared_settings(
         project,
         batch: batch_size,
         memory_limit: memory_limit.unwrap_or(defaults.memory_limit),
+        ..defaults
     })
 }
 
@@ -202,83 +203,23 @@ fn polygonizer_field<'a>(field: &'a FieldArg, lattice: &Lattice) -> PyResult<Box
     })
 }
 
-/// Tracking settings: `common`, the walks from the given seed points (up to the whole lattice)
-/// or from the field's own starts, and every component of a blob field (it bounds its values
-/// over blocks), the seeded ones of any other.
+/// Tracking settings: `common`, and the seeds given (``seeds``, (N, 3) points) or the field's
+/// own, as [`TrackingSettings::for_field`] decides.
 fn tracking_settings(
-    field: &FieldArg,
+    f: &dyn Field,
     seeds: Option<&Bound<'_, PyAny>>,
     lattice: &Lattice,
     common: Settings,
 ) -> PyResult<TrackingSettings> {
-    let (starts, max_walk) = tracking_starts(field, seeds, lattice)?;
-    let components = match field {
-        FieldArg::Blob(_) => Components::All,
-        _ => Components::Seeded,
-    };
-    Ok(TrackingSettings {
-        common,
-        starts,
-        max_walk,
-        components,
-        ..Default::default()
-    })
+    let seeds = seeds.map(|s| points(s, "seeds")).transpose()?;
+    Ok(TrackingSettings::for_field(f, lattice, common, seeds)?)
 }
-
-/// Tracking starts: the given seed points (walk up to the whole lattice) or the field's own.
-fn tracking_starts(
-    field: &FieldArg,
-    seeds: Option<&Bound<'_, PyAny>>,
-    lattice: &Lattice,
-) -> PyResult<(Vec<glam::DVec3>, u32)> {
-    match seeds {
-        Some(s) => {
-            let p = points(s, "seeds")?;
-            crate::error::check_finite_points("seeds", &p)?;
-            Ok((p, *lattice.cells.iter().max().unwrap()))
-        }
-        None => field.default_starts(lattice.cell.min_element()).ok_or_else(|| {
-            value_error(
-                "seeds",
-                "method=\"tracking\" with a callable needs seeds: points inside or on each component of the surface",
-            )
-        }),
-    }
-}
-
-/// A polygonizer's result with the mesh as numpy-ready buffers.
-fn buffers((mesh, stats): (crate::mesh::Mesh, Stats)) -> (MeshBuffers, Stats) {
-    (MeshBuffers::new(mesh), stats)
-}
-
-/// What a tile run adds: its triangles as flat `u32` (the mesh buffers then hold none), and
-/// its vertices on edges in its boundary faces with their edge keys ([`boundary_edges`]).
-type TileParts = (Vec<u32>, (Vec<u32>, Vec<u64>));
-
-/// A polygonizer's result, with the tile's parts when asked for.
-type Polygonized = (MeshBuffers, Stats, Option<TileParts>);
 
 /// Triangles as a flat vector, without a copy when the allocation allows it.
 fn flat_u32(t: Vec<[u32; 3]>) -> Vec<u32> {
     match bytemuck::allocation::try_cast_vec::<[u32; 3], u32>(t) {
         Ok(v) => v,
         Err((_, t)) => bytemuck::cast_slice::<[u32; 3], u32>(&t).to_vec(),
-    }
-}
-
-/// [`buffers`] without the boundary.
-fn unkeyed(r: (crate::mesh::Mesh, Stats)) -> Polygonized {
-    let (m, s) = buffers(r);
-    (m, s, None)
-}
-
-/// A keyed polygonizer's result, with the vertices on edges in the boundary faces of the
-/// window `window` ([`boundary_edges`]).
-fn keyed(window: [[u32; 3]; 2]) -> impl Fn((crate::mesh::Mesh, Vec<u64>, Stats)) -> Polygonized {
-    move |(mut mesh, keys, stats)| {
-        let b = boundary_edges(&keys, window);
-        let faces = flat_u32(std::mem::take(&mut mesh.triangles));
-        (MeshBuffers::new(mesh), stats, Some((faces, b)))
     }
 }
 
@@ -321,9 +262,9 @@ fn unknown_method(method: &str) -> PyErr {
 /// uint32`` and their edges' keys ``(B,) uint64`` in the whole lattice's numbering, what
 /// :func:`weld_tiles` joins them by.
 ///
-/// Returns ``(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or (0, 3),
-/// stats dict)``; with ``boundary``, faces ``(F, 3) uint32`` and then ``boundary (B,) uint32,
-/// keys (B,) uint64``.
+/// Returns ``(vertices (V, 3) float64, faces (F, 3), normals (V, 3) float64 or (0, 3), stats
+/// dict, boundary, keys)``: faces ``int64`` and ``boundary`` and ``keys`` None without
+/// ``boundary``; with it, faces ``uint32``, ``boundary (B,) uint32`` and ``keys (B,) uint64``.
 #[pyfunction]
 #[pyo3(signature = (field, bounds, resolution, *, method="dense", ambiguity="separate", normals=true, project=false, batch_size=262144, memory_limit=None, start_level=None, safety=None, corner_test=None, seeds=None, progress=None, window=None, boundary=false))]
 #[allow(clippy::too_many_arguments)]
@@ -348,123 +289,89 @@ pub fn polygonize<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     let field = FieldArg::extract(field)?;
     let mut lattice = parse_lattice(bounds, resolution)?;
-    let mut cells = [[0; 3], lattice.cells];
+    let mut cells = [[0; 3], lattice.cells()];
     if let Some(w) = window {
         cells = parse_window(w)?;
         lattice = lattice.window(cells[0], cells[1])?;
     }
-    let settings = shared_settings(ambiguity, normals, project, batch_size, memory_limit)?;
-    let method = method.to_ascii_lowercase();
-    if !METHODS.contains(&method.as_str()) {
-        return Err(unknown_method(&method));
+    let settings = Settings {
+        keys: boundary,
+        ..shared_settings(ambiguity, normals, project, batch_size, memory_limit)?
+    };
+    let name = method.to_ascii_lowercase();
+    if !METHODS.contains(&name.as_str()) {
+        return Err(unknown_method(&name));
     }
-    if method != "octree" {
-        for (name, given) in [
+    if name != "octree" {
+        for (arg, given) in [
             ("start_level", start_level.is_some()),
             ("safety", safety.is_some()),
             ("corner_test", corner_test.is_some()),
         ] {
             if given {
-                return Err(value_error(name, "applies to method=\"octree\" only"));
+                return Err(value_error(arg, "applies to method=\"octree\" only"));
             }
         }
     }
-    if method != "tracking" && seeds.is_some() {
+    if name != "tracking" && seeds.is_some() {
         return Err(value_error(
             "seeds",
             "seeds apply to method=\"tracking\" only",
         ));
     }
     let f = &*polygonizer_field(&field, &lattice)?;
-    let on_caller = field.is_callable();
-    let result = match method.as_str() {
-        "dense" if boundary => run(py, progress, on_caller, || {
-            dense::polygonize_keyed(f, &lattice, &settings).map(keyed(cells))
-        }),
-        "dense" => run(py, progress, on_caller, || dense::polygonize(f, &lattice, &settings).map(unkeyed)),
+    let method = match name.as_str() {
+        "dense" => Method::Dense(settings),
+        "sparse" => Method::Sparse(settings),
         "octree" => {
             let od = octree::OctreeSettings::default();
-            let o = octree::OctreeSettings {
+            Method::Octree(octree::OctreeSettings {
                 common: settings,
                 start_level: start_level.or(od.start_level),
                 safety: safety.or(od.safety),
                 corner_test: corner_test.unwrap_or(od.corner_test),
-            };
-            match boundary {
-                true => run(py, progress, on_caller, || {
-                    octree::polygonize_keyed(f, &lattice, &o).map(keyed(cells))
-                }),
-                false => run(py, progress, on_caller, || octree::polygonize(f, &lattice, &o).map(unkeyed)),
-            }
+            })
         }
-        "tracking" => {
-            let ts = tracking_settings(&field, seeds, &lattice, settings)?;
-            match &field {
-                FieldArg::Blob(b) if boundary => {
-                    let blobs = &b.inner;
-                    run(py, progress, on_caller, || {
-                        tracking::polygonize_bounded_keyed(blobs, &lattice, &ts).map(keyed(cells))
-                    })
-                }
-                FieldArg::Blob(b) => {
-                    let blobs = &b.inner;
-                    run(py, progress, on_caller, || {
-                        tracking::polygonize_bounded(blobs, &lattice, &ts).map(unkeyed)
-                    })
-                }
-                _ if boundary => {
-                    return Err(value_error(
-                        "boundary",
-                        "with method=\"tracking\" needs a BlobField (whose every component is found)",
-                    ))
-                }
-                _ => run(py, progress, on_caller, || {
-                    tracking::polygonize(f, &lattice, &ts).map(unkeyed)
-                }),
-            }
-        }
-        "sparse" => match &field {
-            FieldArg::Blob(b) => {
-                let blobs = &b.inner;
-                run(py, progress, on_caller, || match boundary {
-                    true => sparse::polygonize_as_keyed::<_, u32>(blobs, &lattice, &settings).map(
-                        |(mesh, faces, keys, stats)| {
-                            let b = boundary_edges(&keys, cells);
-                            (MeshBuffers::new(mesh), stats, Some((flat_u32(faces), b)))
-                        },
-                    ),
-                    false => sparse::polygonize_as::<_, i64>(blobs, &lattice, &settings).map(
-                        |(mesh, faces, stats)| (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats, None),
-                    ),
-                })
-            }
-            _ => {
+        _ => {
+            let ts = tracking_settings(f, seeds, &lattice, settings)?;
+            if boundary && ts.components != Components::All {
                 return Err(value_error(
-                    "method",
-                    "method=\"sparse\" needs a BlobField (it bounds the field over blocks of the lattice); use \"dense\" or \"octree\"",
-                ))
+                    "boundary",
+                    "with method=\"tracking\" needs a BlobField (whose every component is found)",
+                ));
             }
-        },
-        _ => return Err(unknown_method(&method)),
+            Method::Tracking(ts)
+        }
     };
+    let result = run(py, progress, field.is_callable(), || {
+        crate::polygonize::polygonize(f, &lattice, &method)
+    });
     if let Some(e) = field.take_error() {
         return Err(e);
     }
-    let (mesh, stats, edges) = result?;
-    let out = mesh_to_py(py, mesh, &stats, &lattice, &method)?;
-    match edges {
-        None => Ok(out),
+    let Polygonized {
+        mut mesh,
+        keys,
+        stats,
+    } = result?;
+    let tile = keys.map(|keys| {
+        let b = boundary_edges(&keys, cells);
+        (flat_u32(std::mem::take(&mut mesh.triangles)), b)
+    });
+    let out = mesh_to_py(py, MeshBuffers::new(mesh), &stats, &lattice, method.name())?;
+    let mut items: Vec<Bound<'py, PyAny>> = out.iter().collect();
+    match tile {
+        None => items.extend([py.None().into_bound(py), py.None().into_bound(py)]),
         Some((faces, (b, k))) => {
-            let mut items: Vec<Bound<'py, PyAny>> = out.iter().collect();
             let n = faces.len() / 3;
             items[1] = numpy::PyArray1::from_vec(py, faces)
                 .reshape([n, 3])?
                 .into_any();
             items.push(numpy::PyArray1::from_vec(py, b).into_any());
             items.push(numpy::PyArray1::from_vec(py, k).into_any());
-            PyTuple::new(py, items)
         }
     }
+    PyTuple::new(py, items)
 }
 
 /// Projects the vertices of a mesh made over the lattice of ``bounds`` and ``resolution``
@@ -554,35 +461,23 @@ impl PyTessellator {
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
         let settings = shared_settings(ambiguity, normals, false, batch_size, memory_limit)?;
-        let ts = tracking_settings(&field, seeds, &lattice, settings)?;
+        let f = &*polygonizer_field(&field, &lattice)?;
+        let ts = tracking_settings(f, seeds, &lattice, settings)?;
         let tess = &mut self.inner;
         let on_caller = field.is_callable();
-        let result = match &field {
-            // Blob fields evaluate whole blocks: the walk goes block by block.
-            FieldArg::Blob(b) if blocks => {
-                let blobs = &b.inner;
-                run(py, progress, on_caller, || {
-                    tess.polygonize_blocks::<_, i64>(blobs, &lattice, &ts).map(
-                        |(mesh, faces, stats)| {
-                            (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
-                        },
-                    )
-                })
-            }
-            FieldArg::Blob(b) => {
-                let blobs = &b.inner;
-                run(py, progress, on_caller, || {
-                    tess.polygonize_bounded(blobs, &lattice, &ts)
-                        .map(|(m, s)| (MeshBuffers::copied(m), s))
-                })
-            }
-            _ => {
-                let f = &*polygonizer_field(&field, &lattice)?;
-                run(py, progress, on_caller, || {
-                    tess.polygonize(f, &lattice, &ts)
-                        .map(|(m, s)| (MeshBuffers::copied(m), s))
-                })
-            }
+        // ``blocks``: the walk goes block by block for a field that evaluates whole blocks.
+        let result = if blocks && f.block_field().is_some() {
+            run(py, progress, on_caller, || {
+                tess.polygonize_blocks::<_, i64>(f, &lattice, &ts)
+                    .map(|(mesh, faces, stats)| {
+                        (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
+                    })
+            })
+        } else {
+            run(py, progress, on_caller, || {
+                tess.polygonize(f, &lattice, &ts)
+                    .map(|(m, s)| (MeshBuffers::copied(m), s))
+            })
         };
         if let Some(e) = field.take_error() {
             return Err(e);

@@ -4,11 +4,15 @@
 
 use super::convert::{points, points_to_py, values, values_to_py};
 use super::errors::value_error;
-use super::variational::Fitted;
 use crate::field::rbf::constraints::Constraints;
 use crate::field::rbf::kernel::Kernel;
 use crate::field::rbf::partition::octree::Node;
-use crate::field::rbf::partition::{PartitionParts, PartitionSettings, PartitionSurface, PatchParts};
+use crate::field::rbf::partition::{
+    PartitionParts, PartitionSettings, PartitionSurface, PatchParts,
+};
+use crate::field::rbf::Fitted;
+use crate::field::scan::surface::guard_of;
+use crate::field::scan::{ScanReport, ScanSettings, ScanSurface};
 use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use glam::DVec3;
 use numpy::{PyArray1, PyReadonlyArray1};
@@ -110,15 +114,45 @@ fn constraints_of(d: &Bound<'_, PyDict>) -> PyResult<Constraints> {
     })
 }
 
-/// The state of a fitted surface.
+/// The state of a fitted surface: its fit's, and for a scan fit its cleaned points, their
+/// normals and areas, the bands and the report under keys `scan_*`.
 pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("format", FORMAT)?;
+    let Some(scan) = fitted.scan() else {
+        put_fit(py, &d, fitted)?;
+        return Ok(d);
+    };
+    put_fit(py, &d, scan.surface.fit())?;
+    let guard = scan.surface.guard();
+    let r = &scan.report;
+    let (near, far) = guard.bands();
+    d.set_item("scan_points", points_to_py(py, guard.points().to_vec())?)?;
+    d.set_item("scan_normals", points_to_py(py, guard.normals().to_vec())?)?;
+    d.set_item("scan_areas", values_to_py(py, guard.areas().to_vec()))?;
+    d.set_item("scan_spacing", r.spacing)?;
+    d.set_item("scan_near", near / r.spacing)?;
+    d.set_item("scan_far", far / r.spacing)?;
+    d.set_item("scan_outliers", PyArray1::from_vec(py, r.outliers.clone()))?;
+    d.set_item("scan_given_points", r.points)?;
+    d.set_item("scan_noise", r.noise)?;
+    d.set_item("scan_normals_corrected", r.normals_corrected)?;
+    d.set_item("scan_turned_outward", r.turned_outward)?;
+    d.set_item(
+        "scan_distances",
+        values_to_py(py, vec![r.distance_mean, r.distance_p99, r.distance_max]),
+    )?;
+    Ok(d)
+}
+
+/// A global or partition fit's entries into `d`.
+fn put_fit(py: Python<'_>, d: &Bound<'_, PyDict>, fitted: &Fitted) -> PyResult<()> {
     match fitted {
+        Fitted::Scan(s) => put_fit(py, d, s.surface.fit())?,
         Fitted::Global(s) => {
             let p = py.detach(|| s.parts());
             d.set_item("method", "global")?;
-            put_constraints(py, &d, &p.constraints)?;
+            put_constraints(py, d, &p.constraints)?;
             d.set_item("kernel", p.kernel.name())?;
             d.set_item("centers", points_to_py(py, p.centers)?)?;
             d.set_item("weights", values_to_py(py, p.weights))?;
@@ -142,7 +176,7 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
                 (p, flat)
             });
             d.set_item("method", "partition")?;
-            put_constraints(py, &d, &p.constraints)?;
+            put_constraints(py, d, &p.constraints)?;
             let st = &p.settings;
             d.set_item("kernel", st.fit.kernel.name())?;
             d.set_item("smoothing", st.fit.smoothing)?;
@@ -152,13 +186,13 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
             d.set_item("max_patch", st.max_patch)?;
             d.set_item("min_points", st.min_points)?;
             d.set_item("residual", p.residual)?;
-            flat.put(py, &d)?;
+            flat.put(py, d)?;
             if let Some(nodes) = &p.tree {
-                put_tree(py, &d, nodes)?;
+                put_tree(py, d, nodes)?;
             }
         }
     }
-    Ok(d)
+    Ok(())
 }
 
 /// A cut's octree: per node its cube's centre and half side, and its first child (0 for a
@@ -402,15 +436,70 @@ impl FlatPatches {
 
 /// A uint32 array's numbers.
 fn indices(a: &Bound<'_, PyAny>) -> PyResult<Vec<u32>> {
+    indices_named(a, "patch_index")
+}
+
+/// The numbers of the uint32 array `a`, the state's entry `key`.
+fn indices_named(a: &Bound<'_, PyAny>, key: &str) -> PyResult<Vec<u32>> {
     let a: PyReadonlyArray1<u32> = a
         .extract()
-        .map_err(|_| bad("\"patch_index\" is not a 1-D array of uint32"))?;
+        .map_err(|_| bad(format!("\"{key}\" is not a 1-D array of uint32")))?;
     Ok(a.as_slice()
         .map_or_else(|_| a.as_array().to_vec(), <[u32]>::to_vec))
 }
 
 /// The fitted surface of a state [`state`] made.
 pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
+    let fit = fit_from_state(d)?;
+    if d.get_item("scan_points")?.is_none() {
+        return Ok(fit);
+    }
+    let spacing: f64 = number(d, "scan_spacing")?;
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(bad(format!("\"scan_spacing\" {spacing}")));
+    }
+    let settings = ScanSettings {
+        near: number(d, "scan_near")?,
+        far: number(d, "scan_far")?,
+        ..ScanSettings::default()
+    };
+    if !(settings.near >= 0.0 && settings.far > settings.near && settings.far.is_finite()) {
+        return Err(bad("\"scan_near\" and \"scan_far\" are not 0 ≤ near < far"));
+    }
+    let points = points_of(d, "scan_points")?;
+    let normals = points_of(d, "scan_normals")?;
+    let areas = values_of(d, "scan_areas")?;
+    if normals.len() != points.len() || areas.len() != points.len() {
+        return Err(bad("\"scan_points\", \"scan_normals\" and \"scan_areas\" differ in length"));
+    }
+    let distances = values_of(d, "scan_distances")?;
+    let [mean, p99, max]: [f64; 3] = distances
+        .try_into()
+        .map_err(|_| bad("\"scan_distances\" needs 3 numbers"))?;
+    let report = ScanReport {
+        points: number(d, "scan_given_points")?,
+        outliers: indices_named(&item(d, "scan_outliers")?, "scan_outliers")?,
+        spacing,
+        noise: number(d, "scan_noise")?,
+        normals_corrected: number(d, "scan_normals_corrected")?,
+        turned_outward: number(d, "scan_turned_outward")?,
+        distance_mean: mean,
+        distance_p99: p99,
+        distance_max: max,
+    };
+    let py = d.py();
+    let guard = super::interrupt::run(py, None, false, || {
+        guard_of(points, normals, areas, spacing, &settings)
+    })?;
+    Ok(Fitted::Scan(Arc::new(ScanSurface::from_parts(
+        fit,
+        Arc::new(guard),
+        report,
+    ))))
+}
+
+/// A global or partition fit from a state's entries.
+fn fit_from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
     let format: i64 = number(d, "format")?;
     if !(1..=FORMAT).contains(&format) {
         return Err(bad(format!(

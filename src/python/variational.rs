@@ -4,86 +4,17 @@ use super::convert::{
     field_gradients, field_values, points_arg, points_to_py, triangles, values, values_to_py,
 };
 use super::errors::value_error;
-use crate::error::Result;
-use crate::field::rbf::constraints::{self, Constraints};
+use crate::field::rbf::constraints;
 use crate::field::rbf::kernel::Kernel;
-use crate::field::rbf::partition::{self, PartitionSurface};
-use crate::field::rbf::{self, VariationalSurface};
-use crate::field::rbf::reduction::{self, Reduction, ReductionSettings};
-use crate::field::Field;
+use crate::field::rbf::partition;
+use crate::field::rbf::reduction::{Reduction, ReductionSettings};
+use crate::field::rbf::{self, Fit, FitData, FitMethod, Fitted};
+use crate::field::scan::ScanSettings;
 use glam::DVec3;
 use numpy::PyArray1;
 use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::borrow::Cow;
-use std::sync::Arc;
-
-/// Constraints (2 per data point for `fit` and `from_mesh`) from which `method="auto"` fits a
-/// partition of unity instead of one global system: about where the partition fit becomes the
-/// faster, at the same distance to the sampled surface (see benchmarks/bench_partition.py,
-/// `crossover`).
-pub const AUTO_PARTITION_CONSTRAINTS: usize = 2000;
-
-/// The fitted surface behind the Python class: one global system, or a partition of unity.
-#[derive(Clone)]
-pub enum Fitted {
-    Global(Arc<VariationalSurface>),
-    Partition(Arc<PartitionSurface>),
-}
-
-impl Fitted {
-    /// The surface as a core field.
-    pub fn as_field(&self) -> &(dyn Field + '_) {
-        match self {
-            Fitted::Global(s) => s.as_ref(),
-            Fitted::Partition(s) => s.as_ref(),
-        }
-    }
-    /// The constraints (for a partition fit, its points gathered into the constraints' order).
-    pub fn constraints(&self) -> Cow<'_, Constraints> {
-        match self {
-            Fitted::Global(s) => Cow::Borrowed(s.constraints()),
-            Fitted::Partition(s) => s.constraints(),
-        }
-    }
-    fn constraint_count(&self) -> usize {
-        match self {
-            Fitted::Global(s) => s.constraints().points.len(),
-            Fitted::Partition(s) => s.constraint_count(),
-        }
-    }
-    fn kernel(&self) -> Kernel {
-        match self {
-            Fitted::Global(s) => s.kernel(),
-            Fitted::Partition(s) => s.kernel(),
-        }
-    }
-    fn residual(&self) -> f64 {
-        match self {
-            Fitted::Global(s) => s.residual(),
-            Fitted::Partition(s) => s.residual(),
-        }
-    }
-    fn merged(&self) -> usize {
-        match self {
-            Fitted::Global(s) => s.constraints().merged,
-            Fitted::Partition(s) => s.merged(),
-        }
-    }
-    fn data_bounding_box(&self) -> (DVec3, DVec3) {
-        match self {
-            Fitted::Global(s) => s.data_bounding_box(),
-            Fitted::Partition(s) => s.data_bounding_box(),
-        }
-    }
-    fn method(&self) -> &'static str {
-        match self {
-            Fitted::Global(_) => "global",
-            Fitted::Partition(_) => "partition",
-        }
-    }
-}
 
 /// The progress callback and the function that ends the report, from `progress` as users pass
 /// it (False, True or a callable; see `implicitmesh._progress.reporter`).
@@ -100,19 +31,11 @@ fn reporter<'py>(
     Ok(((!callback.is_none()).then_some(callback), end))
 }
 
-/// How to fit: `"global"`, `"partition"`, or `"auto"` (decided by the number of constraints).
-#[derive(Clone, Copy, PartialEq)]
-enum Method {
-    Global,
-    Partition,
-    Auto,
-}
-
-fn parse_method(method: &str) -> PyResult<Method> {
+fn parse_method(method: &str) -> PyResult<FitMethod> {
     match method {
-        "global" => Ok(Method::Global),
-        "partition" => Ok(Method::Partition),
-        "auto" => Ok(Method::Auto),
+        "global" => Ok(FitMethod::Global),
+        "partition" => Ok(FitMethod::Partition),
+        "auto" => Ok(FitMethod::Auto),
         _ => Err(value_error(
             "method",
             format!("unknown method {method:?}; use \"auto\", \"global\" or \"partition\""),
@@ -122,16 +45,14 @@ fn parse_method(method: &str) -> PyResult<Method> {
 
 /// The keyword arguments that `fit`, `from_mesh` and `interpolate` share, converted and checked
 /// in this order: `method`, then `kernel`, `smoothing` and `memory_limit`, then
-/// `partition_options`, then `merge_distance`.
+/// `partition_options`, then `merge_distance`; with the progress report.
 struct FitOptions<'a, 'py> {
-    method: Method,
-    global: rbf::FitSettings,
-    partition: partition::PartitionSettings,
-    merge_distance: Option<f64>,
+    fit: Fit,
     progress: Option<&'a Bound<'py, PyAny>>,
 }
 
-/// [`FitOptions`] from the Python arguments.
+/// [`FitOptions`] from the Python arguments (`d` and `w` place the normal constraints).
+#[allow(clippy::too_many_arguments)]
 fn fit_options<'a, 'py>(
     method: &str,
     kernel: &str,
@@ -140,105 +61,103 @@ fn fit_options<'a, 'py>(
     progress: Option<&'a Bound<'py, PyAny>>,
     partition_options: Option<&Bound<'_, PyDict>>,
     merge_distance: Option<f64>,
+    (d, w): (Option<f64>, Option<f64>),
 ) -> PyResult<FitOptions<'a, 'py>> {
     let method = parse_method(method)?;
-    let global = fit_settings(kernel, smoothing, memory_limit)?;
-    let partition = partition_settings(partition_options, global)?;
+    let settings = fit_settings(kernel, smoothing, memory_limit)?;
+    let partition = partition_settings(partition_options)?;
     let merge_distance = constraints::check_merge_distance(merge_distance)?;
     Ok(FitOptions {
-        method,
-        global,
-        partition,
-        merge_distance,
+        fit: Fit {
+            method,
+            settings,
+            partition,
+            placement: constraints::ConstraintSettings {
+                d,
+                w,
+                merge_distance,
+                ..Default::default()
+            },
+        },
         progress,
     })
 }
 
 impl<'a, 'py> FitOptions<'a, 'py> {
-    /// Runs the global or the partition fit (with the GIL released), as the method and the
-    /// number of constraints decide.
-    fn run(
+    /// The scan fit of `points` with `normals` ([`Fit::run_scan`]) with the GIL released, the
+    /// cleaned points fitted with `tolerance` only as much as it needs; warns when every normal
+    /// was turned outward, or the rounds did not suffice.
+    fn run_scan(
         self,
         py: Python<'py>,
-        constraints: usize,
-        global: impl FnOnce(&rbf::FitSettings) -> Result<VariationalSurface> + Send,
-        partition: impl FnOnce(&partition::PartitionSettings) -> Result<PartitionSurface> + Send,
+        points: &[DVec3],
+        normals: &[DVec3],
+        tolerance: Option<f64>,
     ) -> PyResult<PyVariationalSurface> {
-        let use_partition = match self.method {
-            Method::Global => false,
-            Method::Partition => true,
-            Method::Auto => constraints >= AUTO_PARTITION_CONSTRAINTS,
-        };
-        let (progress, ps, gs) = (self.progress, self.partition, self.global);
-        let inner = if use_partition {
-            let (report, end) = reporter(py, progress, "fit (partition)")?;
-            let fitted = super::interrupt::run(py, report.as_ref(), false, move || partition(&ps));
-            end.call0()?;
-            Fitted::Partition(Arc::new(fitted?))
-        } else {
-            let (report, end) = reporter(py, progress, "fit (global)")?;
-            let fitted = super::interrupt::run(py, report.as_ref(), false, move || global(&gs));
-            end.call0()?;
-            Fitted::Global(Arc::new(fitted?))
-        };
+        let fit = self.fit;
+        let reduction = tolerance.map(|tolerance| ReductionSettings {
+            tolerance,
+            ..Default::default()
+        });
+        if let Some(r) = &reduction {
+            r.check()?;
+        }
+        let scan = ScanSettings::default();
+        let (report, end) = reporter(py, self.progress, "fit (scan)")?;
+        let fitted = super::interrupt::run(py, report.as_ref(), false, || {
+            fit.run_scan(points, normals, &scan, reduction.as_ref())
+        });
+        end.call0()?;
+        let (inner, r) = fitted?;
         warn_merged(py, inner.merged())?;
+        if inner.scan().is_some_and(|s| s.report.turned_outward) {
+            let message = c"normals: most normals pointed into the body the points enclose; \
+                            all were turned outward (see VariationalSurface.report)";
+            PyErr::warn(py, &py.get_type::<PyUserWarning>(), message, 1)?;
+        }
+        if let (Some(r), Some(t)) = (&r, tolerance) {
+            warn_outside(py, r, t, points.len())?;
+        }
         Ok(PyVariationalSurface {
             inner,
-            reduction: None,
+            reduction: r,
         })
     }
 
-    /// Greedy fits to growing subsets of `points` until every point is within `tolerance`
-    /// ([`reduction::fit_within`]), each fit global or partition as the method and the subset's
-    /// constraints (`per_point` per point) decide; warns when the rounds did not suffice.
-    #[allow(clippy::too_many_arguments)]
-    fn run_within(
+    /// Fits all of `data` ([`Fit::run`]) with the GIL released, or with `tolerance` only as
+    /// much as it needs ([`Fit::run_within`]), warning when the rounds did not suffice.
+    fn run(
         self,
         py: Python<'py>,
-        tolerance: f64,
-        points: &[DVec3],
-        targets: Option<&[f64]>,
-        per_point: usize,
-        global: impl Fn(&[u32], &rbf::FitSettings) -> Result<VariationalSurface> + Send,
-        partition: impl Fn(&[u32], &partition::PartitionSettings) -> Result<PartitionSurface> + Send,
+        data: FitData<'_>,
+        tolerance: Option<f64>,
     ) -> PyResult<PyVariationalSurface> {
+        let fit = self.fit;
+        let Some(tolerance) = tolerance else {
+            let what = format!("fit ({})", fit.chosen(&data).name());
+            let (report, end) = reporter(py, self.progress, &what)?;
+            let fitted = super::interrupt::run(py, report.as_ref(), false, || fit.run(&data));
+            end.call0()?;
+            let inner = fitted?;
+            warn_merged(py, inner.merged())?;
+            return Ok(PyVariationalSurface {
+                inner,
+                reduction: None,
+            });
+        };
         let settings = ReductionSettings {
             tolerance,
             ..Default::default()
         };
         settings.check()?;
-        let (method, ps, gs) = (self.method, self.partition, self.global);
         let (report, end) = reporter(py, self.progress, "fit (within tolerance)")?;
-        let fitted = super::interrupt::run(py, report.as_ref(), false, move || {
-            let fit = |used: &[u32]| -> Result<Fitted> {
-                let use_partition = match method {
-                    Method::Global => false,
-                    Method::Partition => true,
-                    Method::Auto => per_point * used.len() >= AUTO_PARTITION_CONSTRAINTS,
-                };
-                Ok(if use_partition {
-                    Fitted::Partition(Arc::new(partition(used, &ps)?))
-                } else {
-                    Fitted::Global(Arc::new(global(used, &gs)?))
-                })
-            };
-            reduction::fit_within(points, targets, &settings, fit, Fitted::as_field)
+        let fitted = super::interrupt::run(py, report.as_ref(), false, || {
+            fit.run_within(&data, &settings)
         });
         end.call0()?;
         let (inner, r) = fitted?;
         warn_merged(py, inner.merged())?;
-        if r.outside > 0 {
-            let message = std::ffi::CString::new(format!(
-                "{} of {} data points are farther than tolerance={tolerance:e} from the surface \
-                 after {} fits (largest {:.3e}); see VariationalSurface.reduction",
-                r.outside,
-                points.len(),
-                r.rounds,
-                r.largest_residual
-            ))
-            .expect("no NUL in the message");
-            PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)?;
-        }
+        warn_outside(py, &r, tolerance, data.data_points())?;
         Ok(PyVariationalSurface {
             inner,
             reduction: Some(r),
@@ -246,15 +165,26 @@ impl<'a, 'py> FitOptions<'a, 'py> {
     }
 }
 
-/// The partition fit's settings: the defaults, with the keys of `options` (a dict) in place.
+/// A `UserWarning` when points stayed farther than `tolerance` from a reduced fit.
+fn warn_outside(py: Python<'_>, r: &Reduction, tolerance: f64, points: usize) -> PyResult<()> {
+    if r.outside == 0 {
+        return Ok(());
+    }
+    let message = std::ffi::CString::new(format!(
+        "{} of {points} data points are farther than tolerance={tolerance:e} from the surface \
+         after {} fits (largest {:.3e}); see VariationalSurface.reduction",
+        r.outside, r.rounds, r.largest_residual
+    ))
+    .expect("no NUL in the message");
+    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
+}
+
+/// The partition fit's patches: the defaults, with the keys of `options` (a dict) in place
+/// (their `fit` is the [`Fit`]'s settings).
 fn partition_settings(
     options: Option<&Bound<'_, PyDict>>,
-    fit: rbf::FitSettings,
 ) -> PyResult<partition::PartitionSettings> {
-    let mut s = partition::PartitionSettings {
-        fit,
-        ..Default::default()
-    };
+    let mut s = partition::PartitionSettings::default();
     let Some(options) = options else {
         return Ok(s);
     };
@@ -321,19 +251,6 @@ fn fit_settings(
         smoothing,
         memory_limit: memory_limit.unwrap_or(d.memory_limit),
     })
-}
-
-fn placement(
-    d: Option<f64>,
-    w: Option<f64>,
-    merge_distance: Option<f64>,
-) -> constraints::ConstraintSettings {
-    constraints::ConstraintSettings {
-        d,
-        w,
-        merge_distance,
-        ..Default::default()
-    }
 }
 
 /// A `UserWarning` saying how many data points were merged, when any were.
@@ -440,12 +357,13 @@ impl PyVariationalSurface {
     ///     ``merge_distance``, zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
+    #[pyo3(signature = (points, normals, *, exact=false, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
         normals: &Bound<'_, PyAny>,
+        exact: bool,
         d: Option<f64>,
         w: Option<f64>,
         kernel: &str,
@@ -465,6 +383,7 @@ impl PyVariationalSurface {
             progress,
             partition_options,
             merge_distance,
+            (d, w),
         )?;
         let (p, n) = (
             points_arg(points, "points")?,
@@ -481,34 +400,14 @@ impl PyVariationalSurface {
                 ),
             ));
         }
-        let pl = placement(d, w, fit.merge_distance);
-        if let Some(tolerance) = tolerance {
-            let subset = |used: &[u32]| -> (Vec<DVec3>, Vec<DVec3>) {
-                let pick = |a: &[DVec3]| used.iter().map(|&i| a[i as usize]).collect();
-                (pick(p), pick(n))
-            };
-            return fit.run_within(
-                py,
-                tolerance,
-                p,
-                None,
-                2,
-                |used, s| {
-                    let (q, m) = subset(used);
-                    VariationalSurface::fit(&q, &m, &pl, s)
-                },
-                |used, s| {
-                    let (q, m) = subset(used);
-                    PartitionSurface::fit(&q, &m, &pl, s)
-                },
-            );
+        if !exact {
+            return fit.run_scan(py, p, n, tolerance);
         }
-        fit.run(
-            py,
-            2 * p.len(),
-            |s| VariationalSurface::fit(p, n, &pl, s),
-            |s| PartitionSurface::fit(p, n, &pl, s),
-        )
+        let data = FitData::Normals {
+            points: p,
+            normals: n,
+        };
+        fit.run(py, data, tolerance)
     }
 
     /// Fits a surface to the vertices of a triangle mesh.
@@ -558,17 +457,15 @@ impl PyVariationalSurface {
             progress,
             partition_options,
             merge_distance,
+            (d, w),
         )?;
         let v = points_arg(vertices, "vertices")?;
-        let v = v.as_slice();
         let f = triangles(faces, "faces")?;
-        let pl = placement(d, w, fit.merge_distance);
-        fit.run(
-            py,
-            2 * v.len(),
-            |s| VariationalSurface::from_mesh(v, &f, &pl, s),
-            |s| PartitionSurface::from_mesh(v, &f, &pl, s),
-        )
+        let data = FitData::Mesh {
+            vertices: v.as_slice(),
+            faces: &f,
+        };
+        fit.run(py, data, None)
     }
 
     /// Interpolates values at points (no normal constraints): f(points[i]) = values[i].
@@ -610,50 +507,26 @@ impl PyVariationalSurface {
             progress,
             partition_options,
             merge_distance,
+            (None, None),
         )?;
         let p = points_arg(points, "points")?;
         let p = p.as_slice();
         let v = self::values(values, "values")?;
-        let merge = fit.merge_distance;
-        if let Some(tolerance) = tolerance {
-            if v.len() != p.len() {
-                return Err(value_error(
-                    "values",
-                    format!(
-                        "need one value per point: {} values for {} points",
-                        v.len(),
-                        p.len()
-                    ),
-                ));
-            }
-            let subset = |used: &[u32]| -> (Vec<DVec3>, Vec<f64>) {
-                (
-                    used.iter().map(|&i| p[i as usize]).collect(),
-                    used.iter().map(|&i| v[i as usize]).collect(),
-                )
-            };
-            return fit.run_within(
-                py,
-                tolerance,
-                p,
-                Some(&v),
-                1,
-                |used, s| {
-                    let (q, w) = subset(used);
-                    VariationalSurface::interpolate(&q, &w, merge, s)
-                },
-                |used, s| {
-                    let (q, w) = subset(used);
-                    PartitionSurface::interpolate(&q, &w, merge, s)
-                },
-            );
+        if tolerance.is_some() && v.len() != p.len() {
+            return Err(value_error(
+                "values",
+                format!(
+                    "need one value per point: {} values for {} points",
+                    v.len(),
+                    p.len()
+                ),
+            ));
         }
-        fit.run(
-            py,
-            p.len(),
-            |s| VariationalSurface::interpolate(p, &v, merge, s),
-            |s| PartitionSurface::interpolate(p, &v, merge, s),
-        )
+        let data = FitData::Values {
+            points: p,
+            values: &v,
+        };
+        fit.run(py, data, tolerance)
     }
 
     /// f at points.
@@ -703,20 +576,16 @@ impl PyVariationalSurface {
     /// For a partition fit, the centres of all patches together: the constraint points.
     #[getter]
     fn centers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let points = match &self.inner {
-            Fitted::Global(s) => s.constraints().points.clone(),
-            Fitted::Partition(s) => s.constraint_points().into_owned(),
-        };
-        points_to_py(py, points)
+        points_to_py(py, self.inner.centers().into_owned())
     }
 
     /// (M,) float64: the weights λ_j. Global fits only: a partition fit has one set of weights
     /// per patch (ValueError).
     #[getter]
     fn weights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        match &self.inner {
+        match self.inner.interpolant() {
             Fitted::Global(s) => Ok(values_to_py(py, s.weights().to_vec())),
-            Fitted::Partition(_) => Err(global_only("weights")),
+            _ => Err(global_only("weights")),
         }
     }
 
@@ -724,9 +593,9 @@ impl PyVariationalSurface {
     /// partition fit has one polynomial per patch (ValueError).
     #[getter]
     fn polynomial<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        match &self.inner {
+        match self.inner.interpolant() {
             Fitted::Global(s) => Ok(values_to_py(py, s.polynomial().to_vec())),
-            Fitted::Partition(_) => Err(global_only("polynomial")),
+            _ => Err(global_only("polynomial")),
         }
     }
 
@@ -748,10 +617,67 @@ impl PyVariationalSurface {
         Ok(Some(d))
     }
 
+    /// The distance from each point to the nearest data point: the points a scan fit kept, or
+    /// the data points of an exact fit (what ``polygonize(..., trim=)`` measures).
+    ///
+    /// Parameters
+    /// ----------
+    /// points : (N, 3) float64
+    ///
+    /// Returns
+    /// -------
+    /// (N,) float64
+    fn distance_to_data<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let p = points_arg(points, "points")?;
+        let (p, inner) = (p.as_slice(), &self.inner);
+        let d = super::interrupt::run(py, None, false, || inner.distances_to_data(p))?;
+        Ok(values_to_py(py, d))
+    }
+
+    /// (K,) int64 or None: the indices of the points a scan fit left out as outliers,
+    /// increasing; None for an exact fit.
+    #[getter]
+    fn outliers<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        let scan = self.inner.scan()?;
+        let o: Vec<i64> = scan.report.outliers.iter().map(|&i| i as i64).collect();
+        Some(PyArray1::from_vec(py, o).into_any())
+    }
+
+    /// dict or None: what a scan fit found in its data. ``"points"`` given, ``"outliers"``
+    /// (the number left out), ``"spacing"`` (median distance from a point to its 6th nearest
+    /// neighbour), ``"noise"`` (the estimated noise: the median root-mean-square distance of a
+    /// neighbourhood from its plane, in the points' units), ``"normals_corrected"`` (kept points
+    /// whose normal was turned to agree with its neighbours'), ``"turned_outward"`` (True when
+    /// the normals pointed inward and all were turned), and the distance from the kept points,
+    /// as given, to the surface: ``"distance_mean"``, ``"distance_p99"``,
+    /// ``"distance_max"``. None for an exact fit.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(scan) = self.inner.scan() else {
+            return Ok(None);
+        };
+        let r = &scan.report;
+        let d = PyDict::new(py);
+        d.set_item("points", r.points)?;
+        d.set_item("outliers", r.outliers.len())?;
+        d.set_item("spacing", r.spacing)?;
+        d.set_item("noise", r.noise)?;
+        d.set_item("normals_corrected", r.normals_corrected)?;
+        d.set_item("turned_outward", r.turned_outward)?;
+        d.set_item("distance_mean", r.distance_mean)?;
+        d.set_item("distance_p99", r.distance_p99)?;
+        d.set_item("distance_max", r.distance_max)?;
+        Ok(Some(d))
+    }
+
     /// str: ``"global"`` or ``"partition"``, the fit in use (what ``method="auto"`` chose).
     #[getter]
     fn method(&self) -> &'static str {
-        self.inner.method()
+        self.inner.method().name()
     }
 
     /// dict describing the patches of a partition fit: ``centers`` (P, 3) float64, ``radii``
@@ -762,7 +688,7 @@ impl PyVariationalSurface {
     /// otherwise).
     #[getter]
     fn patches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let Fitted::Partition(s) = &self.inner else {
+        let Fitted::Partition(s) = self.inner.interpolant() else {
             return Err(value_error(
                 "patches",
                 "only a partition fit (method=\"partition\") has patches",
@@ -880,12 +806,7 @@ impl PyVariationalSurface {
                 "expected finite [[xmin, ymin, zmin], [xmax, ymax, zmax]]",
             ));
         }
-        let inner = match &self.inner {
-            Fitted::Global(_) => self.inner.clone(),
-            Fitted::Partition(s) => {
-                Fitted::Partition(std::sync::Arc::new(py.detach(|| s.cut(b[0], b[1]))))
-            }
-        };
+        let inner = py.detach(|| self.inner.cut(b[0], b[1]));
         Ok(PyVariationalSurface {
             inner,
             reduction: self.reduction.clone(),
@@ -908,13 +829,17 @@ impl PyVariationalSurface {
     }
 
     fn __repr__(&self) -> String {
-        let patches = match &self.inner {
-            Fitted::Global(_) => String::new(),
+        let patches = match self.inner.interpolant() {
             Fitted::Partition(s) => format!(", patches={}", s.patches().len()),
+            _ => String::new(),
+        };
+        let scan = match self.inner.scan() {
+            Some(s) => format!(", scan=True, outliers={}", s.report.outliers.len()),
+            None => String::new(),
         };
         format!(
-            "VariationalSurface(method={:?}, kernel={:?}, centers={}{patches}, residual={:.2e})",
-            self.inner.method(),
+            "VariationalSurface(method={:?}, kernel={:?}, centers={}{patches}, residual={:.2e}{scan})",
+            self.inner.method().name(),
             self.inner.kernel().name(),
             self.inner.constraint_count(),
             self.inner.residual()

@@ -3,7 +3,7 @@
 use super::convert::{check_rows_of_three, flat_faces, flatten_points, MeshBuffers};
 use super::errors::value_error;
 use super::interrupt::run;
-use crate::lattice::{Lattice, MAX_CELLS_PER_AXIS};
+use crate::lattice::Lattice;
 use crate::polygonize::weld::rows::{room, write as rows_write, Rows};
 use crate::polygonize::weld::{weld, Seams, StreamedWeld, Tile, TilePlan, WeldPlan, Welded};
 use glam::DVec3;
@@ -96,28 +96,14 @@ fn shape(obj: &Bound<'_, PyAny>) -> String {
         .map_or_else(|_| "?".into(), |s| s.to_string())
 }
 
-/// The whole lattice from ``cells``, ``origin`` and ``cell`` (as :func:`lattice` gives them).
+/// The whole lattice from ``cells``, ``origin`` and ``cell`` (as :func:`lattice` gives them),
+/// checked by [`Lattice::from_cells`].
 fn whole_lattice(cells: [u32; 3], origin: [f64; 3], cell: [f64; 3]) -> PyResult<Lattice> {
-    if cells.iter().any(|&c| c == 0 || c > MAX_CELLS_PER_AXIS) {
-        return Err(value_error(
-            "cells",
-            format!("cells per axis must be in 1..={MAX_CELLS_PER_AXIS}, got {cells:?}"),
-        ));
-    }
-    let (origin, cell) = (DVec3::from(origin), DVec3::from(cell));
-    if !origin.is_finite() {
-        return Err(value_error("origin", "must be finite"));
-    }
-    if !(cell.is_finite() && cell.cmpgt(DVec3::ZERO).all()) {
-        return Err(value_error("cell", "must be positive and finite"));
-    }
-    Ok(Lattice {
-        origin,
-        cell,
+    Ok(Lattice::from_cells(
+        DVec3::from(origin),
+        DVec3::from(cell),
         cells,
-        base: origin,
-        offset: [0; 3],
-    })
+    )?)
 }
 
 /// One tile's arrays as the weld reads them (numpy arrays borrowed in place, converted only

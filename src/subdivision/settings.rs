@@ -91,6 +91,7 @@ pub struct LevelStats {
     pub projected: usize,
     /// Field evaluations (value and gradient) per projected vertex during Newton: mean and max.
     pub iterations_mean: f64,
+    /// The largest of those counts.
     pub iterations_max: u32,
     /// Points evaluated in total (Newton, fallback, and the fallback's points once more for their
     /// normals; Newton's points reuse the gradient of their last step, the old vertices theirs).

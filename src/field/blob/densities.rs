@@ -3,8 +3,8 @@
 //! each particle's neighbours read from the nine runs of cells (three x-neighbours each) around
 //! its own, contiguous in memory.
 
-use crate::field::blob::kernel::{with_profile, BlobKernel, Profile};
 use crate::error::Result;
+use crate::field::blob::kernel::{with_profile, BlobKernel, Profile};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -155,8 +155,8 @@ fn sum_at<K: Profile>(list: &CellList, p: DVec3, inv: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use crate::field::testing::random_points;
     use super::*;
+    use crate::field::testing::random_points;
 
     /// The sums against the direct double loop, for each kernel, with particles on the box's
     /// faces and a spread that makes the cells grow.

@@ -353,10 +353,10 @@ impl BlobField {
 
 #[cfg(test)]
 mod tests {
-    use crate::field::blob::{BlobSettings, PerPrimitive};
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
     use crate::field::blob::particles::{colour_field, ParticleSettings};
+    use crate::field::blob::{BlobSettings, PerPrimitive};
     use crate::field::testing::jittered_cube;
     use crate::field::{Block, BlockField, BlockSign};
     use crate::lattice::Lattice;
@@ -377,7 +377,7 @@ mod tests {
     /// The blocks `block_inside` rules out, after checking that every point of each has a
     /// negative value (the splat's bits) on every vector path.
     fn inside_blocks(field: &BlobField, lattice: &Lattice) -> usize {
-        let dims = lattice.cells.map(|c| c.div_ceil(BLOCK_POINTS as u32 - 1));
+        let dims = lattice.cells().map(|c| c.div_ceil(BLOCK_POINTS as u32 - 1));
         let lists = field.blocks(lattice, dims);
         let points = lattice.points_per_axis();
         let mut inside = 0;

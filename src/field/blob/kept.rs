@@ -341,9 +341,17 @@ mod tests {
         settings: &Settings,
         k: usize,
     ) {
-        let (got, _) = sparse::polygonize(moving, lattice, settings).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: got,
+            stats: _,
+            ..
+        } = sparse::polygonize(moving, lattice, settings).unwrap();
         let fresh = field(p, moving.settings().precision);
-        let (want, _) = sparse::polygonize(&fresh, lattice, settings).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: want,
+            stats: _,
+            ..
+        } = sparse::polygonize(&fresh, lattice, settings).unwrap();
         assert!(!want.triangles.is_empty());
         assert_eq!(got.triangles, want.triangles, "frame {k}");
         let bits = |v: &[DVec3]| {

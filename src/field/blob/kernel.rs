@@ -99,6 +99,7 @@ pub trait Real:
     fn of(x: f64) -> Self;
     /// `self > o ? self : o`, `o` where `self` is NaN.
     fn max(self, o: Self) -> Self;
+    /// Square root, correctly rounded.
     fn sqrt(self) -> Self;
 }
 

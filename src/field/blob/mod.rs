@@ -22,12 +22,12 @@ pub mod voxels;
 use hints::{Hints, Proof, ONE_SIGN_FRAMES};
 pub use single::Precision;
 
+use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
+use crate::error::{check_finite_points, Error, Result};
 #[cfg(target_arch = "x86_64")]
 use crate::field::blob::kernel::LaneProfile;
 use crate::field::blob::kernel::{with_profile, BlobKernel, Profile, Real, Triquet};
 use crate::field::blob::voxels::VoxelGrid;
-use super::{Block, BlockField, BlockSign, Field, BLOCK_POINTS, PAR_CHUNK};
-use crate::error::{check_finite_points, Error, Result};
 use crate::lattice::Lattice;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::lanes::{F64s, Lanes};
@@ -97,7 +97,9 @@ struct Packed {
 /// A scalar or one value per primitive.
 #[derive(Clone, Debug)]
 pub enum PerPrimitive<'a> {
+    /// The same value for every primitive.
     All(f64),
+    /// One value per primitive, in the primitives' order.
     Each(&'a [f64]),
 }
 
@@ -373,7 +375,7 @@ impl BlobField {
     ) {
         let (px, py) = (xs.len(), ys.len());
         slab.fill(T::of(0.0));
-        let inv_h = DVec3::ONE / lattice.cell;
+        let inv_h = DVec3::ONE / lattice.cell();
         // Index range of the lattice points in [c - r, c + r] along an axis, with a point of
         // margin for rounding (the exact test is t > 0 in the row loop); empty when outside.
         let range = |c: f64, r: f64, o: f64, inv_h: f64, n: usize| -> Option<(usize, usize)> {
@@ -398,7 +400,7 @@ impl BlobField {
             if 1.0 - dz2 * inv <= 0.0 {
                 continue;
             }
-            let Some((y0, y1)) = range(c.y, r, lattice.origin.y, inv_h.y, py) else {
+            let Some((y0, y1)) = range(c.y, r, lattice.origin().y, inv_h.y, py) else {
                 continue;
             };
             for y in y0..=y1 {
@@ -408,7 +410,7 @@ impl BlobField {
                 // Half the chord, from k = 1 − (dy² + dz²)/R² (the exact test is t > 0 in the
                 // row loop; `range` adds a point of margin).
                 let half = r * term.k.max(0.0).sqrt();
-                let Some((x0, x1)) = range(c.x, half, lattice.origin.x, inv_h.x, px) else {
+                let Some((x0, x1)) = range(c.x, half, lattice.origin().x, inv_h.x, px) else {
                     continue;
                 };
                 row_fn(&mut slab[y * px + x0..=y * px + x1], &xs[x0..=x1], &term);
@@ -837,15 +839,19 @@ impl BlobField {
         unsafe { self.gradients_lanes::<std::arch::x86_64::__m256d>(list, points, out) }
     }
 
+    /// The primitives' centres.
     pub fn centers(&self) -> &[DVec3] {
         &self.centers
     }
+    /// The primitives' radii (each primitive acts up to this distance from its centre).
     pub fn radii(&self) -> &[f64] {
         &self.radii
     }
+    /// The primitives' strengths.
     pub fn strengths(&self) -> &[f64] {
         &self.strengths
     }
+    /// The threshold: the surface is where the summed potential equals it.
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
@@ -857,6 +863,7 @@ impl BlobField {
             grid
         })
     }
+    /// The settings the field was made with.
     pub fn settings(&self) -> BlobSettings {
         self.settings
     }
@@ -993,6 +1000,18 @@ unsafe fn splat_row_avx512(row: &mut [f64], xs: &[f64], q: &RowTerm) {
 }
 
 impl Field for BlobField {
+    /// The primitives' centres, each walking at most its largest radius in cells, plus 2.
+    fn starts(&self, cell: f64) -> Option<crate::field::Starts> {
+        let rmax = self.radii().iter().fold(0.0f64, |a, r| a.max(*r));
+        Some(crate::field::Starts {
+            points: self.centers().to_vec(),
+            max_walk: (rmax / cell).ceil() as u32 + 2,
+        })
+    }
+    /// A blob field bounds its values over blocks of the lattice.
+    fn block_field(&self) -> Option<&dyn crate::field::DynBlockField> {
+        Some(self)
+    }
     /// An upper bound on |∇f| over all space: one primitive's gradient is at most
     /// A·max|w′| / R (for the default profile at d = R/√3, where it is 8A / (3√3 R)); near any
     /// point only the primitives of its voxel list act, so the bound is the largest sum over one
@@ -1159,7 +1178,7 @@ impl BlockCoords {
             ys: coord(1),
             zs: coord(2),
             n,
-            inv_h: (DVec3::ONE / lattice.cell).to_array(),
+            inv_h: (DVec3::ONE / lattice.cell()).to_array(),
         }
     }
 
@@ -1400,9 +1419,9 @@ fn margin(r: f64) -> f64 {
 /// Candidate blocks along axis `a` for a sphere at `c` of radius `rm` (one more on each side
 /// for rounding), for the exact sphere-box test; `dims` blocks per axis.
 fn block_range(lattice: &Lattice, dims: [u32; 3], c: DVec3, rm: f64, a: usize) -> Range<u32> {
-    let span = lattice.cell[a] * (BLOCK_POINTS - 1) as f64;
-    let lo = floor((c[a] - rm - lattice.origin[a]) / span) - 1.0;
-    let hi = floor((c[a] + rm - lattice.origin[a]) / span) + 1.0;
+    let span = lattice.cell()[a] * (BLOCK_POINTS - 1) as f64;
+    let lo = floor((c[a] - rm - lattice.origin()[a]) / span) - 1.0;
+    let hi = floor((c[a] + rm - lattice.origin()[a]) / span) + 1.0;
     let hi = hi.min((dims[a] - 1) as f64);
     if hi < 0.0 || lo > hi {
         return 0..0;
@@ -1501,7 +1520,7 @@ fn block_sides(lattice: &Lattice, dims: [u32; 3]) -> [Vec<(f64, f64)>; 3] {
 /// Box of the lattice points of a block: its lowest point and its highest.
 fn block_box(lattice: &Lattice, b: [u32; 3]) -> (DVec3, DVec3) {
     let step = (BLOCK_POINTS - 1) as u32;
-    let last = lattice.cells;
+    let last = lattice.cells();
     let lo = [b[0] * step, b[1] * step, b[2] * step];
     let hi = std::array::from_fn(|a| (lo[a] + step).min(last[a]));
     (lattice.point(lo), lattice.point(hi))
@@ -1908,7 +1927,9 @@ mod tests {
                 normals,
                 ..Default::default()
             };
-            let (m, _) = sparse::polygonize(&b, &l, &settings).unwrap();
+            let crate::polygonize::Polygonized {
+                mesh: m, stats: _, ..
+            } = sparse::polygonize(&b, &l, &settings).unwrap();
             assert!(!m.triangles.is_empty());
             assert_eq!(m.normals.len(), if normals { m.vertices.len() } else { 0 });
             assert!(b.grid.get().is_none() && b.packed.get().is_none());

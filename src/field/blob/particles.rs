@@ -8,10 +8,10 @@
 //! profile of [`BlobKernel`], 1 at the centre), (m/ρᵢ) W(d, H) = w(d/H) / Σⱼ w(|xᵢ − xⱼ|/H), so
 //! the strength of particle i is Aᵢ = 1 / Σⱼ w(|xᵢ − xⱼ|/H) and neither m, ρ₀ nor σ appears.
 
-use crate::field::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
-use crate::field::blob::kernel::BlobKernel;
-use crate::field::blob::densities::kernel_sums;
 use crate::error::{check_finite_points, Error, Result};
+use crate::field::blob::densities::kernel_sums;
+use crate::field::blob::kernel::BlobKernel;
+use crate::field::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
 use glam::DVec3;
 
 /// Options of [`colour_field`] (splashsurf's names and defaults).
@@ -95,8 +95,8 @@ fn compact_support(particle_radius: f64, settings: &ParticleSettings) -> Result<
 
 #[cfg(test)]
 mod tests {
-    use crate::field::testing::random_points;
     use super::*;
+    use crate::field::testing::random_points;
 
     /// The colour field against the formula summed directly with splashsurf's normalised kernel
     /// and mass.

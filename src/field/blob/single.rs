@@ -256,9 +256,9 @@ impl BlobField {
 
 #[cfg(test)]
 mod tests {
-    use crate::field::blob::{BlobSettings, PerPrimitive};
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
+    use crate::field::blob::{BlobSettings, PerPrimitive};
     use crate::field::testing::jittered_cube;
     use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
 
@@ -277,7 +277,7 @@ mod tests {
     fn ruled_out_blocks_have_their_sign() {
         let p = jittered_cube(10, 3);
         let lattice = Lattice::new(DVec3::splat(-2.3), DVec3::splat(11.2), [54, 54, 54]).unwrap();
-        let dims = lattice.cells.map(|c| c.div_ceil(BLOCK_POINTS as u32 - 1));
+        let dims = lattice.cells().map(|c| c.div_ceil(BLOCK_POINTS as u32 - 1));
         let points = lattice.points_per_axis();
         for kernel in BlobKernel::ALL {
             for share in [0.3, 0.6, 0.9] {

@@ -13,9 +13,13 @@ use rayon::prelude::*;
 /// axis (the last tile along an axis holds what is left), numbered x fastest, then y, then z.
 #[derive(Clone, Copy, Debug)]
 pub struct TileGrid {
+    /// Corner of the lattice with the smallest coordinates.
     pub origin: DVec3,
+    /// Size of one cell along each axis.
     pub cell: DVec3,
+    /// Cells per axis of the lattice.
     pub cells: [u64; 3],
+    /// Cells per axis of a tile.
     pub tile: [u64; 3],
 }
 

@@ -5,10 +5,10 @@
 //! checks on the data (count, finiteness, duplicates, coplanarity) and vertex normals of
 //! triangle meshes.
 
-use crate::field::rbf::duplicates;
-use crate::spatial::Grid;
-use crate::field::rbf::thin;
 use crate::error::{check_finite_points, Error, Result};
+use crate::field::rbf::duplicates;
+use crate::field::rbf::thin;
+use crate::spatial::Grid;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -66,7 +66,9 @@ impl Default for ConstraintSettings {
 /// their data points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Constraints {
+    /// The constraint points.
     pub points: Vec<DVec3>,
+    /// The value the surface takes at each point.
     pub values: Vec<f64>,
     /// The offset `d_i` used for each data point (after shrinking).
     pub offsets: Vec<f64>,

@@ -104,10 +104,13 @@ pub trait RadialFn: Copy + Send + Sync + 'static {
     fn dphi_over_r_r2(r2: f64) -> f64;
 }
 
+/// φ(r) = r³ (the default).
 #[derive(Clone, Copy)]
 pub struct Triharmonic;
+/// φ(r) = r.
 #[derive(Clone, Copy)]
 pub struct Biharmonic;
+/// φ(r) = r² log r.
 #[derive(Clone, Copy)]
 pub struct ThinPlate;
 
@@ -159,17 +162,24 @@ impl RadialFn for ThinPlate {
 /// Centres and weights in structure-of-arrays layout.
 #[derive(Clone, Debug, Default)]
 pub struct Centres {
+    /// x of each centre.
     pub x: Vec<f64>,
+    /// y of each centre.
     pub y: Vec<f64>,
+    /// z of each centre.
     pub z: Vec<f64>,
+    /// Weight of each centre.
     pub w: Vec<f64>,
 }
 
 /// A block of [`LANES`] points in structure-of-arrays layout.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Block {
+    /// x of each point.
     pub x: [f64; LANES],
+    /// y of each point.
     pub y: [f64; LANES],
+    /// z of each point.
     pub z: [f64; LANES],
 }
 

@@ -4,29 +4,37 @@
 //! The fit works in normalised coordinates (data centred on its bounding box and scaled so its
 //! largest half-side is 1), which keeps the system's entries of order one whatever the units of
 //! the data; the interpolant is similarity-equivariant, so this changes nothing but the rounding.
+//!
+//! Two fits: [`VariationalSurface`] solves one dense system over every constraint,
+//! [`partition::PartitionSurface`] blends patches fitted the same way. [`Fit`] chooses between
+//! them by the number of constraints ([`FitMethod::Auto`], [`AUTO_PARTITION_CONSTRAINTS`]) and
+//! gives either as a [`Fitted`] surface; [`Fit::run_within`] fits only as many points as a
+//! tolerance needs ([`reduction`]), choosing again for each round.
 
 pub mod constraints;
 pub mod duplicates;
+mod fit;
 pub mod kernel;
-mod parts;
 pub mod partition;
+mod parts;
 mod patch;
 pub mod reduction;
 pub mod thin;
 
+pub use fit::{Fit, FitData, FitMethod, Fitted, AUTO_PARTITION_CONSTRAINTS};
 pub(crate) use parts::bad_state;
 pub use parts::SurfaceParts;
 pub use patch::{PatchCentres, PatchFit};
 
-use constraints::{bounding_box, Constraints};
+use super::Field;
+use crate::error::{Error, Result};
 use crate::field::rbf::kernel::{
     block_gradients, block_values, block_values_gradients, values_by_point,
     values_gradients_by_point, Arithmetic, Biharmonic, Block, Centres, Kernel, RadialFn, ThinPlate,
     Triharmonic, LANES,
 };
 use crate::linalg::saddle::SaddleSolver;
-use super::Field;
-use crate::error::{Error, Result};
+use constraints::{bounding_box, Constraints};
 use faer::Par;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -34,6 +42,7 @@ use rayon::prelude::*;
 /// How a variational surface is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FitSettings {
+    /// The radial basis function φ.
     pub kernel: Kernel,
     /// Added to the diagonal of the kernel block: 0 interpolates exactly, > 0 smooths noisy data.
     pub smoothing: f64,
@@ -567,6 +576,18 @@ impl VariationalSurface {
     }
 }
 
+/// Cells a tracking walk from a data point goes at most ([`Field::starts`]): the data points
+/// lie on the surface, so a short walk reaches it.
+pub const STARTS_MAX_WALK: u32 = 16;
+
+/// Tracking starts of a fit: its boundary constraints (the data points).
+fn boundary_starts(c: &Constraints) -> crate::field::Starts {
+    crate::field::Starts {
+        points: c.points[..c.boundary].to_vec(),
+        max_walk: STARTS_MAX_WALK,
+    }
+}
+
 /// Errors when the dense system for `n` constraints would exceed `limit` bytes.
 fn check_system_memory(n: usize, limit: u64) -> Result<()> {
     // The assembled matrix and the factor's copy.
@@ -574,6 +595,11 @@ fn check_system_memory(n: usize, limit: u64) -> Result<()> {
 }
 
 impl Field for VariationalSurface {
+    /// The boundary constraints (the data points), each walking at most
+    /// [`STARTS_MAX_WALK`] cells.
+    fn starts(&self, _cell: f64) -> Option<crate::field::Starts> {
+        Some(boundary_starts(self.constraints()))
+    }
     fn value(&self, p: DVec3) -> f64 {
         let mut out = [0.0];
         self.values(&[p], &mut out);

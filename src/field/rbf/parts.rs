@@ -11,21 +11,27 @@ use glam::DVec3;
 /// [`VariationalSurface::from_parts`] takes it back.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SurfaceParts {
+    /// The radial basis function φ.
     pub kernel: Kernel,
     /// Centres and weights in the caller's coordinates (empty for a partition fit's patches).
     pub centers: Vec<DVec3>,
+    /// One weight per centre.
     pub weights: Vec<f64>,
     /// [a, bx, by, bz] in the caller's coordinates.
     pub polynomial: [f64; 4],
     /// The normalisation x' = (x − shift) · scale.
     pub shift: DVec3,
+    /// The normalisation's scale (see `shift`).
     pub scale: f64,
     /// Centres (normalised) and weights of the normalised problem: what evaluation reads.
     pub normalized_centers: Vec<DVec3>,
+    /// The weights of the normalised problem.
     pub normalized_weights: Vec<f64>,
+    /// [a, bx, by, bz] of the normalised problem.
     pub normalized_polynomial: [f64; 4],
     /// The constraints (empty for a partition fit's patches).
     pub constraints: Constraints,
+    /// Largest |f(c_i) − v_i| over the constraints after the fit.
     pub residual: f64,
     /// `"cholesky"` or `"lblt"`.
     pub factorization: String,

@@ -9,11 +9,11 @@
 //! the points it used exactly and approximates the others within the tolerance when the rounds
 //! sufficed ([`Reduction::outside`] says).
 
-use crate::field::rbf::duplicates::typical_spacing;
-use crate::spatial::Grid;
-use crate::field::Field;
 use crate::cancel;
 use crate::error::{Error, Result};
+use crate::field::rbf::duplicates::typical_spacing;
+use crate::field::Field;
+use crate::spatial::Grid;
 use glam::DVec3;
 use rayon::prelude::*;
 

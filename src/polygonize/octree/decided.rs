@@ -72,7 +72,7 @@ fn place(i: usize) -> (usize, u32) {
 
 impl DecidedBlocks {
     fn dims(lattice: &Lattice) -> [usize; 3] {
-        lattice.cells.map(|c| c.div_ceil(2) as usize)
+        lattice.cells().map(|c| c.div_ceil(2) as usize)
     }
 
     pub(super) fn bytes(lattice: &Lattice) -> u64 {

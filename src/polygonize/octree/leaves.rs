@@ -37,7 +37,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// `masks`: per block of leaves, its children inside the lattice, in case-bit order; they
     /// are the cells tested.
     fn leaf_masks(&mut self) {
-        let cells = self.lattice.cells;
+        let cells = self.lattice.cells();
         self.masks = self
             .blocks
             .par_iter()

@@ -17,7 +17,7 @@ use std::time::Instant;
 
 /// Number of levels L: the root cube has 2^L cells per side, enough to cover the lattice.
 pub(super) fn levels(lattice: &Lattice) -> u32 {
-    let n = *lattice.cells.iter().max().unwrap();
+    let n = *lattice.cells().iter().max().unwrap();
     n.next_power_of_two().trailing_zeros()
 }
 
@@ -133,7 +133,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// The level of the first test ([`super::OctreeSettings::start_level`]; by default the first
     /// whose blocks span at most 1/8 of the lattice's longest side).
     fn start_level(&self) -> u32 {
-        let largest = *self.lattice.cells.iter().max().unwrap();
+        let largest = *self.lattice.cells().iter().max().unwrap();
         let levels = self.levels;
         self.settings.start_level.unwrap_or_else(|| {
             (1..=levels)
@@ -147,8 +147,8 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// only ones on a block's corners are those of its ancestors, carried down with it (see
     /// [`KnownCorners`]): no lookups.
     fn drop_covered_blocks(&mut self, s: u32) {
-        let size = self.lattice.cell * s as f64;
-        let (store, cells, safety) = (&self.store, self.lattice.cells, self.safety);
+        let size = self.lattice.cell() * s as f64;
+        let (store, cells, safety) = (&self.store, self.lattice.cells(), self.safety);
         // Per block: kept (None), or covered, with whether its known corners are all negative
         // (its sign) or all positive (Some(None) where they differ, which the premise rules
         // out).
@@ -213,7 +213,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
         // 2 × 2 × 2 cells is a corner of its own leaves only, so it stays with the block
         // instead of in the store.
         if s != 2 {
-            let cells = lattice.cells;
+            let cells = lattice.cells();
             for (o, &i) in self.blocks.iter().zip(&self.centres) {
                 let c = [o[0] + h, o[1] + h, o[2] + h];
                 if c[0] <= cells[0] && c[1] <= cells[1] && c[2] <= cells[2] {
@@ -235,7 +235,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// Splits the blocks (of `s` cells per side) into their children inside the lattice, in
     /// block order, then octant order; the children know their parent's centre at a corner.
     fn split(&mut self, s: u32) {
-        let (h, cells) = (s / 2, self.lattice.cells);
+        let (h, cells) = (s / 2, self.lattice.cells());
         let child = |o: [u32; 3], d: usize| {
             let off = corner_offset(d);
             [o[0] + off[0] * h, o[1] + off[1] * h, o[2] + off[2] * h]

@@ -52,11 +52,10 @@ mod state;
 mod store;
 mod triangulate;
 
-use super::{finish_mesh, Settings, Stats};
+use super::{finish_mesh, Polygonized, Settings};
 use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
-use crate::mesh::Mesh;
 use run::Run;
 use std::time::Instant;
 
@@ -129,32 +128,14 @@ impl OctreeSettings {
 }
 
 /// Polygonizes `field` over `lattice` with hierarchical rejection; leaves are single cells.
-pub fn polygonize<F: Field + ?Sized>(
+/// With the vertices' edge keys when [`Settings::keys`](crate::polygonize::Settings::keys) asks
+/// for them ([`super::polygonize`] with [`super::Method::Octree`]).
+pub(crate) fn polygonize<F: Field + ?Sized>(
     field: &F,
     lattice: &Lattice,
     settings: &OctreeSettings,
-) -> Result<(Mesh, Stats)> {
-    let (mesh, _, stats) = polygonize_with_keys(field, lattice, settings, false)?;
-    Ok((mesh, stats))
-}
-
-/// [`polygonize`], with the key of each vertex's lattice edge ([`Lattice::whole_edge_key`]),
-/// one per vertex.
-pub fn polygonize_keyed<F: Field + ?Sized>(
-    field: &F,
-    lattice: &Lattice,
-    settings: &OctreeSettings,
-) -> Result<(Mesh, Vec<u64>, Stats)> {
-    polygonize_with_keys(field, lattice, settings, true)
-}
-
-/// [`polygonize`], and the vertices' edge keys when `keyed` (else none).
-fn polygonize_with_keys<F: Field + ?Sized>(
-    field: &F,
-    lattice: &Lattice,
-    settings: &OctreeSettings,
-    keyed: bool,
-) -> Result<(Mesh, Vec<u64>, Stats)> {
+) -> Result<Polygonized> {
+    let keyed = settings.common.keys;
     let mut run = Run::new(field, lattice, settings)?;
     run.test_levels()?;
     let sampling = Instant::now();
@@ -163,7 +144,11 @@ fn polygonize_with_keys<F: Field + ?Sized>(
     run.stats.add_time("sample", sampling);
     let (mut mesh, keys, mut stats) = run.triangulate(leaves, keyed);
     finish_mesh(field, &mut mesh, lattice, &settings.common, &mut stats)?;
-    Ok((mesh, keys, stats))
+    Ok(Polygonized {
+        mesh,
+        keys: keyed.then_some(keys),
+        stats,
+    })
 }
 
 #[cfg(test)]

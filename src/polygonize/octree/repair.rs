@@ -95,7 +95,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// visited as repaired.
     pub(super) fn repair(&mut self, leaves: &mut Vec<CrossedLeaf>) -> Result<()> {
         let beyond =
-            cells_beyond_crossed_faces(self.table, &self.decided, leaves, self.lattice.cells);
+            cells_beyond_crossed_faces(self.table, &self.decided, leaves, self.lattice.cells());
         let suspects = std::mem::take(&mut self.suspects);
         let repaired = self.close(beyond, suspects, leaves)?;
         self.stats.cells_repaired = repaired;
@@ -116,7 +116,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     ) -> Result<u64> {
         let (lattice, table) = (self.lattice, self.table);
         let (store, dropped) = (&mut self.store, &self.decided);
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         let mut wave = start;
         for &p in &suspects.points {
             wave.extend(cells_around(p, cells));

@@ -65,13 +65,13 @@ impl<F: Field + ?Sized> Run<'_, F> {
         let mut settling = Settling {
             crossed: vec![0u8; n],
             open: vec![0u32; n],
-            reach: block_reach(self.lattice.cell, self.safety),
+            reach: block_reach(self.lattice.cell(), self.safety),
             ends: Ends::default(),
         };
         // Every point the leaves may need, signs inferred or values, has slots from here on.
         for (&o, &m) in self.blocks.iter().zip(&self.masks) {
             if m != 0 {
-                self.store.give_block_bricks(o, self.lattice.cells);
+                self.store.give_block_bricks(o, self.lattice.cells());
             }
         }
         // First with the signs of the blocks the levels decided, on the faces, edges and
@@ -117,7 +117,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// `crossed` and `open`, and returns what it inferred where it inferred anything.
     fn infer_signs(&mut self, settling: &mut Settling, first: bool) -> Vec<Inferred> {
         let (store, blocks, centres) = (&self.store, &self.blocks, &self.centres);
-        let (cells, reach) = (self.lattice.cells, &*settling.reach);
+        let (cells, reach) = (self.lattice.cells(), &*settling.reach);
         let first = first.then_some((&self.decided, &self.known[..]));
         blocks
             .par_iter()
@@ -244,7 +244,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// until none is left. Returns where the premise failed.
     fn evaluate_crossed_edge_ends(&mut self, crossed: &[u8], ends: Ends) -> Result<Suspects> {
         let (lattice, blocks, centres) = (self.lattice, &self.blocks, &self.centres);
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         let store = &mut self.store;
         let (mut ends, mut disagreed, mut suspects) = (ends.blocks, ends.disagreed, ends.suspects);
         while !ends.is_empty() || disagreed {

@@ -10,9 +10,10 @@ use super::state::PointState;
 use super::*;
 use crate::field::analytic::{Sphere, Torus};
 use crate::field::Counting;
+use crate::mesh::Mesh;
 use crate::polygonize::cell::corner_offset;
 use crate::polygonize::table::EDGES;
-use crate::polygonize::{dense, Ambiguity};
+use crate::polygonize::{dense, Ambiguity, Settings, Stats};
 use glam::DVec3;
 
 /// Polygonizes `f` with the octree (`settings`) and checks the mesh is the dense mesh (`dense`,
@@ -26,7 +27,9 @@ fn check_equals_dense<F: Field>(
     what: &str,
 ) -> (Mesh, Stats) {
     let counting = Counting::new(f);
-    let (o, st) = polygonize(&counting, lattice, settings).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: o, stats: st, ..
+    } = polygonize(&counting, lattice, settings).unwrap();
     let c = dense.compare(&o);
     assert_eq!(
         (c.missing, c.extra),
@@ -47,7 +50,9 @@ fn check_equal<F: Field>(f: &F, lattice: &Lattice, amb: Ambiguity) -> Stats {
         },
         ..Default::default()
     };
-    let (d, _) = dense::polygonize(f, lattice, &settings.common).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: d, stats: _, ..
+    } = dense::polygonize(f, lattice, &settings.common).unwrap();
     let (o, st) = check_equals_dense(f, lattice, &settings, &d, "");
     assert!(o.is_closed_oriented());
     st
@@ -107,7 +112,9 @@ fn tiny_lattices_and_brick_boundaries() {
     ] {
         let l = Lattice::new(DVec3::splat(-0.2), DVec3::splat(0.8), cells).unwrap();
         let set = Settings::default();
-        let (d, _) = dense::polygonize(&s, &l, &set).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: d, stats: _, ..
+        } = dense::polygonize(&s, &l, &set).unwrap();
         assert!(!d.triangles.is_empty(), "{cells:?}");
         for corner_test in [true, false] {
             let o = OctreeSettings {
@@ -136,7 +143,9 @@ fn wrong_rejections_are_repaired() {
         center: DVec3::new(0.01, 0.02, 0.03),
         radius: 0.6,
     });
-    let (d, _) = dense::polygonize(&f, &l, &Settings::default()).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: d, stats: _, ..
+    } = dense::polygonize(&f, &l, &Settings::default()).unwrap();
     for corner_test in [true, false] {
         let octree = OctreeSettings {
             corner_test,
@@ -154,7 +163,7 @@ fn wrong_rejections_are_repaired() {
         assert!(o.is_closed_oriented(), "corner test {corner_test}");
     }
     // With a safety factor that restores the premise, nothing needs repair.
-    let (o, stats) = polygonize(
+    let crate::polygonize::Polygonized { mesh: o, stats, .. } = polygonize(
         &f,
         &l,
         &OctreeSettings {
@@ -189,7 +198,10 @@ fn same_mesh_and_count_on_any_number_of_threads() {
             .num_threads(threads)
             .build()
             .unwrap();
-        pool.install(|| polygonize(f, &l, &OctreeSettings::default()).unwrap())
+        pool.install(|| {
+            let p = polygonize(f, &l, &OctreeSettings::default()).unwrap();
+            (p.mesh, p.stats)
+        })
     };
     for f in [&Over(t) as &(dyn Field + Sync), &t] {
         let (one, st1) = run(1, f);
@@ -223,18 +235,24 @@ fn start_level_matters_when_far_values_overshoot() {
         center: DVec3::new(0.51, 0.02, 0.03),
         radius: 0.3,
     });
-    let (d, _) = dense::polygonize(&f, &l, &Settings::default()).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: d, stats: _, ..
+    } = dense::polygonize(&f, &l, &Settings::default()).unwrap();
     let coarse = OctreeSettings {
         start_level: Some(1),
         ..Default::default()
     };
-    let (o, _) = polygonize(&f, &l, &coarse).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: o, stats: _, ..
+    } = polygonize(&f, &l, &coarse).unwrap();
     assert!(d.compare(&o).missing > 0);
     let deep = OctreeSettings {
         start_level: Some(6),
         ..Default::default()
     };
-    let (o, _) = polygonize(&f, &l, &deep).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: o, stats: _, ..
+    } = polygonize(&f, &l, &deep).unwrap();
     assert_eq!(d.compare(&o).missing, 0);
 }
 

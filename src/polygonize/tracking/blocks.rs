@@ -533,7 +533,7 @@ impl BlockTracking {
 
     /// Enters seed cell `c` (ignored outside the lattice): its bit in its block.
     fn seed(&mut self, c: [u32; 3], lattice: &Lattice, grid: &BlockGrid) {
-        if (0..3).all(|a| c[a] < lattice.cells[a]) {
+        if (0..3).all(|a| c[a] < lattice.cells()[a]) {
             let (i, l) = grid.locate(c);
             let mut bits = [0u64; 8];
             bits[l[2] as usize] = 1 << (l[0] + 8 * l[1]);
@@ -648,7 +648,7 @@ impl BlockTracking {
                 self.seed(w.cell, lattice, grid);
                 return false;
             }
-            if !w.advance(lattice.cells, max_walk) {
+            if !w.advance(lattice.cells(), max_walk) {
                 return false;
             }
         }

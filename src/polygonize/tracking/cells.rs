@@ -19,7 +19,7 @@
 use super::settings::BLOCKS_PER_BATCH;
 use super::walker::{start_walkers, step_walkers, FACE_STEP};
 use super::{Components, TrackingSettings};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::field::{BlockField, Field};
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
@@ -83,20 +83,15 @@ impl CellTracking {
             + self.signs.capacity() * std::mem::size_of::<(Option<BlockSigns>, u64)>()
     }
 
-    /// The components that hold a seed ([`Components::Seeded`]; [`Components::All`] needs a
-    /// [`BlockField`]: [`CellTracking::polygonize_bounded`]).
+    /// The components that hold a seed ([`Components::Seeded`]; [`Components::All`] is
+    /// [`CellTracking::polygonize_bounded`]'s).
     pub(super) fn polygonize<F: Field + ?Sized>(
         &mut self,
         field: &F,
         lattice: &Lattice,
         settings: &TrackingSettings,
     ) -> Result<(&Mesh, Stats)> {
-        if settings.components == Components::All {
-            return Err(Error::invalid(
-                "components",
-                "Components::All needs a field with block bounds (a BlockField)",
-            ));
-        }
+        debug_assert_eq!(settings.components, Components::Seeded);
         let mut stats = self.walk_from(field, lattice, settings)?;
         self.finish(field, lattice, &settings.common, &mut stats)?;
         Ok((&self.mesh, stats))
@@ -190,7 +185,7 @@ impl CellTracking {
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<Vec<[u32; 3]>> {
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         let mut walkers = start_walkers(starts, lattice);
         let mut seeds = Vec::new();
         while !walkers.is_empty() {
@@ -221,7 +216,7 @@ impl CellTracking {
         settings: &Settings,
         stats: &mut Stats,
     ) -> Result<()> {
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         self.wave.clear();
         for &c in seeds {
             if c[0] < cells[0] && c[1] < cells[1] && c[2] < cells[2] && self.cache.queue(c) {
@@ -242,7 +237,7 @@ impl CellTracking {
         stats: &mut Stats,
     ) -> Result<()> {
         let table = CaseTable::get(settings.ambiguity);
-        let cells = lattice.cells;
+        let cells = lattice.cells();
         let mut vertices = std::mem::take(&mut self.mesh.vertices);
         let mut triangles = std::mem::take(&mut self.mesh.triangles);
         while !self.wave.is_empty() {

@@ -32,7 +32,7 @@
 //! use implicitmesh::field::blob::{BlobField, PerPrimitive, BlobSettings};
 //! use implicitmesh::lattice::Lattice;
 //! use implicitmesh::polygonize::tracking::{Tessellator, TrackingSettings};
-//! use implicitmesh::polygonize::{dense, Settings};
+//! use implicitmesh::polygonize::{polygonize, Method, Settings};
 //!
 //! // Two blobs far apart: seeding one cell of the first finds only the first.
 //! let centers = [DVec3::new(-0.5, 0.0, 0.0), DVec3::new(0.5, 0.0, 0.0)];
@@ -54,7 +54,9 @@
 //! let (mesh, triangles, _) = tess
 //!     .polygonize_blocks::<_, u32>(&blobs, &lattice, &settings)
 //!     .unwrap();
-//! let (both, _) = dense::polygonize(&blobs, &lattice, &Settings::default()).unwrap();
+//! let both = polygonize(&blobs, &lattice, &Method::Dense(Settings::default()))
+//!     .unwrap()
+//!     .mesh;
 //! let first = both.triangles.iter().filter(|t| both.vertices[t[0] as usize].x < 0.0);
 //! assert_eq!(triangles.len(), first.count());
 //! assert!(mesh.vertices.iter().all(|v| v.x < 0.0));
@@ -73,5 +75,6 @@ mod walker;
 mod tests;
 
 pub use settings::{Components, TrackingSettings};
-pub use tessellator::{polygonize, polygonize_bounded, polygonize_bounded_keyed, Tessellator};
+pub(crate) use tessellator::polygonize;
+pub use tessellator::Tessellator;
 pub(in crate::polygonize) use walker::FACE_STEP;

@@ -1,5 +1,8 @@
 //! What a tracking call is asked to do: [`TrackingSettings`].
 
+use crate::error::{Error, Result};
+use crate::field::Field;
+use crate::lattice::Lattice;
 use crate::polygonize::Settings;
 use glam::DVec3;
 
@@ -44,6 +47,51 @@ impl Default for TrackingSettings {
             seed_cells: Vec::new(),
             components: Components::Seeded,
         }
+    }
+}
+
+impl TrackingSettings {
+    /// The tracking `field` calls for on `lattice`, with the shared settings `common`: walks
+    /// from `seeds` when given (each up to the lattice's longest side), else from the field's
+    /// own starts ([`Field::starts`]: blob centres, a fit's data points); every component
+    /// ([`Components::All`]) of a field with block bounds ([`Field::block_field`]), the seeded
+    /// ones of any other.
+    ///
+    /// Errors (naming `seeds`) when a seed is not finite, or when no seeds are given and the
+    /// field has no starts of its own (a Python callable).
+    pub fn for_field<F: Field + ?Sized>(
+        field: &F,
+        lattice: &Lattice,
+        common: Settings,
+        seeds: Option<Vec<DVec3>>,
+    ) -> Result<Self> {
+        let (starts, max_walk) = match seeds {
+            Some(points) => {
+                crate::error::check_finite_points("seeds", &points)?;
+                (points, *lattice.cells().iter().max().unwrap())
+            }
+            None => {
+                let s = field.starts(lattice.cell().min_element()).ok_or_else(|| {
+                    Error::invalid(
+                        "seeds",
+                        "tracking a field with no starts of its own (a callable) needs seeds: \
+                         points inside or on each component of the surface",
+                    )
+                })?;
+                (s.points, s.max_walk)
+            }
+        };
+        let components = match field.block_field() {
+            Some(_) => Components::All,
+            None => Components::Seeded,
+        };
+        Ok(TrackingSettings {
+            common,
+            starts,
+            max_walk,
+            components,
+            ..Default::default()
+        })
     }
 }
 

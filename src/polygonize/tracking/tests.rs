@@ -9,7 +9,7 @@ use crate::field::testing::{
     canonical_triangles as canonical, for_each_blob_case, random_points, vertex_normal_bits, Lying,
     BLOB_CASES,
 };
-use crate::field::{BlockField, Counting};
+use crate::field::{BlockField, Counting, Field};
 use crate::lattice::Lattice;
 use crate::mesh::Mesh;
 use crate::polygonize::{dense, sparse, Ambiguity, Settings, Stats};
@@ -58,14 +58,18 @@ fn tracking_equals_dense_on_blobs() {
                 ambiguity: amb,
                 ..Default::default()
             };
-            let (d, _) = dense::polygonize(&b, &l, &s).unwrap();
+            let crate::polygonize::Polygonized {
+                mesh: d, stats: _, ..
+            } = dense::polygonize(&b, &l, &s).unwrap();
             let counting = Counting::new(&b);
-            let max_walk = (r / l.cell.x).ceil() as u32 + 2;
+            let max_walk = (r / l.cell().x).ceil() as u32 + 2;
             let ts = TrackingSettings {
                 common: s,
                 ..walks(b.centers(), max_walk)
             };
-            let (t, st) = polygonize(&counting, &l, &ts).unwrap();
+            let crate::polygonize::Polygonized {
+                mesh: t, stats: st, ..
+            } = polygonize(&counting, &l, &ts).unwrap();
             let c = d.compare(&t);
             assert_eq!(
                 (c.missing, c.extra),
@@ -82,18 +86,23 @@ fn tracking_equals_dense_on_blobs() {
 
 #[test]
 fn every_component_needs_block_bounds() {
+    // A field without block bounds is refused, cell by cell and block by block; a blob field,
+    // also behind a reference, has them.
     let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 8).unwrap();
-    let e = polygonize(&blobs(3, 0.3, 1), &l, &seeds(&[], Components::All)).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            Error::InvalidArgument {
-                name: "components",
-                ..
-            }
-        ),
-        "{e}"
-    );
+    let sphere = crate::field::analytic::Sphere {
+        center: DVec3::ZERO,
+        radius: 0.5,
+    };
+    let all = seeds(&[[4, 4, 4]], Components::All);
+    let refused = |e: Error| matches!(e, Error::InvalidArgument { name: "method", .. });
+    assert!(refused(polygonize(&sphere, &l, &all).unwrap_err()));
+    let mut tess = Tessellator::new();
+    assert!(refused(
+        tess.polygonize_blocks::<_, u32>(&sphere, &l, &all)
+            .unwrap_err()
+    ));
+    let b = blobs(3, 0.3, 1);
+    assert!(polygonize(&&b, &l, &all).is_ok());
 }
 
 /// A hollow shell: 150 blobs of radius 0.25 on a sphere of radius 0.6 (Fibonacci points).
@@ -129,8 +138,14 @@ fn assert_same_mesh(m: &Mesh, t: &[[u32; 3]], d: &Mesh) {
 fn all_components_include_the_cavity_no_seed_reaches() {
     let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 48).unwrap();
     let s = Settings::default();
-    let (d, dense_stats) = dense::polygonize(&shell(), &l, &s).unwrap();
-    let (sp, _) = sparse::polygonize(&shell(), &l, &s).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: d,
+        stats: dense_stats,
+        ..
+    } = dense::polygonize(&shell(), &l, &s).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: sp, stats: _, ..
+    } = sparse::polygonize(&shell(), &l, &s).unwrap();
     // One start outside the shell: its walk along +x meets the outer surface first.
     let seeded = walks(&[DVec3::new(-0.95, 0.01, 0.02)], 48);
     let every = TrackingSettings {
@@ -146,7 +161,7 @@ fn all_components_include_the_cavity_no_seed_reaches() {
     assert_eq!(found.triangles.len() + inner, d.triangles.len());
     // Every component, cell by cell: the dense mesh, every point counted.
     let counting = Counting::new(shell());
-    let (all, st) = tess.polygonize_bounded(&counting, &l, &every).unwrap();
+    let (all, st) = tess.polygonize(&counting, &l, &every).unwrap();
     assert_same_mesh(all, &all.triangles, &d);
     assert_eq!(st.evaluations, counting.evaluations());
     assert_eq!(st.cells_crossed, dense_stats.cells_crossed);
@@ -154,10 +169,10 @@ fn all_components_include_the_cavity_no_seed_reaches() {
     // sparse's mesh, array for array.
     let f = Counting::new(shell());
     let mut ws = BlockTracking::default();
-    let (_, t, _) = by_blocks(&f, &l, &seeded, &mut ws).unwrap();
+    let (_, t, _) = by_blocks(f.block_field().unwrap(), &l, &seeded, &mut ws).unwrap();
     assert_eq!(t.len() + inner, d.triangles.len());
     let before = f.evaluations();
-    let (m, t, st) = by_blocks(&f, &l, &every, &mut ws).unwrap();
+    let (m, t, st) = by_blocks(f.block_field().unwrap(), &l, &every, &mut ws).unwrap();
     assert_eq!(
         (t, &m.vertices, &m.normals),
         (sp.triangles.clone(), &sp.vertices, &sp.normals)
@@ -182,8 +197,10 @@ fn every_component_of_random_clusters() {
         let one = |v| PerPrimitive::All(v);
         let f = BlobField::new(&centers, one(r), one(1.0), 0.5, BlobSettings::default());
         let f = f.unwrap();
-        let (d, _) = dense::polygonize(&f, &l, &s).unwrap();
-        let max_walk = (r / l.cell.x).ceil() as u32 + 2;
+        let crate::polygonize::Polygonized {
+            mesh: d, stats: _, ..
+        } = dense::polygonize(&f, &l, &s).unwrap();
+        let max_walk = (r / l.cell().x).ceil() as u32 + 2;
         let seeded = walks(&centers, max_walk);
         let (found, _) = tess.polygonize(&f, &l, &seeded).unwrap();
         let c = d.compare(found);
@@ -193,7 +210,7 @@ fn every_component_of_random_clusters() {
             components: Components::All,
             ..seeded
         };
-        let (all, _) = tess.polygonize_bounded(&f, &l, &every).unwrap();
+        let (all, _) = tess.polygonize(&f, &l, &every).unwrap();
         assert_same_mesh(all, &all.triangles, &d);
         let (m, t, _) = tess.polygonize_blocks::<_, u32>(&f, &l, &every).unwrap();
         assert_same_mesh(&m, &t, &d);
@@ -281,7 +298,11 @@ fn one_seed_finds_one_component_of_many() {
     )
     .unwrap();
     let l = Lattice::new(DVec3::splat(-1.0), DVec3::splat(1.0), [61, 23, 30]).unwrap();
-    let (all, _) = dense::polygonize(&f, &l, &Settings::default()).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: all,
+        stats: _,
+        ..
+    } = dense::polygonize(&f, &l, &Settings::default()).unwrap();
     let mut ws = BlockTracking::default();
     for centre in &centers {
         // Walked from inside the blob along +x to its surface.
@@ -315,7 +336,9 @@ fn wrong_bounds_give_an_error_not_a_panic() {
     );
     // The true field from the same seed: the whole sphere.
     let (m, t, _) = by_blocks(&f.0, &l, &seed, &mut ws).unwrap();
-    let (d, _) = dense::polygonize(&f.0, &l, &Settings::default()).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: d, stats: _, ..
+    } = dense::polygonize(&f.0, &l, &Settings::default()).unwrap();
     assert_eq!(
         (m.vertices.len(), t.len()),
         (d.vertices.len(), d.triangles.len())
@@ -342,7 +365,7 @@ fn seeds_of(m: &Mesh, l: &Lattice) -> Vec<[u32; 3]> {
         .iter()
         .map(|t| {
             let c = t.iter().map(|&v| m.vertices[v as usize]).sum::<DVec3>() / 3.0;
-            ((c - l.origin) / l.cell)
+            ((c - l.origin()) / l.cell())
                 .floor()
                 .to_array()
                 .map(|v| v as u32)
@@ -371,7 +394,9 @@ fn equals_sparse_exactly_whatever_the_earlier_calls() {
         (3, 0.5, 20, 15),
     ];
     for_each_blob_case(&cases, |f, l| {
-        let (sp, _) = sparse::polygonize(&f, l, &s).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: sp, stats: _, ..
+        } = sparse::polygonize(&f, l, &s).unwrap();
         let every = seeds(&seeds_of(&sp, l), Components::Seeded);
         let (m, t, _) = by_blocks(&f, l, &every, &mut BlockTracking::default()).unwrap();
         assert!(!t.is_empty());
@@ -392,11 +417,13 @@ fn every_component_without_seeds_is_sparse_exactly() {
     let cases = [(200, 0.25, 64, 31), (60, 0.12, 37, 32), (3, 0.5, 20, 33)];
     for_each_blob_case(&cases, |f, l| {
         let f = Counting::new(f);
-        let (sp, _) = sparse::polygonize(&f.inner, l, &s).unwrap();
+        let crate::polygonize::Polygonized {
+            mesh: sp, stats: _, ..
+        } = sparse::polygonize(&f.inner, l, &s).unwrap();
         assert!(!sp.triangles.is_empty());
         for ws in [&mut BlockTracking::default(), &mut kept] {
             let before = f.evaluations();
-            let (m, t, st) = by_blocks(&f, l, &all, ws).unwrap();
+            let (m, t, st) = by_blocks(f.block_field().unwrap(), l, &all, ws).unwrap();
             assert_is_sparse((&m, &t), &sp);
             assert_eq!(st.evaluations, f.evaluations() - before);
         }
@@ -425,7 +452,9 @@ fn blocks_evaluated_ahead_change_nothing() {
     let s = Settings::default();
     let f = blobs(40, 0.2, 21);
     let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 48).unwrap();
-    let (sp, _) = sparse::polygonize(&f, &l, &s).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: sp, stats: _, ..
+    } = sparse::polygonize(&f, &l, &s).unwrap();
     let every = seeds(&seeds_of(&sp, &l), Components::Seeded);
     let mut kept = BlockTracking::default();
     let (all, all_t, _) = by_blocks(&f, &l, &every, &mut kept).unwrap();
@@ -484,9 +513,13 @@ fn blobs_apart_in_the_last_blocks_one_at_a_time() {
     }
     // Every blob found alone (the blobs do not touch).
     assert_eq!(found, centers.len());
-    let (all, _) = dense::polygonize(&f, &l, &Settings::default()).unwrap();
+    let crate::polygonize::Polygonized {
+        mesh: all,
+        stats: _,
+        ..
+    } = dense::polygonize(&f, &l, &Settings::default()).unwrap();
     assert!(all
         .vertices
         .iter()
-        .any(|v| v.max_element() > l.origin.x + 35.0 * l.cell.x));
+        .any(|v| v.max_element() > l.origin().x + 35.0 * l.cell().x));
 }

@@ -57,12 +57,12 @@ impl Walker {
 /// The walks from `starts` (finite ones): each from the cell holding it, or the nearest cell
 /// for points outside the lattice; sorted, each once.
 pub(super) fn start_walkers(starts: &[DVec3], lattice: &Lattice) -> Vec<Walker> {
-    let cells = lattice.cells;
+    let cells = lattice.cells();
     let mut walkers: Vec<Walker> = starts
         .iter()
         .filter(|p| p.is_finite())
         .map(|p| {
-            let q = (*p - lattice.origin) / lattice.cell;
+            let q = (*p - lattice.origin()) / lattice.cell();
             let c = [0, 1, 2].map(|k| q[k].floor().clamp(0.0, (cells[k] - 1) as f64) as u32);
             Walker {
                 cell: c,

@@ -12,8 +12,11 @@ use std::mem::MaybeUninit;
 /// Where one tile's rows go: room for exactly its kept vertices, their normals (`None` when
 /// the welded mesh has no normals) and its triangles.
 pub struct Rows<'a> {
+    /// Room for the tile's kept vertices.
     pub vertices: &'a mut [MaybeUninit<DVec3>],
+    /// Room for their normals, `None` when the welded mesh has none.
     pub normals: Option<&'a mut [MaybeUninit<DVec3>]>,
+    /// Room for the tile's triangles.
     pub faces: &'a mut [MaybeUninit<[i64; 3]>],
 }
 

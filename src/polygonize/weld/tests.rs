@@ -2,7 +2,18 @@ use super::*;
 use crate::field::analytic::Sphere;
 use crate::field::Field;
 use crate::mesh::Mesh;
-use crate::polygonize::{dense, octree, Settings};
+use crate::polygonize::{octree, polygonize, Method, Settings};
+
+/// `field` polygonized over `lattice` by `method`, with the vertices' edge keys.
+fn keyed<F: Field>(field: &F, lattice: &Lattice, mut method: Method) -> (Mesh, Vec<u64>) {
+    match &mut method {
+        Method::Dense(s) | Method::Sparse(s) => s.keys = true,
+        Method::Octree(o) => o.common.keys = true,
+        Method::Tracking(t) => t.common.keys = true,
+    }
+    let p = polygonize(field, lattice, &method).unwrap();
+    (p.mesh, p.keys.unwrap())
+}
 
 /// Bit patterns of a position: equal exactly for equal coordinates.
 type Bits = [u64; 3];
@@ -42,7 +53,7 @@ fn tiles_of(lattice: &Lattice, tile: u32) -> Vec<(Lattice, [[u32; 3]; 2])> {
             .step_by(tile as usize)
             .map(move |s| (s, (s + tile).min(n)))
     };
-    let [nx, ny, nz] = lattice.cells;
+    let [nx, ny, nz] = lattice.cells();
     let mut out = Vec::new();
     for (z0, z1) in starts(nz) {
         for (y0, y1) in starts(ny) {
@@ -133,11 +144,10 @@ fn welded_tiles_are_the_whole_mesh() {
     let lattice =
         Lattice::new(DVec3::splat(-1.0), DVec3::new(1.0, 0.9, 0.8), [23, 19, 17]).unwrap();
     let settings = Settings::default();
-    let (whole, _) = dense::polygonize(&sphere, &lattice, &settings).unwrap();
-    let meshes = tile_meshes(&lattice, 5, |l| {
-        let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
-        (m, k)
-    });
+    let whole = polygonize(&sphere, &lattice, &Method::Dense(settings))
+        .unwrap()
+        .mesh;
+    let meshes = tile_meshes(&lattice, 5, |l| keyed(&sphere, l, Method::Dense(settings)));
     let welded = weld(&as_tiles(&meshes), &lattice).unwrap();
     assert_whole(&welded, &whole);
     // The first tile's vertices come first, in their order.
@@ -152,7 +162,7 @@ fn welded_tiles_are_the_whole_mesh() {
 fn zeros_at_lattice_points_weld_to_the_whole_mesh() {
     let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 16).unwrap();
     let settings = Settings::default();
-    let (whole, keys, _) = dense::polygonize_keyed(&Octahedron, &lattice, &settings).unwrap();
+    let (whole, keys) = keyed(&Octahedron, &lattice, Method::Dense(settings));
     // One vertex per crossed edge: several at one position, distinct keys.
     let mut at = whole.vertices.iter().map(|&p| bits(p)).collect::<Vec<_>>();
     at.sort_unstable();
@@ -164,16 +174,16 @@ fn zeros_at_lattice_points_weld_to_the_whole_mesh() {
     assert_eq!(distinct.len(), whole.vertices.len());
     assert!(whole.is_closed_oriented());
     let octree_settings = octree::OctreeSettings::default();
-    let (whole_octree, _) = octree::polygonize(&Octahedron, &lattice, &octree_settings).unwrap();
+    let whole_octree = polygonize(&Octahedron, &lattice, &Method::Octree(octree_settings))
+        .unwrap()
+        .mesh;
     for tile in [2, 3, 5, 16] {
         let meshes = tile_meshes(&lattice, tile, |l| {
-            let (m, k, _) = dense::polygonize_keyed(&Octahedron, l, &settings).unwrap();
-            (m, k)
+            keyed(&Octahedron, l, Method::Dense(settings))
         });
         assert_whole(&weld(&as_tiles(&meshes), &lattice).unwrap(), &whole);
         let meshes = tile_meshes(&lattice, tile, |l| {
-            let (m, k, _) = octree::polygonize_keyed(&Octahedron, l, &octree_settings).unwrap();
-            (m, k)
+            keyed(&Octahedron, l, Method::Octree(octree_settings))
         });
         assert_whole(&weld(&as_tiles(&meshes), &lattice).unwrap(), &whole_octree);
     }
@@ -188,8 +198,7 @@ fn sphere_tiles(tile: u32) -> (Lattice, Vec<TileMesh>) {
     let lattice = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 18).unwrap();
     let settings = Settings::default();
     let meshes = tile_meshes(&lattice, tile, |l| {
-        let (m, k, _) = dense::polygonize_keyed(&sphere, l, &settings).unwrap();
-        (m, k)
+        keyed(&sphere, l, Method::Dense(settings))
     });
     (lattice, meshes)
 }

@@ -346,6 +346,10 @@ impl PartitionSurface {
 }
 
 impl Field for PartitionSurface {
+    /// The boundary constraints (the data points), as for a global fit.
+    fn starts(&self, _cell: f64) -> Option<crate::field::Starts> {
+        Some(super::boundary_starts(&self.constraints()))
+    }
     fn value(&self, p: DVec3) -> f64 {
         let mut out = [0.0];
         self.blend(&[p], &mut out, None);

@@ -11,6 +11,7 @@ pub const MAX_DEPTH: u32 = 24;
 /// One node: a cube, its children and the run of points it holds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
+    /// Centre of the cube.
     pub centre: DVec3,
     /// Half the side of the cube.
     pub half: f64,
@@ -19,10 +20,12 @@ pub struct Node {
     pub children: u32,
     /// `order[start..end]` are the points inside the cube.
     pub start: u32,
+    /// End of the run of the cube's points in `order` (see `start`).
     pub end: u32,
 }
 
 impl Node {
+    /// Whether the node has no children.
     pub fn is_leaf(&self) -> bool {
         self.children == 0
     }
@@ -48,6 +51,7 @@ impl Node {
 /// An octree over a point set.
 #[derive(Clone, Debug)]
 pub struct Octree {
+    /// The nodes, the root first.
     pub nodes: Vec<Node>,
     /// Point indices, grouped by node (each node's run splits into its children's runs, in
     /// child order); increasing within a leaf.

@@ -13,9 +13,13 @@ use glam::DVec3;
 /// One patch: its ball, its counts and its fit.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PatchParts {
+    /// Centre of the patch's support.
     pub centre: DVec3,
+    /// Support radius: the patch's weight is zero from this distance on.
     pub radius: f64,
+    /// Constraints inside the support.
     pub inside: usize,
+    /// Constraints the patch interpolates.
     pub size: usize,
     /// The fit's numbers; its normalised centres only for a patch with centres of its own.
     pub fit: SurfaceParts,
@@ -27,9 +31,13 @@ pub struct PatchParts {
 /// Everything a [`PartitionSurface`] holds besides what is built again from it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PartitionParts {
+    /// How the surface was fitted.
     pub settings: PartitionSettings,
+    /// The constraints of all patches.
     pub constraints: Constraints,
+    /// The patches.
     pub patches: Vec<PatchParts>,
+    /// Largest residual over the patches and their constraints.
     pub residual: f64,
     /// The octree's nodes, for a [`PartitionSurface::cut`] (whose octree is not the one its
     /// constraints give); `None` for a whole surface.

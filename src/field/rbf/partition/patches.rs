@@ -26,6 +26,7 @@ use std::sync::Mutex;
 /// One fitted patch.
 #[derive(Clone, Debug)]
 pub struct Patch {
+    /// Centre of the support.
     pub centre: DVec3,
     /// Support radius: the patch's weight is zero from this distance on.
     pub radius: f64,
@@ -40,7 +41,9 @@ pub struct Patch {
 /// Where a patch's system comes from.
 #[derive(Clone, Copy, Debug)]
 pub struct Support {
+    /// Centre of the support.
     pub centre: DVec3,
+    /// Support radius.
     pub radius: f64,
     /// Constraints within `radius`.
     pub inside: usize,
@@ -55,6 +58,7 @@ impl Support {
         self.inside == 0 && self.extra.is_none()
     }
 
+    /// Constraints in the patch's system.
     pub fn size(&self) -> usize {
         if self.is_plane() {
             return empty::PLANE_POINTS;
@@ -89,7 +93,9 @@ pub const FAR_DATA: f64 = 0.95;
 /// point.
 #[derive(Clone, Copy, Debug)]
 pub struct Oriented {
+    /// Index of the first constraint off the surface.
     pub first_off: usize,
+    /// Largest distance of a constraint off the surface from its data point.
     pub largest_offset: f64,
 }
 
