@@ -46,9 +46,11 @@
 // which reads as the mathematics does; iterator chains over zipped slices would not.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bvh;
 pub mod cancel;
 pub mod error;
 pub mod field;
+pub mod knn;
 pub mod lattice;
 pub mod linalg;
 pub(crate) mod memory;
