@@ -435,9 +435,7 @@ impl Bvh {
         let mut stack = [0u32; STACK];
         let mut top = 0;
         let root = &self.nodes[0];
-        if ray_box(origin, inv, root.lo, root.hi, best).is_none() {
-            return None;
-        }
+        ray_box(origin, inv, root.lo, root.hi, best)?;
         stack[0] = 0;
         top += 1;
         while top > 0 {

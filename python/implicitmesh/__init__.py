@@ -21,6 +21,7 @@ from ._core import BlobField, VariationalSurface, __version__
 from .mesh import Mesh, compare
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
+from . import scanner
 from .subdivision import blend, butterfly, subdivide
 from .io import load, save
 from .frames import read_particles
