@@ -4,8 +4,8 @@ on the same points, by topology, distance to the true surface and time (issue 53
 Every closed ``_hires`` mesh of ``tests/data/meshes`` is scanned by :func:`implicitmesh.scanner.scan`
 (12 views at elevations 0°, 25° and 50°, none from below; PCA normals over 20 neighbours per
 view, oriented towards the view's camera) in each condition of :data:`CONDITIONS`, at each size of
-:data:`SIZES`; every method of :data:`METHODS` reconstructs the same points in this process, one
-after the other. A method is a function of (points, normals, size) returning a mesh: a new fit
+:data:`SIZES`; every method of :data:`METHODS` reconstructs the same points, one after the other,
+in one fresh process per case (after one untimed call of each). A method is a function of (points, normals, size) returning a mesh: a new fit
 becomes a new entry of :data:`METHODS` (a new column group of the tables).
 
 Measures of each reconstruction (:func:`measures`): bodies (connected components), watertight
@@ -17,12 +17,16 @@ consistency (the mean |cos| between the reconstruction's face normal at its samp
 face normal at their closest points); distances as fractions of the true mesh's bounding-box
 diagonal.
 
-    python -m benchmarks.bench_scans [--quick] [--sizes 50000 500000] [--results DIR]
+    python -m benchmarks.bench_scans [--quick] [--sizes 50000 500000] [--meshes NAME ...]
+                                     [--conditions CONDITION ...] [--results DIR]
+
+A run of some sizes keeps the stored cases of the other sizes (each with its own run's record).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import time
@@ -30,7 +34,7 @@ from pathlib import Path
 from typing import Callable
 
 from benchmarks.timing import (ROOT, RunRecord, fmt_ratio, fmt_s, load_raw, md_table, record_section, results_dir,
-                               run_markdown, section_parser)
+                               run_case_process, run_markdown, section_parser)
 
 MESHES = ROOT / "tests" / "data" / "meshes"
 #: The scanner's conditions: keyword arguments of ``scan`` besides the mesh and the size.
@@ -197,43 +201,50 @@ def run_case(truth, genus: int, scan, n: int, runs: int) -> dict:
     return out
 
 
-def measure(a: argparse.Namespace) -> dict:
-    import numpy as np
+def one(model: str, condition: str, n: int, runs: int) -> dict:
+    """One case in this process: the scan, one untimed call of each method (imports, thread pools
+    and allocators warm), then :func:`run_case`."""
     import trimesh
 
     import implicitmesh as im
 
+    truth = trimesh.load(MESHES / f"{model}_hires.ply", process=False)
+    genus = topology(truth.vertices, truth.faces)["genera"][0]
+    t0 = time.perf_counter()
+    s = im.scanner.scan(truth.vertices, truth.faces, n, seed=SCAN_SEED, **CONDITIONS[condition])
+    scan_s = time.perf_counter() - t0
+    for fn, _ in METHODS.values():
+        try:
+            fn(s.points, s.normals, n)
+        except Exception:  # noqa: BLE001 - run_case records the failure
+            pass
+    return {"model": model, "genus": genus, "condition": condition, "n": n, "points": len(s),
+            "resolution": s.parameters.resolution, "outliers": int(len(s.outliers)), "scan_s": scan_s,
+            "methods": run_case(truth, genus, s, n, runs)}
+
+
+def measure(a: argparse.Namespace) -> dict:
     run = RunRecord("benchmarks.bench_scans", a.quick)
-    meshes = [m for m in closed_meshes() if not a.quick or m in QUICK_MESHES]
-    conditions = [c for c in CONDITIONS if not a.quick or c in QUICK_CONDITIONS]
+    meshes = [m for m in closed_meshes() if (not a.quick or m in QUICK_MESHES) and (not a.meshes or m in a.meshes)]
+    conditions = [c for c in CONDITIONS
+                  if (not a.quick or c in QUICK_CONDITIONS) and (not a.conditions or c in a.conditions)]
     sizes = [min(SIZES)] if a.quick else [int(s) for s in a.sizes]
     cases = []
-    warmed = False
     for n in sizes:
         runs = 1 if a.quick else SIZES[n][2]
         for model in meshes:
-            truth = trimesh.load(MESHES / f"{model}_hires.ply", process=False)
-            genus = topology(truth.vertices, truth.faces)["genera"][0]
             for condition in conditions:
-                t0 = time.perf_counter()
-                s = im.scanner.scan(truth.vertices, truth.faces, n, seed=SCAN_SEED, **CONDITIONS[condition])
-                scan_s = time.perf_counter() - t0
-                if not warmed:
-                    # One untimed call of each method: imports, thread pools and allocators warm.
-                    for fn, _ in METHODS.values():
-                        fn(s.points, s.normals, n)
-                    warmed = True
-                log(f"{model}, {condition}, {len(s):,} points, {runs} run(s) per method")
-                result = run_case(truth, genus, s, n, runs)
-                cases.append({
-                    "model": model, "genus": genus, "condition": condition, "n": n, "points": len(s),
-                    "resolution": s.parameters.resolution, "outliers": int(len(s.outliers)), "scan_s": scan_s,
-                    "methods": result,
-                })
+                log(f"{model}, {condition}, {n:,} points, {runs} run(s) per method")
+                # Each case in a fresh process: a crash of one method costs one case, not the run.
+                case = {"model": model, "condition": condition, "n": n}
+                c = run_case_process("benchmarks.bench_scans", [model, condition, str(n), str(runs)], case)
+                if "error" in c:
+                    c = {**case, "genus": None, "points": 0, "methods": {m: {"error": c["error"]} for m in METHODS}}
+                cases.append(c)
                 log("  " + "; ".join(
                     f"{m}: " + (r["error"] if "error" in r else
                                 f"{r['seconds']:.2f} s, {r['bodies']} bodies, genus {r['genera'][:3]}, "
-                                f"Chamfer {r['chamfer']:.2e}") for m, r in result.items()))
+                                f"Chamfer {r['chamfer']:.2e}") for m, r in c["methods"].items()))
     raw = {"cases": cases, "methods": list(METHODS), "reference": REFERENCE, "samples": SAMPLES,
            "sizes": {str(n): list(SIZES[n]) for n in sizes}, "conditions": {c: CONDITIONS[c] for c in conditions},
            "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "implicitmesh"))}
@@ -281,9 +292,10 @@ def render(raw: dict) -> str:
         "uniform points in the box with random normals. Ours: `VariationalSurface.fit(points, normals)` then "
         "`polygonize(surface, resolution=R, method=\"octree\")` (R = 256 at 5·10⁴ points, 512 at 5·10⁵); "
         "Poisson: Open3D's `create_from_point_cloud_poisson(pcd, depth=d)` (d = 8, 9), untrimmed; both on "
-        "the same points in the same process, seconds end to end (median of the timed runs after one "
-        "warm-up call of each method). Bodies: connected components, with watertightness and each body's "
-        "genus from its Euler characteristic, largest first; ✓: one watertight body of the true genus. "
+        "the same points in the same process (a fresh one per case), seconds end to end (median of the timed "
+        "runs after one warm-up call of each method). Bodies: connected components, with watertightness and each body's "
+        "genus from its Euler characteristic, largest first ((2 − χ) / 2, which is a genus only for a closed body: "
+        "on an open or non-manifold mesh it is a count and can be negative); ✓: one watertight body of the true genus. "
         f"Chamfer: the mean of the two one-sided mean distances between {raw['samples']:,} uniform samples of "
         "each surface and the other surface (exact distances to the triangles); p99: the larger one-sided "
         "99th percentile; both as fractions of the diagonal. NC: mean |cos| between the reconstruction's "
@@ -349,9 +361,17 @@ def render(raw: dict) -> str:
 
 
 def main() -> int:
-    parser = section_parser(__doc__.split("\n")[0], "knot and spot, clean and σ 0.05 %, 5·10⁴ points, one run")
+    if len(sys.argv) == 6 and sys.argv[1] == "one":
+        print(json.dumps(one(sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5]))))
+        return 0
+    parser = section_parser(__doc__.split("\n")[0], "knot and spot, clean and σ 0.05 %%, 5·10⁴ points, one run")
     parser.add_argument("--sizes", nargs="+", type=int, default=sorted(SIZES), choices=sorted(SIZES),
                         help="points per scan (default all)")
+    parser.add_argument("--meshes", nargs="+", default=None, metavar="NAME",
+                        help="only these meshes (names before _hires; default every closed one)")
+    parser.add_argument("--conditions", nargs="+", default=None, choices=list(CONDITIONS), metavar="CONDITION",
+                        help="only these conditions (default all: "
+                        + ", ".join(repr(c) for c in CONDITIONS).replace("%", "%%") + ")")
     return record_section("scans", measure, render, parser.parse_args())
 
 

@@ -7,7 +7,7 @@
 //! and `2i + 2`) and only the boxes are stored. The points are kept in leaf order; queries about
 //! the points themselves ([`PointTree::k_nearest_of_points`], [`pca_normals`]) run in that order,
 //! so that consecutive queries read the same leaves, and each first offers the points of the few
-//! leaves around its own (a close bound from the start prunes most of the tree). A query
+//! leaves around its own, so that its bound is close from its first step. A query
 //! allocates nothing: each parallel job of [`BATCH`] queries reuses one buffer of `k`
 //! neighbours.
 
@@ -206,8 +206,8 @@ impl PointTree {
     }
 
     /// The leaves offered first to the query of the point at leaf position `s`: the subtree of
-    /// the fewest levels above its leaf whose leaves hold `k` points or more (each holds more than
-    /// LEAF / 2 points), so that the search starts with a close bound.
+    /// the fewest levels above its leaf whose leaves hold `k` points or more when each holds
+    /// LEAF / 2 (a leaf holds at least LEAF / 2 points unless the set has LEAF or fewer).
     fn seed_leaves(&self, s: usize, k: usize) -> std::ops::Range<usize> {
         let leaf = self.starts.partition_point(|&x| x as usize <= s) - 1;
         let mut levels = 0;
