@@ -6,8 +6,10 @@
 //! holds at most [`LEAF`] points, so that the tree is implicit (node `i` has children `2i + 1`
 //! and `2i + 2`) and only the boxes are stored. The points are kept in leaf order; queries about
 //! the points themselves ([`PointTree::k_nearest_of_points`], [`pca_normals`]) run in that order,
-//! so that consecutive queries read the same leaves. A query allocates nothing: each parallel
-//! job of [`BATCH`] queries reuses one buffer of `k` neighbours.
+//! so that consecutive queries read the same leaves, and each first offers the points of the few
+//! leaves around its own, so that its bound is close from its first step. A query
+//! allocates nothing: each parallel job of [`BATCH`] queries reuses one buffer of `k`
+//! neighbours.
 
 use crate::error::{Error, Result};
 use glam::DVec3;
@@ -208,10 +210,40 @@ impl PointTree {
     /// (squared distance, the caller's index) into `out`, which must not be longer than the
     /// point set.
     pub fn k_nearest_into(&self, p: DVec3, out: &mut [(f64, u32)]) {
+        self.search(p, out, 0..0);
+    }
+
+    /// The leaves offered first to the query of the point at leaf position `s`: the subtree of
+    /// the fewest levels above its leaf whose leaves hold `k` points or more when each holds
+    /// LEAF / 2 (a leaf holds at least LEAF / 2 points unless the set has LEAF or fewer).
+    fn seed_leaves(&self, s: usize, k: usize) -> std::ops::Range<usize> {
+        let leaf = self.starts.partition_point(|&x| x as usize <= s) - 1;
+        let mut levels = 0;
+        while levels < self.depth && (1usize << levels) * (LEAF / 2) < k {
+            levels += 1;
+        }
+        let first = (leaf >> levels) << levels;
+        first..first + (1 << levels)
+    }
+
+    /// [`PointTree::k_nearest_into`], offering the points of the leaves `seed` first.
+    fn search(&self, p: DVec3, out: &mut [(f64, u32)], seed: std::ops::Range<usize>) {
         if out.is_empty() {
             return;
         }
         let mut near = Nearest { found: out, len: 0 };
+        if !seed.is_empty() {
+            let (a, b) = (
+                self.starts[seed.start] as usize,
+                self.starts[seed.end] as usize,
+            );
+            for (q, &i) in self.sorted[a..b].iter().zip(&self.order[a..b]) {
+                let d = (*q - p).length_squared();
+                if d <= near.bound() {
+                    near.offer(d, i);
+                }
+            }
+        }
         let first_leaf = (1usize << self.depth) - 1;
         let mut stack = [(0u32, 0.0f64); STACK];
         stack[0] = (0, box_distance_squared(p, self.boxes[0]));
@@ -225,6 +257,9 @@ impl PointTree {
             let node = node as usize;
             if node >= first_leaf {
                 let j = node - first_leaf;
+                if seed.contains(&j) {
+                    continue;
+                }
                 let (a, b) = (self.starts[j] as usize, self.starts[j + 1] as usize);
                 for (q, &i) in self.sorted[a..b].iter().zip(&self.order[a..b]) {
                     let d = (*q - p).length_squared();
@@ -242,10 +277,16 @@ impl PointTree {
             } else {
                 ((r, dr), (l, dl))
             };
-            // The nearer child is popped first.
-            stack[top] = (b as u32, db);
-            stack[top + 1] = (a as u32, da);
-            top += 2;
+            // The nearer child is popped first; a child beyond the bound is not pushed.
+            let bound = near.bound();
+            if db <= bound {
+                stack[top] = (b as u32, db);
+                top += 1;
+            }
+            if da <= bound {
+                stack[top] = (a as u32, da);
+                top += 1;
+            }
         }
     }
 
@@ -300,10 +341,11 @@ impl PointTree {
         in_leaf_order
             .par_chunks_mut(BATCH)
             .zip(self.sorted.par_chunks(BATCH))
-            .for_each(|(out, p)| {
+            .enumerate()
+            .for_each(|(c, (out, p))| {
                 let mut found = vec![(0.0, 0u32); k];
-                for (o, p) in out.iter_mut().zip(p) {
-                    self.k_nearest_into(*p, &mut found);
+                for (s, (o, p)) in (c * BATCH..).zip(out.iter_mut().zip(p)) {
+                    self.search(*p, &mut found, self.seed_leaves(s, k));
                     *o = per_point(&found);
                 }
             });
@@ -335,10 +377,12 @@ impl PointTree {
             .par_chunks_mut(BATCH * k)
             .zip(dist_sorted.par_chunks_mut(BATCH * k))
             .zip(self.sorted.par_chunks(BATCH))
-            .for_each(|((idx, dist), q)| {
+            .enumerate()
+            .for_each(|(c, ((idx, dist), q))| {
                 let mut found = vec![(0.0, 0u32); k];
-                for ((p, i), d) in q.iter().zip(idx.chunks_mut(k)).zip(dist.chunks_mut(k)) {
-                    self.k_nearest_into(*p, &mut found);
+                let rows = q.iter().zip(idx.chunks_mut(k)).zip(dist.chunks_mut(k));
+                for (s, ((p, i), d)) in (c * BATCH..).zip(rows) {
+                    self.search(*p, &mut found, self.seed_leaves(s, k));
                     for ((f, i), d) in found.iter().zip(i).zip(d) {
                         *i = f.1;
                         *d = f.0.sqrt();
@@ -486,7 +530,7 @@ mod tests {
         // Points on a surface (a sphere), where a grid of the bounding box would be mostly empty,
         // plus exact duplicates.
         let mut pts: Vec<DVec3> = fibonacci_sphere(3000);
-        pts.extend_from_slice(&pts[..50].to_vec());
+        pts.extend_from_within(..50);
         let tree = PointTree::new(&pts).unwrap();
         let k = 12;
         let (idx, dist) = tree.k_nearest_of_points(k).unwrap();

@@ -50,6 +50,7 @@
 #![allow(clippy::needless_range_loop)]
 #![warn(missing_docs)]
 
+pub mod bvh;
 pub mod cancel;
 pub mod error;
 pub mod field;

@@ -23,6 +23,7 @@ from .mesh import Mesh, compare
 from .options import OctreeOptions, PartitionOptions, TrackingOptions
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
+from . import scanner
 from .subdivision import blend, butterfly, subdivide
 from .io import load, save
 from .frames import read_particles

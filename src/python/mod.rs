@@ -8,6 +8,7 @@ mod errors;
 mod field;
 mod interrupt;
 mod polygonize;
+mod scan;
 mod state;
 mod subdivision;
 mod variational;
@@ -54,5 +55,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<weld::PyWeldPlan>()?;
     m.add_function(wrap_pyfunction!(weld::write_welded_tile, m)?)?;
     subdivision::register(m)?;
+    scan::register(m)?;
     Ok(())
 }
