@@ -354,6 +354,25 @@ fn warn_merged(py: Python<'_>, merged: usize) -> PyResult<()> {
     PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
 }
 
+/// Warns when some of `points` (argument `name`) lie more than [`crate::spatial::OUTSIDE`] times
+/// their bulk's extent from it: the default bounds leave them out.
+fn warn_outside(py: Python<'_>, name: &str, points: &[DVec3]) -> PyResult<()> {
+    let bulk = crate::spatial::Bulk::of(points);
+    let Some(b) = bulk.and_then(|k| k.beyond(points, crate::spatial::OUTSIDE)) else {
+        return Ok(());
+    };
+    if b.ratio > crate::spatial::FAR {
+        // The fit refuses them (crate::spatial::check_far).
+        return Ok(());
+    }
+    let message = std::ffi::CString::new(format!(
+        "{name}: {b}, more than {} times; the default bounds (VariationalSurface.bounds) cover the other points only: pass bounds= to polygonize to include the far ones",
+        crate::spatial::OUTSIDE
+    ))
+    .expect("no NUL in the message");
+    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
+}
+
 fn global_only(name: &str) -> PyErr {
     value_error(
         name,
@@ -457,6 +476,7 @@ impl PyVariationalSurface {
         merge_distance: Option<f64>,
         tolerance: Option<f64>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.fit");
         let fit = fit_options(
             method,
             kernel,
@@ -471,6 +491,7 @@ impl PyVariationalSurface {
             points_arg(normals, "normals")?,
         );
         let (p, n) = (p.as_slice(), n.as_slice());
+        warn_outside(py, "points", p)?;
         if n.len() != p.len() {
             return Err(value_error(
                 "normals",
@@ -550,6 +571,7 @@ impl PyVariationalSurface {
         partition_options: Option<&Bound<'_, PyDict>>,
         merge_distance: Option<f64>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.from_mesh");
         let fit = fit_options(
             method,
             kernel,
@@ -561,6 +583,7 @@ impl PyVariationalSurface {
         )?;
         let v = points_arg(vertices, "vertices")?;
         let v = v.as_slice();
+        warn_outside(py, "vertices", v)?;
         let f = triangles(faces, "faces")?;
         let pl = placement(d, w, fit.merge_distance);
         fit.run(
@@ -602,6 +625,7 @@ impl PyVariationalSurface {
         merge_distance: Option<f64>,
         tolerance: Option<f64>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.interpolate");
         let fit = fit_options(
             method,
             kernel,
@@ -613,6 +637,7 @@ impl PyVariationalSurface {
         )?;
         let p = points_arg(points, "points")?;
         let p = p.as_slice();
+        warn_outside(py, "points", p)?;
         let v = self::values(values, "values")?;
         let merge = fit.merge_distance;
         if let Some(tolerance) = tolerance {
@@ -670,6 +695,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("VariationalSurface.evaluate");
         field_values(py, self.inner.as_field(), points)
     }
 
@@ -687,6 +713,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("VariationalSurface.gradient");
         field_gradients(py, self.inner.as_field(), points)
     }
 
@@ -696,6 +723,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("VariationalSurface.__call__");
         self.evaluate(py, points)
     }
 
@@ -847,6 +875,7 @@ impl PyVariationalSurface {
     ///     ``"format"`` (int), ``"method"`` (``"global"`` or ``"partition"``), the constraints
     ///     (``"constraint_points"`` (M, 3) float64, ...) and the fit's numbers.
     fn to_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let _call = super::interrupt::call("VariationalSurface.to_state");
         super::state::state(py, &self.inner)
     }
 
@@ -863,6 +892,7 @@ impl PyVariationalSurface {
     ///     non-finite numbers, another format version).
     #[staticmethod]
     fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.from_state");
         Ok(PyVariationalSurface {
             inner: super::state::from_state(state)?,
             reduction: None,
@@ -873,6 +903,7 @@ impl PyVariationalSurface {
     /// only the patches that values and gradients in the box use (the same bits there); a
     /// global fit as it is. What :func:`implicitmesh.distributed.polygonize` sends each tile.
     fn _cut(&self, py: Python<'_>, bounds: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface._cut");
         let b = super::convert::points(bounds, "bounds")?;
         if b.len() != 2 || !b.iter().all(|p| p.is_finite()) {
             return Err(value_error(
@@ -883,7 +914,7 @@ impl PyVariationalSurface {
         let inner = match &self.inner {
             Fitted::Global(_) => self.inner.clone(),
             Fitted::Partition(s) => {
-                Fitted::Partition(std::sync::Arc::new(py.detach(|| s.cut(b[0], b[1]))))
+                Fitted::Partition(std::sync::Arc::new(super::interrupt::detach(py, || Ok::<_, PyErr>(s.cut(b[0], b[1])))?))
             }
         };
         Ok(PyVariationalSurface {

@@ -39,11 +39,12 @@ impl CellList {
         );
         let extent = hi - lo;
         let mut side = side;
-        let cells = |s: f64| extent.to_array().map(|e| (e / s) as usize + 1);
-        while cells(side).iter().map(|&c| c as f64).product::<f64>() > MAX_CELLS {
+        // Counted in floats: a far point's (e / s) exceeds usize.
+        let cells = |s: f64| extent.to_array().map(|e| (e / s).floor() + 1.0);
+        while !(cells(side).iter().product::<f64>() <= MAX_CELLS) && side.is_finite() {
             side *= 1.25;
         }
-        let dims = cells(side);
+        let dims = cells(side).map(|c| if c.is_finite() { c as usize } else { 1 });
         let inv_side = 1.0 / side;
         let mut list = CellList {
             origin: lo,

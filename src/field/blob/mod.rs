@@ -177,6 +177,7 @@ impl BlobField {
         strengths: Option<PerPrimitive>,
     ) -> Result<()> {
         check_finite_points("centers", centers)?;
+        crate::spatial::check_far("centers", centers)?;
         let n = centers.len();
         let mut r = std::mem::take(&mut self.radii);
         let mut a = std::mem::take(&mut self.strengths);
@@ -212,6 +213,17 @@ impl BlobField {
         self.radii = r;
         self.strengths = a;
         res?;
+        // The voxel grid spans the spheres of influence: their box must be a finite size.
+        let (lo, hi) = centers.iter().zip(&self.radii).fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (c, r)| (lo.min(*c - *r), hi.max(*c + *r)),
+        );
+        if n > 0 && !(hi - lo).is_finite() {
+            return Err(Error::invalid(
+                "radii",
+                format!("the primitives' spheres span from {lo} to {hi}, wider than a float64 can hold"),
+            ));
+        }
         self.centers.clear();
         self.centers.extend_from_slice(centers);
         self.inv_r2.clear();

@@ -53,6 +53,7 @@ pub fn colour_field(
     settings: &ParticleSettings,
 ) -> Result<BlobField> {
     check_finite_points("particles", particles)?;
+    crate::spatial::check_far("particles", particles)?;
     let support = compact_support(particle_radius, settings)?;
     let blob = BlobSettings {
         voxel_size: settings.voxel_size,
