@@ -234,6 +234,10 @@ impl<'a> Grid<'a> {
 /// hold both scales.
 pub const FAR: f64 = 1e3;
 
+/// The largest span of a point set along an axis that [`check_far`] lets through: squared
+/// distances (sums of three squares) between its points stay finite.
+pub const MAX_SPAN: f64 = 1e150;
+
 /// Points farther than this many times the extent of their bulk from its centre lie outside
 /// the bulk: a fit's default bounds leave them out ([`Bulk::bounding_box`]).
 pub const OUTSIDE: f64 = 50.0;
@@ -347,6 +351,11 @@ fn distance(a: DVec3, b: DVec3) -> f64 {
     }
 }
 
+/// A point as `[x, y, z]` with four significant digits.
+pub fn short(p: DVec3) -> String {
+    format!("[{:.3e}, {:.3e}, {:.3e}]", p.x, p.y, p.z)
+}
+
 /// Points far from their bulk ([`Bulk::beyond`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Beyond {
@@ -376,38 +385,70 @@ impl std::fmt::Display for Beyond {
     }
 }
 
-/// Refuses points (finite) of which any lies more than [`FAR`] extents from their bulk, naming
-/// argument `name`: grids and trees sized from such points would have cells too coarse for the
-/// bulk or too many cells.
+/// Refuses points (finite) that span more than [`MAX_SPAN`] along an axis, or of which any lies
+/// more than [`FAR`] extents from their bulk, naming argument `name`: grids and trees sized from
+/// such points would have cells too coarse for the bulk or too many cells, and comparisons of
+/// squared distances would overflow.
 pub fn check_far(name: &'static str, points: &[DVec3]) -> crate::Result<()> {
     let Some(bulk) = Bulk::of(points) else {
         return Ok(());
     };
-    let (lo, hi) = points.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    if !(hi - lo).is_finite() {
+    if let Some(b) = bulk.beyond(points, FAR) {
         return Err(crate::Error::invalid(
-            name,
-            format!("the entries span from {lo} to {hi}, wider than a float64 can hold"),
-        ));
-    }
-    match bulk.beyond(points, FAR) {
-        Some(b) => Err(crate::Error::invalid(
             name,
             format!(
                 "{b} (more than {FAR:.0} times is refused: one grid or tree cannot hold both scales); remove or move the far entries, or handle them separately"
             ),
-        )),
-        None => Ok(()),
+        ));
     }
+    let (lo, hi) = points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    if !((hi - lo).max_element() <= MAX_SPAN) {
+        return Err(crate::Error::invalid(
+            name,
+            format!(
+                "the entries span from {} to {}, more than {MAX_SPAN:e} along an axis: squared distances between them overflow float64",
+                short(lo),
+                short(hi)
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::field::testing::random_points;
+
+    #[test]
+    fn far_points_are_named_and_left_out_of_the_bulk_box() {
+        let mut p = random_points(1000, -1.0, 1.0, 3);
+        assert_eq!(check_far("points", &p), Ok(()));
+        let bulk = Bulk::of(&p).unwrap();
+        assert!(bulk.extent > 1.5 && bulk.extent < 2.0, "{bulk:?}");
+        // Within FAR: accepted, but outside the bulk's box.
+        p.push(DVec3::new(100.0, 0.0, 0.0));
+        assert_eq!(check_far("points", &p), Ok(()));
+        let (b, outside) = Bulk::of(&p).unwrap().bounding_box(&p);
+        assert_eq!(outside, 1);
+        assert_eq!(b, Bulk::of(&p[..1000]).unwrap().bounding_box(&p[..1000]).0);
+        // Beyond FAR, at any magnitude up to the largest float: refused, naming the entry.
+        for far in [1e6, 1e200, f64::MAX] {
+            p[1000].x = far;
+            let e = check_far("points", &p).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("points: entry 1000 lies {far:.3e} from the median")), "{e}");
+        }
+        // Spans whose squares overflow: refused whatever the bulk.
+        let two = [DVec3::ZERO, DVec3::ZERO, DVec3::splat(1e200), DVec3::splat(1e200)];
+        assert!(check_far("points", &two).unwrap_err().to_string().contains("squared distances"));
+        // A bulk of one point repeated makes no point far.
+        let same = [DVec3::ONE, DVec3::ONE, DVec3::ONE, DVec3::new(1.0, 2.0, 1.0)];
+        assert_eq!(check_far("points", &same), Ok(()));
+        assert_eq!(check_far("points", &[]), Ok(()));
+    }
 
     #[test]
     fn finds_the_same_neighbours_as_brute_force() {

@@ -86,7 +86,7 @@ def test_far_particles_and_blobs_are_refused_naming_the_entry(far):
 
 def test_particles_spanning_more_than_a_float_holds_are_refused():
     p = np.array([[-1.7e308, 0, 0], [1.7e308, 0, 0]] * 4) + np.arange(8)[:, None] * [0, 1, 0]
-    with pytest.raises(ValueError, match="particles: the entries span .* wider than a float64 can hold"):
+    with pytest.raises(ValueError, match="particles: the entries span .* squared distances between them overflow"):
         im.BlobField.from_particles(p, 0.1)
 
 

@@ -132,6 +132,18 @@ impl PerPrimitive<'_> {
                 ),
             ));
         }
+        // Radii: the kernels compare squared distances with r², so 1/r² must be a normal float64.
+        if positive {
+            if let Some(i) = out.iter().position(|v| !(1.0 / (v * v)).is_normal()) {
+                return Err(Error::invalid(
+                    name,
+                    format!(
+                        "entry {i} is {:e}; must lie between 1e-154 and 1e154 (its square a normal float64)",
+                        out[i]
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -208,22 +220,26 @@ impl BlobField {
                 }
                 None => {}
             }
+            // The voxel grid spans the spheres of influence: their box must be a finite size.
+            let (lo, hi) = centers.iter().zip(&r).fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), (c, r)| (lo.min(*c - *r), hi.max(*c + *r)),
+            );
+            if n > 0 && !(hi - lo).is_finite() {
+                return Err(Error::invalid(
+                    "radii",
+                    format!(
+                        "the primitives' spheres span from {} to {}, wider than a float64 can hold",
+                        crate::spatial::short(lo),
+                        crate::spatial::short(hi)
+                    ),
+                ));
+            }
             Ok(())
         })();
         self.radii = r;
         self.strengths = a;
         res?;
-        // The voxel grid spans the spheres of influence: their box must be a finite size.
-        let (lo, hi) = centers.iter().zip(&self.radii).fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), (c, r)| (lo.min(*c - *r), hi.max(*c + *r)),
-        );
-        if n > 0 && !(hi - lo).is_finite() {
-            return Err(Error::invalid(
-                "radii",
-                format!("the primitives' spheres span from {lo} to {hi}, wider than a float64 can hold"),
-            ));
-        }
         self.centers.clear();
         self.centers.extend_from_slice(centers);
         self.inv_r2.clear();

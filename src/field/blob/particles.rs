@@ -91,7 +91,9 @@ fn compact_support(particle_radius: f64, settings: &ParticleSettings) -> Result<
             ));
         }
     }
-    Ok(2.0 * smoothing_length * particle_radius)
+    let support = 2.0 * smoothing_length * particle_radius;
+    crate::field::blob::densities::check_support("particle_radius", support)?;
+    Ok(support)
 }
 
 #[cfg(test)]
