@@ -43,15 +43,20 @@ struct Node {
 /// its index in the mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
+    /// The ray parameter of the hit.
     pub t: f64,
+    /// The triangle hit.
     pub triangle: u32,
 }
 
 /// The closest point of the mesh to a query point, its distance and the triangle it lies on.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Closest {
+    /// The closest point of the mesh.
     pub point: DVec3,
+    /// Its distance from the query point.
     pub distance: f64,
+    /// The triangle it lies on.
     pub triangle: u32,
 }
 

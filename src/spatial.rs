@@ -228,10 +228,227 @@ impl<'a> Grid<'a> {
     }
 }
 
+/// Points farther than this many times the extent of their bulk ([`Bulk`]) from its centre are
+/// refused by the structures sized from coordinates (voxel grids, cell lists, trees): such a
+/// grid either has cells too large for the bulk or too many cells, and a fit's system cannot
+/// hold both scales.
+pub const FAR: f64 = 1e3;
+
+/// The largest span of a point set along an axis that [`check_far`] lets through: squared
+/// distances (sums of three squares) between its points stay finite.
+pub const MAX_SPAN: f64 = 1e150;
+
+/// Points farther than this many times the extent of their bulk from its centre lie outside
+/// the bulk: a fit's default bounds leave them out ([`Bulk::bounding_box`]).
+pub const OUTSIDE: f64 = 50.0;
+
+/// Where most of a point set lies: the per-axis median and the largest per-axis spread between
+/// the 5th and 95th percentiles, both over at most 2¹⁶ points taken at a fixed stride (so a
+/// few far points move neither).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bulk {
+    /// Per-axis median.
+    pub centre: DVec3,
+    /// Largest 5th–95th percentile spread over the three axes; when it is zero, the largest
+    /// side of the bounding box (so that coincident bulks make no point far).
+    pub extent: f64,
+}
+
+impl Bulk {
+    /// The bulk of `points` (finite; `None` when empty).
+    pub fn of(points: &[DVec3]) -> Option<Bulk> {
+        if points.is_empty() {
+            return None;
+        }
+        const SAMPLE: usize = 1 << 16;
+        let step = points.len().div_ceil(SAMPLE);
+        let mut axis = Vec::with_capacity(points.len().div_ceil(step));
+        let (mut centre, mut extent) = (DVec3::ZERO, 0.0f64);
+        for k in 0..3 {
+            axis.clear();
+            axis.extend(points.iter().step_by(step).map(|p| p[k]));
+            let n = axis.len();
+            let mut at = |q: f64| {
+                let i = ((q * (n - 1) as f64).round() as usize).min(n - 1);
+                *axis.select_nth_unstable_by(i, f64::total_cmp).1
+            };
+            centre[k] = at(0.5);
+            extent = extent.max(at(0.95) - at(0.05));
+        }
+        if !(extent > 0.0) {
+            let (lo, hi) = points.iter().fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+            );
+            extent = (hi - lo).max_element();
+        }
+        Some(Bulk { centre, extent })
+    }
+
+    /// The distance of `p` from the centre, in units of the extent (infinite for a bulk of one
+    /// point repeated, unless `p` is that point).
+    pub fn ratio(&self, p: DVec3) -> f64 {
+        distance(p, self.centre) / self.extent
+    }
+
+    /// The bounding box of the points within [`OUTSIDE`] extents of the centre, and how many
+    /// points lie beyond.
+    pub fn bounding_box(&self, points: &[DVec3]) -> ((DVec3, DVec3), usize) {
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        let mut outside = 0;
+        for p in points {
+            if self.ratio(*p) > OUTSIDE {
+                outside += 1;
+            } else {
+                (lo, hi) = (lo.min(*p), hi.max(*p));
+            }
+        }
+        ((lo, hi), outside)
+    }
+
+    /// The points farther than `factor` extents from the centre: how many, and the farthest
+    /// (index, distance, ratio).
+    pub fn beyond(&self, points: &[DVec3], factor: f64) -> Option<Beyond> {
+        let (count, far) = points
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| (i, self.ratio(*p)))
+            .filter(|&(_, r)| r > factor)
+            .fold(
+                || (0usize, None::<(usize, f64)>),
+                |(n, best), (i, r)| (n + 1, pick(best, Some((i, r)))),
+            )
+            .reduce(|| (0, None), |(n, a), (m, b)| (n + m, pick(a, b)));
+        far.map(|(index, ratio)| Beyond {
+            count,
+            index,
+            distance: distance(points[index], self.centre),
+            ratio,
+            extent: self.extent,
+        })
+    }
+}
+
+/// The farther of two (index, ratio) pairs; the lower index on ties (so the result does not
+/// depend on how the work was split).
+fn pick(a: Option<(usize, f64)>, b: Option<(usize, f64)>) -> Option<(usize, f64)> {
+    match (a, b) {
+        (Some(x), Some(y)) => Some(if y.1 > x.1 || (y.1 == x.1 && y.0 < x.0) { y } else { x }),
+        (x, None) => x,
+        (None, y) => y,
+    }
+}
+
+/// |a − b| without overflow for finite points anywhere in the range of f64 (infinite only when
+/// the difference itself is).
+fn distance(a: DVec3, b: DVec3) -> f64 {
+    let d = a - b;
+    let m = d.abs().max_element();
+    if m == 0.0 || !m.is_finite() {
+        m
+    } else {
+        m * (d / m).length()
+    }
+}
+
+/// A point as `[x, y, z]` with four significant digits.
+pub fn short(p: DVec3) -> String {
+    format!("[{:.3e}, {:.3e}, {:.3e}]", p.x, p.y, p.z)
+}
+
+/// Points far from their bulk ([`Bulk::beyond`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Beyond {
+    /// How many points lie beyond the factor.
+    pub count: usize,
+    /// The farthest one.
+    pub index: usize,
+    /// Its distance from the bulk's centre.
+    pub distance: f64,
+    /// That distance in units of the bulk's extent.
+    pub ratio: f64,
+    /// The bulk's extent.
+    pub extent: f64,
+}
+
+impl std::fmt::Display for Beyond {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "entry {} lies {:.3e} from the median of the entries, {:.2e} times the extent of their bulk ({:.3e}, their largest 5th–95th percentile spread)",
+            self.index, self.distance, self.ratio, self.extent
+        )?;
+        if self.count > 1 {
+            write!(f, "; {} entries lie that far", self.count)?;
+        }
+        Ok(())
+    }
+}
+
+/// Refuses points (finite) that span more than [`MAX_SPAN`] along an axis, or of which any lies
+/// more than [`FAR`] extents from their bulk, naming argument `name`: grids and trees sized from
+/// such points would have cells too coarse for the bulk or too many cells, and comparisons of
+/// squared distances would overflow.
+pub fn check_far(name: &'static str, points: &[DVec3]) -> crate::Result<()> {
+    let Some(bulk) = Bulk::of(points) else {
+        return Ok(());
+    };
+    if let Some(b) = bulk.beyond(points, FAR) {
+        return Err(crate::Error::invalid(
+            name,
+            format!(
+                "{b} (more than {FAR:.0} times is refused: one grid or tree cannot hold both scales); remove or move the far entries, or handle them separately"
+            ),
+        ));
+    }
+    let (lo, hi) = points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    if !((hi - lo).max_element() <= MAX_SPAN) {
+        return Err(crate::Error::invalid(
+            name,
+            format!(
+                "the entries span from {} to {}, more than {MAX_SPAN:e} along an axis: squared distances between them overflow float64",
+                short(lo),
+                short(hi)
+            ),
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::field::testing::random_points;
+
+    #[test]
+    fn far_points_are_named_and_left_out_of_the_bulk_box() {
+        let mut p = random_points(1000, -1.0, 1.0, 3);
+        assert_eq!(check_far("points", &p), Ok(()));
+        let bulk = Bulk::of(&p).unwrap();
+        assert!(bulk.extent > 1.5 && bulk.extent < 2.0, "{bulk:?}");
+        // Within FAR: accepted, but outside the bulk's box.
+        p.push(DVec3::new(100.0, 0.0, 0.0));
+        assert_eq!(check_far("points", &p), Ok(()));
+        let (b, outside) = Bulk::of(&p).unwrap().bounding_box(&p);
+        assert_eq!(outside, 1);
+        assert_eq!(b, Bulk::of(&p[..1000]).unwrap().bounding_box(&p[..1000]).0);
+        // Beyond FAR, at any magnitude up to the largest float: refused, naming the entry.
+        for far in [1e6, 1e200, f64::MAX] {
+            p[1000].x = far;
+            let e = check_far("points", &p).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("points: entry 1000 lies {far:.3e} from the median")), "{e}");
+        }
+        // Spans whose squares overflow: refused whatever the bulk.
+        let two = [DVec3::ZERO, DVec3::ZERO, DVec3::splat(1e200), DVec3::splat(1e200)];
+        assert!(check_far("points", &two).unwrap_err().to_string().contains("squared distances"));
+        // A bulk of one point repeated makes no point far.
+        let same = [DVec3::ONE, DVec3::ONE, DVec3::ONE, DVec3::new(1.0, 2.0, 1.0)];
+        assert_eq!(check_far("points", &same), Ok(()));
+        assert_eq!(check_far("points", &[]), Ok(()));
+    }
 
     #[test]
     fn finds_the_same_neighbours_as_brute_force() {

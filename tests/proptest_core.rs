@@ -4,7 +4,11 @@
 
 use glam::DVec3;
 use implicitmesh::field::analytic::Sphere;
+use implicitmesh::field::blob::densities::kernel_sums;
+use implicitmesh::field::blob::kernel::BlobKernel;
+use implicitmesh::field::blob::particles::{colour_field, ParticleSettings};
 use implicitmesh::field::blob::{BlobField, BlobSettings, PerPrimitive};
+use implicitmesh::field::rbf::partition::{PartitionSettings, PartitionSurface};
 use implicitmesh::field::rbf::{constraints, FitSettings, VariationalSurface};
 use implicitmesh::field::Field;
 use implicitmesh::lattice::Lattice;
@@ -36,6 +40,41 @@ fn points(max: usize) -> impl Strategy<Value = Vec<DVec3>> {
         prop_oneof![9 => (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z)), 1 => point()],
         0..max,
     )
+}
+
+/// A finite magnitude anywhere from 1e-300 to 1e300, either sign.
+fn magnitude() -> impl Strategy<Value = f64> {
+    (-300i32..=300, 1.0..10.0f64, any::<bool>()).prop_map(|(e, m, neg)| {
+        let v = m * 10f64.powi(e);
+        if neg {
+            -v
+        } else {
+            v
+        }
+    })
+}
+
+/// Point sets over the whole finite range: a cloud of one scale at an offset, with a single far
+/// point, mixed scales or near-duplicates at the offset (always finite).
+fn extreme_points(max: usize) -> impl Strategy<Value = Vec<DVec3>> {
+    let unit = (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z));
+    (prop::collection::vec(unit, 4..max), magnitude(), magnitude(), 0u8..4, magnitude(), any::<prop::sample::Index>())
+        .prop_map(|(u, scale, offset, kind, other, at)| {
+            let mut p: Vec<DVec3> = u.iter().map(|q| *q * scale.abs() + DVec3::splat(offset)).collect();
+            let n = p.len();
+            match kind {
+                0 => p[at.index(n)].x = other,
+                1 => p[..n / 2].iter_mut().zip(&u).for_each(|(q, v)| *q = *v * other.abs()),
+                2 => {
+                    let h = n / 2;
+                    for i in h..n {
+                        p[i] = p[i - h] * (1.0 + 1e-15);
+                    }
+                }
+                _ => {}
+            }
+            p.into_iter().map(|q| if q.is_finite() { q } else { DVec3::splat(1e300) }).collect()
+        })
 }
 
 fn small_lattice() -> impl Strategy<Value = Lattice> {
@@ -116,6 +155,46 @@ proptest! {
         if let Ok(levels) = subdivision::butterfly(&control, 1, w) {
             let fine = levels.last().unwrap();
             prop_assert!(fine.triangles.iter().flatten().all(|&i| (i as usize) < fine.vertices.len()));
+        }
+    }
+
+    #[test]
+    fn blob_fields_take_any_magnitude(c in extreme_points(40), r in magnitude(), l in small_lattice()) {
+        let Ok(blobs) = BlobField::new(&c, PerPrimitive::All(r.abs()), PerPrimitive::All(1.0), 0.5, BlobSettings::default()) else {
+            return Ok(());
+        };
+        let s = Settings::default();
+        if let (Ok(d), Ok(m)) = (polygonize(&blobs, &l, &Method::Dense(s)), polygonize(&blobs, &l, &Method::Sparse(s))) {
+            let cmp = d.mesh.compare(&m.mesh);
+            prop_assert_eq!((cmp.missing, cmp.extra), (0, 0));
+        }
+    }
+
+    #[test]
+    fn particles_take_any_magnitude(p in extreme_points(40), r in magnitude()) {
+        if let Ok(f) = colour_field(&p, r.abs(), &ParticleSettings::default()) {
+            prop_assert_eq!(f.centers().len(), p.len());
+            prop_assert!(f.strengths().iter().all(|a| a.is_finite() && *a > 0.0));
+        }
+        // The densities alone (whose cell list must not depend on a far point for its size):
+        // every sum counts the particle itself.
+        if let Ok(sums) = kernel_sums(&p, r.abs(), BlobKernel::CubicSpline) {
+            prop_assert!(sums.iter().all(|s| *s >= 1.0 || !s.is_finite()));
+        }
+    }
+
+    #[test]
+    fn partition_fits_take_any_magnitude(p in extreme_points(60)) {
+        let n: Vec<DVec3> = p.iter().enumerate().map(|(i, _)| DVec3::new(1.0, i as f64, 0.5).normalize()).collect();
+        let settings = PartitionSettings { max_per_leaf: 8, max_patch: 16, min_points: 8, ..Default::default() };
+        if let Ok(s) = PartitionSurface::fit(&p, &n, &Default::default(), &settings) {
+            // Loading what it saved, with one constraint moved anywhere, gives a surface or an
+            // error.
+            let mut parts = s.parts();
+            if let Some(q) = parts.constraints.points.first_mut() {
+                *q = DVec3::new(1e200, 0.0, 0.0);
+            }
+            let _ = PartitionSurface::from_parts(parts);
         }
     }
 }

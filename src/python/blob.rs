@@ -73,6 +73,7 @@ impl PyBlobField {
         kernel: &str,
         precision: &str,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("BlobField");
         let c = points(centers, "centers")?;
         let r = per_primitive(radii, "radii")?;
         let a = match strengths {
@@ -85,7 +86,7 @@ impl PyBlobField {
             precision: Precision::parse(precision)?,
         };
         let inner =
-            py.detach(|| BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings))?;
+            super::interrupt::detach(py, || BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings))?;
         Ok(PyBlobField { inner })
     }
 
@@ -151,6 +152,7 @@ impl PyBlobField {
         precision: &str,
         progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("BlobField.from_particles");
         let p = points(particles, "particles")?;
         let settings = ParticleSettings {
             smoothing_length,
@@ -196,13 +198,14 @@ impl PyBlobField {
         radii: Option<&Bound<'_, PyAny>>,
         strengths: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
+        let _call = super::interrupt::call("BlobField.update");
         let c = points(centers, "centers")?;
         let r = radii.map(|r| per_primitive(r, "radii")).transpose()?;
         let a = strengths
             .map(|a| per_primitive(a, "strengths"))
             .transpose()?;
         let inner = &mut self.inner;
-        py.detach(|| inner.update(&c, r.as_ref().map(as_per), a.as_ref().map(as_per)))?;
+        super::interrupt::detach(py, || inner.update(&c, r.as_ref().map(as_per), a.as_ref().map(as_per)))?;
         Ok(())
     }
 
@@ -212,6 +215,7 @@ impl PyBlobField {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("BlobField.evaluate");
         field_values(py, &self.inner, points)
     }
 
@@ -221,6 +225,7 @@ impl PyBlobField {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("BlobField.potential");
         let p = self::points(points, "points")?;
         crate::error::check_finite_points("points", &p)?;
         let b = &self.inner;
@@ -234,6 +239,7 @@ impl PyBlobField {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("BlobField.gradient");
         field_gradients(py, &self.inner, points)
     }
 
@@ -242,6 +248,7 @@ impl PyBlobField {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("BlobField.__call__");
         self.evaluate(py, points)
     }
 
@@ -260,6 +267,7 @@ impl PyBlobField {
         tile: [u64; 3],
         margin: f64,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let _call = super::interrupt::call("BlobField._tile_primitives");
         let grid = blob::tiles::TileGrid {
             origin: DVec3::from_array(origin),
             cell: DVec3::from_array(cell),
@@ -280,8 +288,9 @@ impl PyBlobField {
     /// threshold and settings: the field ``BlobField(centers[index], radii[index],
     /// strengths[index], threshold, **settings)`` is.
     fn _subset(&self, py: Python<'_>, index: numpy::PyReadonlyArray1<'_, u32>) -> PyResult<Self> {
+        let _call = super::interrupt::call("BlobField._subset");
         let keep = index.as_array().to_vec();
-        let inner = py.detach(|| self.inner.subset(&keep))?;
+        let inner = super::interrupt::detach(py, || self.inner.subset(&keep))?;
         Ok(PyBlobField { inner })
     }
 

@@ -225,7 +225,7 @@ fn batch<T: Clone + Default + Send>(
         Ok(out)
     };
     if n <= CHUNK {
-        Ok(py.detach(work)?)
+        super::interrupt::detach(py, work)
     } else {
         super::interrupt::run(py, None, false, work)
     }

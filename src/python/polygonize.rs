@@ -287,6 +287,7 @@ pub fn polygonize<'py>(
     window: Option<&Bound<'py, PyAny>>,
     boundary: bool,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    let _call = super::interrupt::call("polygonize");
     let field = FieldArg::extract(field)?;
     let mut lattice = parse_lattice(bounds, resolution)?;
     let mut cells = [[0; 3], lattice.cells()];
@@ -395,6 +396,7 @@ pub fn project_mesh<'py>(
     batch_size: usize,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    let _call = super::interrupt::call("project_mesh");
     let field = FieldArg::extract(field)?;
     let lattice = parse_lattice(bounds, resolution)?;
     let settings = shared_settings("separate", normals, true, batch_size, None)?;
@@ -458,6 +460,7 @@ impl PyTessellator {
         blocks: bool,
         progress: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyTuple>> {
+        let _call = super::interrupt::call("Tessellator.polygonize");
         let field = FieldArg::extract(field)?;
         let lattice = parse_lattice(bounds, resolution)?;
         let settings = shared_settings(ambiguity, normals, false, batch_size, memory_limit)?;

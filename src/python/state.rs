@@ -551,7 +551,7 @@ fn fit_from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
             };
             let (flat, tree) = (FlatPatches::read(d)?, tree_of(d)?);
             let py = d.py();
-            let patches = py.detach(|| flat.patches(kernel))?;
+            let patches = super::interrupt::detach(py, || flat.patches(kernel))?;
             let parts = PartitionParts {
                 settings,
                 constraints,

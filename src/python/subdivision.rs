@@ -81,6 +81,7 @@ pub fn subdivide<'py>(
     step: Option<f64>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
+    let _call = super::interrupt::call("subdivide");
     let field = FieldArg::extract(field)?;
     let levels = unsigned("levels", levels)?;
     let control = control_mesh(vertices, faces)?;
@@ -133,6 +134,7 @@ pub fn butterfly<'py>(
     w: f64,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
+    let _call = super::interrupt::call("butterfly");
     let levels = unsigned("levels", levels)?;
     let control = control_mesh(vertices, faces)?;
     let result = run(py, progress, false, move || {

@@ -116,7 +116,7 @@ impl<'a, 'py> FitOptions<'a, 'py> {
             PyErr::warn(py, &py.get_type::<PyUserWarning>(), message, 1)?;
         }
         if let (Some(r), Some(t)) = (&r, tolerance) {
-            warn_outside(py, r, t, points.len())?;
+            warn_beyond_tolerance(py, r, t, points.len())?;
         }
         Ok(PyVariationalSurface {
             inner,
@@ -157,7 +157,7 @@ impl<'a, 'py> FitOptions<'a, 'py> {
         end.call0()?;
         let (inner, r) = fitted?;
         warn_merged(py, inner.merged())?;
-        warn_outside(py, &r, tolerance, data.data_points())?;
+        warn_beyond_tolerance(py, &r, tolerance, data.data_points())?;
         Ok(PyVariationalSurface {
             inner,
             reduction: Some(r),
@@ -166,7 +166,7 @@ impl<'a, 'py> FitOptions<'a, 'py> {
 }
 
 /// A `UserWarning` when points stayed farther than `tolerance` from a reduced fit.
-fn warn_outside(py: Python<'_>, r: &Reduction, tolerance: f64, points: usize) -> PyResult<()> {
+fn warn_beyond_tolerance(py: Python<'_>, r: &Reduction, tolerance: f64, points: usize) -> PyResult<()> {
     if r.outside == 0 {
         return Ok(());
     }
@@ -266,6 +266,25 @@ fn warn_merged(py: Python<'_>, merged: usize) -> PyResult<()> {
     let message = std::ffi::CString::new(format!(
         "{merged} data {noun} lay within merge_distance of another and {verb} merged into it \
          (see VariationalSurface.merged_points)"
+    ))
+    .expect("no NUL in the message");
+    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
+}
+
+/// Warns when some of `points` (argument `name`) lie more than [`crate::spatial::OUTSIDE`] times
+/// their bulk's extent from it: the default bounds leave them out.
+fn warn_outside(py: Python<'_>, name: &str, points: &[DVec3]) -> PyResult<()> {
+    let bulk = crate::spatial::Bulk::of(points);
+    let Some(b) = bulk.and_then(|k| k.beyond(points, crate::spatial::OUTSIDE)) else {
+        return Ok(());
+    };
+    if b.ratio > crate::spatial::FAR {
+        // The fit refuses them (crate::spatial::check_far).
+        return Ok(());
+    }
+    let message = std::ffi::CString::new(format!(
+        "{name}: {b}, more than {} times; the default bounds (VariationalSurface.bounds) cover the other points only: pass bounds= to polygonize to include the far ones",
+        crate::spatial::OUTSIDE
     ))
     .expect("no NUL in the message");
     PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
@@ -375,6 +394,7 @@ impl PyVariationalSurface {
         merge_distance: Option<f64>,
         tolerance: Option<f64>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.fit");
         let fit = fit_options(
             method,
             kernel,
@@ -390,6 +410,7 @@ impl PyVariationalSurface {
             points_arg(normals, "normals")?,
         );
         let (p, n) = (p.as_slice(), n.as_slice());
+        warn_outside(py, "points", p)?;
         if n.len() != p.len() {
             return Err(value_error(
                 "normals",
@@ -449,6 +470,7 @@ impl PyVariationalSurface {
         partition_options: Option<&Bound<'_, PyDict>>,
         merge_distance: Option<f64>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.from_mesh");
         let fit = fit_options(
             method,
             kernel,
@@ -460,9 +482,11 @@ impl PyVariationalSurface {
             (d, w),
         )?;
         let v = points_arg(vertices, "vertices")?;
+        let v = v.as_slice();
+        warn_outside(py, "vertices", v)?;
         let f = triangles(faces, "faces")?;
         let data = FitData::Mesh {
-            vertices: v.as_slice(),
+            vertices: v,
             faces: &f,
         };
         fit.run(py, data, None)
@@ -499,6 +523,7 @@ impl PyVariationalSurface {
         merge_distance: Option<f64>,
         tolerance: Option<f64>,
     ) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.interpolate");
         let fit = fit_options(
             method,
             kernel,
@@ -511,6 +536,7 @@ impl PyVariationalSurface {
         )?;
         let p = points_arg(points, "points")?;
         let p = p.as_slice();
+        warn_outside(py, "points", p)?;
         let v = self::values(values, "values")?;
         if tolerance.is_some() && v.len() != p.len() {
             return Err(value_error(
@@ -543,6 +569,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("VariationalSurface.evaluate");
         field_values(py, self.inner.as_field(), points)
     }
 
@@ -560,6 +587,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("VariationalSurface.gradient");
         field_gradients(py, self.inner.as_field(), points)
     }
 
@@ -569,6 +597,7 @@ impl PyVariationalSurface {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let _call = super::interrupt::call("VariationalSurface.__call__");
         self.evaluate(py, points)
     }
 
@@ -773,6 +802,7 @@ impl PyVariationalSurface {
     ///     ``"format"`` (int), ``"method"`` (``"global"`` or ``"partition"``), the constraints
     ///     (``"constraint_points"`` (M, 3) float64, ...) and the fit's numbers.
     fn to_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let _call = super::interrupt::call("VariationalSurface.to_state");
         super::state::state(py, &self.inner)
     }
 
@@ -789,6 +819,7 @@ impl PyVariationalSurface {
     ///     non-finite numbers, another format version).
     #[staticmethod]
     fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface.from_state");
         Ok(PyVariationalSurface {
             inner: super::state::from_state(state)?,
             reduction: None,
@@ -799,6 +830,7 @@ impl PyVariationalSurface {
     /// only the patches that values and gradients in the box use (the same bits there); a
     /// global fit as it is. What :func:`implicitmesh.distributed.polygonize` sends each tile.
     fn _cut(&self, py: Python<'_>, bounds: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let _call = super::interrupt::call("VariationalSurface._cut");
         let b = super::convert::points(bounds, "bounds")?;
         if b.len() != 2 || !b.iter().all(|p| p.is_finite()) {
             return Err(value_error(
@@ -806,7 +838,7 @@ impl PyVariationalSurface {
                 "expected finite [[xmin, ymin, zmin], [xmax, ymax, zmax]]",
             ));
         }
-        let inner = py.detach(|| self.inner.cut(b[0], b[1]));
+        let inner = super::interrupt::detach(py, || Ok::<_, PyErr>(self.inner.cut(b[0], b[1])))?;
         Ok(PyVariationalSurface {
             inner,
             reduction: self.reduction.clone(),

@@ -179,6 +179,7 @@ pub fn weld_tiles<'py>(
     cell: [f64; 3],
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    let _call = super::interrupt::call("weld_tiles");
     let lattice = whole_lattice(cells, origin, cell)?;
     let mut arrays = Vec::with_capacity(tiles.len());
     for t in &tiles {
@@ -260,6 +261,7 @@ impl PyStreamedWeld {
         boundary: &Bound<'_, PyAny>,
         keys: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
+        let _call = super::interrupt::call("StreamedWeld.add");
         let arrays = tile_arrays([window, vertices, faces, normals, boundary, keys])?;
         let tile = as_tile(&arrays)?;
         let lattice = &self.lattice;
@@ -272,7 +274,7 @@ impl PyStreamedWeld {
         }
         if rows < SMALL_TILE {
             // Done before Ctrl-C would be looked at: no task to poll.
-            return py.detach(|| weld.add(&tile, lattice)).map_err(PyErr::from);
+            return super::interrupt::detach(py, || weld.add(&tile, lattice));
         }
         run(py, None, false, || weld.add(&tile, lattice))
     }

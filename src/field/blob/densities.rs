@@ -39,11 +39,12 @@ impl CellList {
         );
         let extent = hi - lo;
         let mut side = side;
-        let cells = |s: f64| extent.to_array().map(|e| (e / s) as usize + 1);
-        while cells(side).iter().map(|&c| c as f64).product::<f64>() > MAX_CELLS {
+        // Counted in floats: a far point's (e / s) exceeds usize.
+        let cells = |s: f64| extent.to_array().map(|e| (e / s).floor() + 1.0);
+        while !(cells(side).iter().product::<f64>() <= MAX_CELLS) && side.is_finite() {
             side *= 1.25;
         }
-        let dims = cells(side);
+        let dims = cells(side).map(|c| if c.is_finite() { c as usize } else { 1 });
         let inv_side = 1.0 / side;
         let mut list = CellList {
             origin: lo,
@@ -108,6 +109,7 @@ impl CellList {
 /// the blob field evaluates it. Parallel; stops between steps when the caller's
 /// [`crate::cancel`] token is set, and reports particles done.
 pub fn kernel_sums(points: &[DVec3], support: f64, kernel: BlobKernel) -> Result<Vec<f64>> {
+    check_support("support", support)?;
     if points.is_empty() {
         return Ok(Vec::new());
     }
@@ -134,6 +136,21 @@ pub fn kernel_sums(points: &[DVec3], support: f64, kernel: BlobKernel) -> Result
         sums[i as usize] = s;
     }
     Ok(sums)
+}
+
+/// Errors (naming `name`) unless `support` is positive with a square and an inverse square that
+/// are normal float64 numbers: the sums compare squared distances with it.
+pub fn check_support(name: &'static str, support: f64) -> Result<()> {
+    let inv = 1.0 / (support * support);
+    if !(support > 0.0 && inv.is_finite() && inv >= f64::MIN_POSITIVE) {
+        return Err(crate::error::Error::invalid(
+            name,
+            format!(
+                "the compact support H = 2 · smoothing_length · particle_radius = {support:e} must lie between 1e-154 and 1e154 (its square must be a normal float64)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Σ w over the particles of the runs around `p` (1/H² `inv`); the particles at H or beyond,
@@ -185,5 +202,20 @@ mod tests {
         assert!(kernel_sums(&[], 0.1, BlobKernel::CubicSpline)
             .unwrap()
             .is_empty());
+    }
+
+    /// A particle far from the rest (which the colour field refuses, but the sums take): the
+    /// cell list stays within its cap and the sums are the direct ones.
+    #[test]
+    fn a_far_particle_keeps_the_cell_list_bounded() {
+        let mut p = random_points(500, -1.0, 1.0, 5);
+        p.push(DVec3::new(1e200, 0.0, 0.0));
+        let h = 0.01;
+        let sums = kernel_sums(&p, h, BlobKernel::CubicSpline).unwrap();
+        for (a, s) in p.iter().zip(&sums) {
+            let want: f64 = p.iter().map(|b| BlobKernel::CubicSpline.value((*a - *b).length(), h)).sum();
+            assert!((s - want).abs() <= 1e-12 * want && *s >= 1.0);
+        }
+        assert!(kernel_sums(&p, 1e-160, BlobKernel::CubicSpline).is_err());
     }
 }

@@ -134,6 +134,18 @@ impl PerPrimitive<'_> {
                 ),
             ));
         }
+        // Radii: the kernels compare squared distances with r², so 1/r² must be a normal float64.
+        if positive {
+            if let Some(i) = out.iter().position(|v| !(1.0 / (v * v)).is_normal()) {
+                return Err(Error::invalid(
+                    name,
+                    format!(
+                        "entry {i} is {:e}; must lie between 1e-154 and 1e154 (its square a normal float64)",
+                        out[i]
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -179,6 +191,7 @@ impl BlobField {
         strengths: Option<PerPrimitive>,
     ) -> Result<()> {
         check_finite_points("centers", centers)?;
+        crate::spatial::check_far("centers", centers)?;
         let n = centers.len();
         let mut r = std::mem::take(&mut self.radii);
         let mut a = std::mem::take(&mut self.strengths);
@@ -208,6 +221,21 @@ impl BlobField {
                     ))
                 }
                 None => {}
+            }
+            // The voxel grid spans the spheres of influence: their box must be a finite size.
+            let (lo, hi) = centers.iter().zip(&r).fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), (c, r)| (lo.min(*c - *r), hi.max(*c + *r)),
+            );
+            if n > 0 && !(hi - lo).is_finite() {
+                return Err(Error::invalid(
+                    "radii",
+                    format!(
+                        "the primitives' spheres span from {} to {}, wider than a float64 can hold",
+                        crate::spatial::short(lo),
+                        crate::spatial::short(hi)
+                    ),
+                ));
             }
             Ok(())
         })();

@@ -53,6 +53,7 @@ pub fn colour_field(
     settings: &ParticleSettings,
 ) -> Result<BlobField> {
     check_finite_points("particles", particles)?;
+    crate::spatial::check_far("particles", particles)?;
     let support = compact_support(particle_radius, settings)?;
     let blob = BlobSettings {
         voxel_size: settings.voxel_size,
@@ -90,7 +91,9 @@ fn compact_support(particle_radius: f64, settings: &ParticleSettings) -> Result<
             ));
         }
     }
-    Ok(2.0 * smoothing_length * particle_radius)
+    let support = 2.0 * smoothing_length * particle_radius;
+    crate::field::blob::densities::check_support("particle_radius", support)?;
+    Ok(support)
 }
 
 #[cfg(test)]

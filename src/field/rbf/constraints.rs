@@ -103,6 +103,22 @@ pub fn largest_side(points: &[DVec3]) -> f64 {
     (hi - lo).max_element()
 }
 
+/// The bounding box of the points within [`crate::spatial::OUTSIDE`] extents of their bulk
+/// ([`crate::spatial::Bulk`]): the box of all points unless a few lie far from the rest. The
+/// default bounds and the default offset of the normal constraints are taken from it.
+pub fn bulk_bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
+    match crate::spatial::Bulk::of(points) {
+        Some(bulk) => bulk.bounding_box(points).0,
+        None => bounding_box(points),
+    }
+}
+
+/// The largest side of [`bulk_bounding_box`].
+pub fn bulk_largest_side(points: &[DVec3]) -> f64 {
+    let (lo, hi) = bulk_bounding_box(points);
+    (hi - lo).max_element()
+}
+
 /// Axis-aligned bounding box (min, max).
 pub fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
     points.iter().fold(
@@ -120,6 +136,7 @@ pub fn check_points(name: &'static str, points: &[DVec3]) -> Result<()> {
         ));
     }
     check_finite_points(name, points)?;
+    crate::spatial::check_far(name, points)?;
     let extent = largest_side(points);
     if extent == 0.0 {
         return Err(Error::invalid(name, "all points coincide"));
@@ -153,6 +170,22 @@ pub fn check_points(name: &'static str, points: &[DVec3]) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// `e`, or, when `e` says the system could not be solved and some of `points` lie more than
+/// [`crate::spatial::OUTSIDE`] extents from their bulk, an error naming argument `name` that says
+/// so: the distances, not the spacing, are then what the system cannot hold.
+pub fn diagnose_far(name: &'static str, points: &[DVec3], e: Error) -> Error {
+    if !matches!(e, Error::SingularSystem { .. }) {
+        return e;
+    }
+    match crate::spatial::Bulk::of(points).and_then(|b| b.beyond(points, crate::spatial::OUTSIDE)) {
+        Some(b) => Error::invalid(
+            name,
+            format!("{b}: the fit cannot hold both scales ({e}); remove the far points or fit them separately"),
+        ),
+        None => e,
+    }
 }
 
 /// Checks data for interpolation: points as [`check_points`], one finite value per point.
@@ -227,7 +260,8 @@ pub const NORMAL_CELL_OVER_SPACING: f64 = 2.0;
 /// further apart than 0.0075 × the largest side / [`D_OVER_SPACING`]).
 const SPACING_CAP_POINTS: usize = 10_000;
 
-/// The default offset of the normal constraints: 0.0075 × the largest side of the bounding box,
+/// The default offset of the normal constraints: 0.0075 × the largest side of the bounding box
+/// of the bulk ([`bulk_bounding_box`]),
 /// at most [`D_OVER_SPACING`] × the typical spacing. A partition fit's patches hold a fixed
 /// number of constraints, so their support shrinks with the spacing, and an offset
 /// large against the support leaves the field on the inner side of the data free to change
@@ -240,7 +274,7 @@ pub fn default_offset(points: &[DVec3]) -> f64 {
 /// [`default_offset`], with the grid `Grid::new(points, 0.0)` when there are at least
 /// [`SPACING_CAP_POINTS`] points.
 fn default_offset_on(points: &[DVec3], grid: Option<&Grid>) -> f64 {
-    let nominal = 0.0075 * largest_side(points);
+    let nominal = 0.0075 * bulk_largest_side(points);
     let Some(grid) = grid.filter(|_| points.len() >= SPACING_CAP_POINTS) else {
         return nominal;
     };

@@ -211,6 +211,7 @@ impl VariationalSurface {
         check_system_memory(2 * points.len(), settings.memory_limit)?;
         let c = constraints::place(points, normals, placement)?;
         Self::solve(c, settings, faer::get_global_parallelism(), false)
+            .map_err(|e| constraints::diagnose_far("points", points, e))
     }
 
     /// Fits a surface to the vertices of a triangle mesh, with area-weighted vertex normals
@@ -226,6 +227,7 @@ impl VariationalSurface {
         let caps = constraints::crease_caps(&v, &f, &n);
         let c = constraints::place_capped(&v, &n, placement, Some(&caps))?;
         Self::solve(c, settings, faer::get_global_parallelism(), false)
+            .map_err(|e| constraints::diagnose_far("vertices", &v, e))
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
@@ -240,6 +242,7 @@ impl VariationalSurface {
         check_system_memory(points.len(), settings.memory_limit)?;
         let c = constraints::interpolation_data(points, values, merge_distance)?;
         Self::solve(c, settings, faer::get_global_parallelism(), false)
+            .map_err(|e| constraints::diagnose_far("points", points, e))
     }
 
     /// Fits the constraints; `by_point` for a patch of a partition fit, whose residuals are
@@ -570,9 +573,10 @@ impl VariationalSurface {
     pub fn bounding_box(&self) -> (DVec3, DVec3) {
         bounding_box(&self.centers)
     }
-    /// Bounding box of the boundary constraints (the data points).
+    /// Bounding box of the boundary constraints (the data points) within
+    /// [`crate::spatial::OUTSIDE`] extents of their bulk ([`constraints::bulk_bounding_box`]).
     pub fn data_bounding_box(&self) -> (DVec3, DVec3) {
-        bounding_box(&self.centers[..self.constraints.boundary])
+        constraints::bulk_bounding_box(&self.centers[..self.constraints.boundary])
     }
 }
 

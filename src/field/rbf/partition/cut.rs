@@ -5,7 +5,7 @@
 //! constraints the kept patches' centres are, renumbered.
 
 use super::{patches, Constraints, PartitionSurface};
-use crate::field::rbf::constraints::bounding_box;
+use crate::field::rbf::constraints::bulk_bounding_box;
 use crate::field::rbf::PatchCentres;
 use glam::DVec3;
 
@@ -43,7 +43,7 @@ impl PartitionSurface {
         PartitionSurface {
             settings: self.settings,
             centres: constraints.points.clone(),
-            data_box: bounding_box(&constraints.points[..constraints.boundary]),
+            data_box: bulk_bounding_box(&constraints.points[..constraints.boundary]),
             constraints,
             tree,
             cut: true,

@@ -147,7 +147,7 @@ impl PartitionSurface {
     ) -> Result<Self> {
         settings.check()?;
         let c = constraints::place(points, normals, placement)?;
-        Self::solve(c, settings)
+        Self::solve(c, settings).map_err(|e| constraints::diagnose_far("points", points, e))
     }
 
     /// Fits a surface to the vertices of a triangle mesh, as
@@ -162,7 +162,7 @@ impl PartitionSurface {
         let (v, f, n) = constraints::mesh_vertices_normals(vertices, faces)?;
         let caps = constraints::crease_caps(&v, &f, &n);
         let c = constraints::place_capped(&v, &n, placement, Some(&caps))?;
-        Self::solve(c, settings)
+        Self::solve(c, settings).map_err(|e| constraints::diagnose_far("vertices", &v, e))
     }
 
     /// Interpolates arbitrary values at arbitrary points (no normal constraints added).
@@ -174,7 +174,7 @@ impl PartitionSurface {
     ) -> Result<Self> {
         settings.check()?;
         let c = constraints::interpolation_data(points, values, merge_distance)?;
-        Self::solve(c, settings)
+        Self::solve(c, settings).map_err(|e| constraints::diagnose_far("points", points, e))
     }
 
     /// The cube, centred on the data's bounding box, covering the default polygonization bounds
@@ -236,7 +236,7 @@ impl PartitionSurface {
             + (tree.nodes.len() * std::mem::size_of::<octree::Node>()) as u64;
         patches::check_memory(bytes, settings.fit.memory_limit)?;
         // From here on the points are read from the octree's copy.
-        let data_box = bounding_box(&c.points[..c.boundary]);
+        let data_box = constraints::bulk_bounding_box(&c.points[..c.boundary]);
         let mut c = c;
         drop(std::mem::take(&mut c.points));
         let fitted = patches::fit(&tree, &c, &levels, &supports, settings)?;
@@ -322,7 +322,8 @@ impl PartitionSurface {
             false => self.tree.order[k as usize],
         }
     }
-    /// Bounding box of the boundary constraints (the data points).
+    /// Bounding box of the boundary constraints (the data points) within
+    /// [`crate::spatial::OUTSIDE`] extents of their bulk ([`constraints::bulk_bounding_box`]).
     pub fn data_bounding_box(&self) -> (DVec3, DVec3) {
         self.data_box
     }

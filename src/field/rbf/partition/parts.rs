@@ -6,7 +6,7 @@
 use super::octree::Node;
 use super::{patches, Octree, PartitionSettings, PartitionSurface, Patch};
 use crate::error::Result;
-use crate::field::rbf::constraints::{bounding_box, Constraints};
+use crate::field::rbf::constraints::{bulk_bounding_box, Constraints};
 use crate::field::rbf::{bad_state, PatchFit, SurfaceParts};
 use glam::DVec3;
 
@@ -86,6 +86,18 @@ impl PartitionSurface {
         if p.patches.is_empty() {
             return Err(bad_state("no patches"));
         }
+        // The octree and the patches' cover are sized from the points: far points are refused
+        // as a fit refuses them, and so are patch balls reaching that far.
+        crate::spatial::check_far("constraint_points", &c.points).map_err(bad_state)?;
+        if let Some(bulk) = crate::spatial::Bulk::of(&c.points) {
+            let reach = crate::spatial::FAR * bulk.extent;
+            let far = |q: &PatchParts| {
+                q.centre.is_finite() && q.radius.is_finite() && (bulk.ratio(q.centre) > crate::spatial::FAR || q.radius > reach)
+            };
+            if p.patches.iter().any(far) {
+                return Err(bad_state(format!("a patch's ball reaches more than {reach:.3e} from the constraint points")));
+            }
+        }
         let cut = p.tree.is_some();
         let mut tree: Octree = match p.tree {
             Some(nodes) => Octree::from_nodes(checked_nodes(nodes)?),
@@ -123,7 +135,7 @@ impl PartitionSurface {
         crate::cancel::check()?;
         let (cover_start, cover) = patches::cover(&tree, &patches);
         // A whole surface keeps its points only in the octree's order (`centres`).
-        let data_box = bounding_box(&c.points[..c.boundary]);
+        let data_box = bulk_bounding_box(&c.points[..c.boundary]);
         let constraints = match cut {
             true => p.constraints,
             false => Constraints {
