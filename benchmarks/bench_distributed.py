@@ -17,7 +17,7 @@ Setups, each in a fresh process (its peak resident size its own):
 
 Fields: ``blobs``, primitives with centres uniform in [-0.8, 0.8]³ (radius chosen so that the
 spheres of influence cover the cube about 1.6 times: a foam of merged blobs), method
-``"sparse"``; ``variational``, a partition fit (``VariationalSurface.fit(method="partition")``)
+``"sparse"``; ``variational``, a partition fit (``VariationalSurface.fit(method="partition", exact=True)``)
 of points sampled on the knot's ``_hires`` mesh with their face normals (as in bench_scale),
 method ``"octree"``, ``normals=False``, at 256³ cells in tiles of 128³ and at 512³ in tiles of
 256³ (eight times the work per tile); ``particles``, 10⁷ particles of bench_particles' ``slab``
@@ -107,7 +107,7 @@ def make_field(name: str, size: int):
         centers = np.random.default_rng(11).uniform(-0.8, 0.8, (size, 3))
         return im.BlobField(centers, BLOB_RADIUS * (200_000 / size) ** (1 / 3))
     p, n, _ = samples(size)
-    return im.VariationalSurface.fit(p, n, method="partition")
+    return im.VariationalSurface.fit(p, n, method="partition", exact=True)
 
 
 class Phases:

@@ -83,7 +83,7 @@ def reconstruct(method: str, p, n) -> tuple[object, dict]:
 
         t = time.perf_counter()
         tolerance = TOLERANCE if method.endswith("-tol") else None
-        s = im.VariationalSurface.fit(p, n, tolerance=tolerance)
+        s = im.VariationalSurface.fit(p, n, tolerance=tolerance, exact=True)
         out["fit_s"] = time.perf_counter() - t
         if s.reduction is not None:
             out["points_used"] = s.reduction["used"]
@@ -119,7 +119,7 @@ def ferreus(p, n, cells: int, out: dict) -> tuple[object, dict]:
 
     import implicitmesh as im
 
-    s = im.VariationalSurface.fit(p, n, method="partition")  # only for its constraints and bounds
+    s = im.VariationalSurface.fit(p, n, method="partition", exact=True)  # only for its constraints and bounds
     c = s.constraints
     lo, hi = np.asarray(s.bounds)
     t = time.perf_counter()
@@ -287,7 +287,7 @@ def render(raw: dict) -> str:
         "",
         f"Run {run['date']} with `{run['command']}`. Points sampled uniformly on `{raw['model']}_hires` "
         "(`trimesh.sample.sample_surface`, seed 7) with their face normals; the same points for every method. "
-        "Ours: `VariationalSurface.fit(points, normals)` (method \"auto\") then `polygonize(method=\"octree\", "
+        "Ours: `VariationalSurface.fit(points, normals, exact=True)` (method \"auto\") then `polygonize(method=\"octree\", "
         "normals=False)` at 128³, 256³ (with `project=True`) or 1024³ over the default bounds; `ours-256-tol` fits with "
         f"`tolerance={TOLERANCE}` (greedy reduction: only the points needed to pass within it of every point). ferreus-rbf: r³ with linear drift, its "
         "default solver, on the constraints our fit places, meshed by its `build_isosurface` at 128³. Open3D: "

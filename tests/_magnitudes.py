@@ -76,7 +76,7 @@ def _fits(p, method):
     opts = {"method": method}
     if method == "partition":
         opts["partition_options"] = {"max_per_leaf": 8, "min_points": 4, "max_patch": 12}
-    s = refused_or(lambda: im.VariationalSurface.fit(p, unit(rng, len(p)), **opts))
+    s = refused_or(lambda: im.VariationalSurface.fit(p, unit(rng, len(p)), **opts, exact=True))
     refused_or(lambda: im.VariationalSurface.interpolate(p, rng.normal(size=len(p)), **opts))
     if s is not None:
         assert np.isfinite(s.bounds).all()
@@ -161,7 +161,7 @@ def _saved(method: str):
     if method not in _SURFACES:
         p, n = im.shapes.fibonacci_sphere(200)
         opts = {"partition_options": {"max_per_leaf": 16, "min_points": 8, "max_patch": 40}} if method == "partition" else {}
-        _SURFACES[method] = im.VariationalSurface.fit(p, n, method=method, **opts)
+        _SURFACES[method] = im.VariationalSurface.fit(p, n, method=method, **opts, exact=True)
     return _SURFACES[method]
 
 

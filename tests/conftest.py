@@ -193,7 +193,7 @@ def sphere_surfaces(sphere_data):
     from implicitmesh import VariationalSurface
 
     p, n = sphere_data
-    return {k: VariationalSurface.fit(p, n, kernel=k) for k in KERNELS}
+    return {k: VariationalSurface.fit(p, n, kernel=k, exact=True) for k in KERNELS}
 
 
 @pytest.fixture(scope="session")

@@ -29,7 +29,7 @@ def mesh():
 
 @pytest.fixture(scope="module")
 def surface(data):
-    return VariationalSurface.fit(*data)
+    return VariationalSurface.fit(*data, exact=True)
 
 
 def with_entry(a, index, value):
@@ -44,9 +44,9 @@ def with_entry(a, index, value):
 def test_points_wrong_shape(data):
     p, n = data
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(p[:, :2], n)
+        VariationalSurface.fit(p[:, :2], n, exact=True)
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(p.ravel(), n)
+        VariationalSurface.fit(p.ravel(), n, exact=True)
     with pytest.raises(ValueError, match="points"):
         VariationalSurface.interpolate(p[:, :2], np.zeros(len(p)))
 
@@ -54,16 +54,16 @@ def test_points_wrong_shape(data):
 def test_normals_wrong_shape_or_count(data):
     p, n = data
     with pytest.raises(ValueError, match="normals"):
-        VariationalSurface.fit(p, n[:-1])
+        VariationalSurface.fit(p, n[:-1], exact=True)
     with pytest.raises(ValueError, match="normals"):
-        VariationalSurface.fit(p, n[:, :2])
+        VariationalSurface.fit(p, n[:, :2], exact=True)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_non_finite_points(data, bad):
     p, n = data
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(with_entry(p, (5, 1), bad), n)
+        VariationalSurface.fit(with_entry(p, (5, 1), bad), n, exact=True)
     with pytest.raises(ValueError, match="points"):
         VariationalSurface.interpolate(with_entry(p, (5, 1), bad), np.zeros(len(p)))
 
@@ -72,7 +72,7 @@ def test_non_finite_points(data, bad):
 def test_non_finite_normals(data, bad):
     p, n = data
     with pytest.raises(ValueError, match="normals"):
-        VariationalSurface.fit(p, with_entry(n, (7, 2), bad))
+        VariationalSurface.fit(p, with_entry(n, (7, 2), bad), exact=True)
 
 
 def test_non_finite_values(data):
@@ -92,11 +92,11 @@ def test_values_wrong_count_or_shape(data):
 def test_fewer_than_four_points(data):
     p, n = data
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(p[:3], n[:3])
+        VariationalSurface.fit(p[:3], n[:3], exact=True)
     with pytest.raises(ValueError, match="points"):
         VariationalSurface.interpolate(p[:3], np.zeros(3))
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(np.zeros((0, 3)), np.zeros((0, 3)))
+        VariationalSurface.fit(np.zeros((0, 3)), np.zeros((0, 3)), exact=True)
 
 
 def test_coplanar_points():
@@ -104,17 +104,17 @@ def test_coplanar_points():
     flat = np.c_[rng.uniform(-1, 1, size=(30, 2)), np.zeros(30)]
     normals = np.tile([0.0, 0.0, 1.0], (30, 1))
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(flat, normals)
+        VariationalSurface.fit(flat, normals, exact=True)
     # The same plane tilted and shifted.
     rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(flat @ rot.T + [0.3, -0.2, 0.5], normals @ rot.T)
+        VariationalSurface.fit(flat @ rot.T + [0.3, -0.2, 0.5], normals @ rot.T, exact=True)
     with pytest.raises(ValueError, match="points"):
         VariationalSurface.interpolate(flat, rng.normal(size=30))
     # Collinear points too.
     line = np.outer(np.linspace(-1, 1, 10), [1.0, 2.0, 3.0])
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(line, np.tile([0.0, 0.0, 1.0], (10, 1)))
+        VariationalSurface.fit(line, np.tile([0.0, 0.0, 1.0], (10, 1)), exact=True)
 
 
 def test_duplicate_points_are_merged_with_a_warning(data):
@@ -123,7 +123,7 @@ def test_duplicate_points_are_merged_with_a_warning(data):
     dup[40] = dup[3]
     dup[41] = dup[5] + 1e-12
     with pytest.warns(UserWarning, match="2 data points"):
-        s = VariationalSurface.fit(dup, n)
+        s = VariationalSurface.fit(dup, n, exact=True)
     assert s.merged_points == 2
     kept = np.delete(dup, [40, 41], axis=0)
     assert np.abs(s.evaluate(kept)).max() < 1e-9
@@ -133,7 +133,7 @@ def test_duplicate_points_are_merged_with_a_warning(data):
     # Merged values are averaged: points 3 and 40 had the values 3 and 40.
     assert s.evaluate(dup[3:4])[0] == pytest.approx(21.5, abs=1e-6)
     with pytest.raises(ValueError, match="merge_distance"):
-        VariationalSurface.fit(p, n, merge_distance=-1.0)
+        VariationalSurface.fit(p, n, merge_distance=-1.0, exact=True)
     with pytest.raises(ValueError, match="merge_distance"):
         VariationalSurface.interpolate(p, np.zeros(len(p)), merge_distance=np.nan)
 
@@ -141,13 +141,13 @@ def test_duplicate_points_are_merged_with_a_warning(data):
 def test_zero_length_normal(data):
     p, n = data
     with pytest.raises(ValueError, match="normals"):
-        VariationalSurface.fit(p, with_entry(n, 11, 0.0))
+        VariationalSurface.fit(p, with_entry(n, 11, 0.0), exact=True)
 
 
 def test_unknown_kernel(data, mesh):
     p, n = data
     with pytest.raises(ValueError, match="kernel"):
-        VariationalSurface.fit(p, n, kernel="gaussian")
+        VariationalSurface.fit(p, n, kernel="gaussian", exact=True)
     with pytest.raises(ValueError, match="kernel"):
         VariationalSurface.interpolate(p, np.zeros(len(p)), kernel="gaussian")
     with pytest.raises(ValueError, match="kernel"):
@@ -158,7 +158,7 @@ def test_unknown_kernel(data, mesh):
 def test_bad_smoothing(data, smoothing):
     p, n = data
     with pytest.raises(ValueError, match="smoothing"):
-        VariationalSurface.fit(p, n, smoothing=smoothing)
+        VariationalSurface.fit(p, n, smoothing=smoothing, exact=True)
     with pytest.raises(ValueError, match="smoothing"):
         VariationalSurface.interpolate(p, np.zeros(len(p)), smoothing=smoothing)
 
@@ -167,20 +167,20 @@ def test_bad_smoothing(data, smoothing):
 def test_bad_offset_d(data, d):
     p, n = data
     with pytest.raises(ValueError, match=r"^d: "):
-        VariationalSurface.fit(p, n, d=d)
+        VariationalSurface.fit(p, n, d=d, exact=True)
 
 
 @pytest.mark.parametrize("w", [0.0, np.nan, np.inf])
 def test_bad_value_w(data, w):
     p, n = data
     with pytest.raises(ValueError, match=r"^w: "):
-        VariationalSurface.fit(p, n, w=w)
+        VariationalSurface.fit(p, n, w=w, exact=True)
 
 
 def test_fit_over_the_memory_limit(data, mesh):
     p, n = data
     with pytest.raises(ValueError, match="points|memory_limit"):
-        VariationalSurface.fit(p, n, memory_limit=1000)
+        VariationalSurface.fit(p, n, memory_limit=1000, exact=True)
     with pytest.raises(ValueError, match="points|memory_limit"):
         VariationalSurface.interpolate(p, np.zeros(len(p)), memory_limit=1000)
     with pytest.raises(ValueError, match="points|vertices|memory_limit"):
@@ -420,16 +420,16 @@ def query_points():
 def test_float32_and_lists_accepted(data):
     p, n = data
     q = query_points()
-    reference = VariationalSurface.fit(p, n).evaluate(q)
+    reference = VariationalSurface.fit(p, n, exact=True).evaluate(q)
     # float32 input: converted to float64 (the same as converting first).
-    s32 = VariationalSurface.fit(p.astype(np.float32), n.astype(np.float32))
-    s32_ref = VariationalSurface.fit(p.astype(np.float32).astype(np.float64), n.astype(np.float32).astype(np.float64))
+    s32 = VariationalSurface.fit(p.astype(np.float32), n.astype(np.float32), exact=True)
+    s32_ref = VariationalSurface.fit(p.astype(np.float32).astype(np.float64), n.astype(np.float32).astype(np.float64), exact=True)
     np.testing.assert_array_equal(s32.evaluate(q), s32_ref.evaluate(q))
     np.testing.assert_array_equal(s32.evaluate(q.astype(np.float32)), s32_ref.evaluate(q.astype(np.float32).astype(np.float64)))
     # Lists: the same as arrays.
-    sl = VariationalSurface.fit(p.tolist(), n.tolist())
+    sl = VariationalSurface.fit(p.tolist(), n.tolist(), exact=True)
     np.testing.assert_array_equal(sl.evaluate(q.tolist()), reference)
-    np.testing.assert_array_equal(sl.gradient(q.tolist()), VariationalSurface.fit(p, n).gradient(q))
+    np.testing.assert_array_equal(sl.gradient(q.tolist()), VariationalSurface.fit(p, n, exact=True).gradient(q))
     si = VariationalSurface.interpolate(p.tolist(), [0.0] * len(p))
     assert np.max(np.abs(si.evaluate(p))) <= 1e-9
     # Integer input.
@@ -458,8 +458,8 @@ def fortran(a):
 def test_fortran_order_same_as_c_order_fit(data):
     p, n = data
     q = query_points()
-    c = VariationalSurface.fit(p, n)
-    f = VariationalSurface.fit(fortran(p), fortran(n))
+    c = VariationalSurface.fit(p, n, exact=True)
+    f = VariationalSurface.fit(fortran(p), fortran(n), exact=True)
     np.testing.assert_array_equal(f.constraints["points"], c.constraints["points"])
     np.testing.assert_array_equal(f.evaluate(q), c.evaluate(q))
     np.testing.assert_array_equal(c.evaluate(fortran(q)), c.evaluate(q))
@@ -467,7 +467,7 @@ def test_fortran_order_same_as_c_order_fit(data):
     # Other non-contiguous layouts: a strided view and a transposed view.
     wide = np.zeros((len(p), 6))
     wide[:, ::2] = p
-    np.testing.assert_array_equal(VariationalSurface.fit(wide[:, ::2], n).evaluate(q), c.evaluate(q))
+    np.testing.assert_array_equal(VariationalSurface.fit(wide[:, ::2], n, exact=True).evaluate(q), c.evaluate(q))
     np.testing.assert_array_equal(c.evaluate(np.ascontiguousarray(q.T).T), c.evaluate(q))
     np.testing.assert_array_equal(c.evaluate(q[::-1])[::-1], c.evaluate(q))
 
@@ -543,11 +543,11 @@ def test_error_messages_are_in_python_terms(data, mesh):
         lambda: polygonize(SPHERE, bounds=BOX, resolution=10**7),
         lambda: polygonize(SPHERE, bounds=BOX, resolution=8, method="octree", safety=-1.0),
         lambda: polygonize(lambda q: np.zeros(len(q) + 1), bounds=BOX, resolution=8),
-        lambda: VariationalSurface.fit(p[:3], n[:3]),
-        lambda: VariationalSurface.fit(p, n[:-1]),
-        lambda: VariationalSurface.fit(with_entry(p, (0, 0), np.nan), n),
-        lambda: VariationalSurface.fit(p, np.zeros_like(n)),
-        lambda: VariationalSurface.fit(p, n, kernel="gaussian"),
+        lambda: VariationalSurface.fit(p[:3], n[:3], exact=True),
+        lambda: VariationalSurface.fit(p, n[:-1], exact=True),
+        lambda: VariationalSurface.fit(with_entry(p, (0, 0), np.nan), n, exact=True),
+        lambda: VariationalSurface.fit(p, np.zeros_like(n), exact=True),
+        lambda: VariationalSurface.fit(p, n, kernel="gaussian", exact=True),
         lambda: VariationalSurface.from_mesh(v, np.array([[0, 0, 1]])),
         lambda: VariationalSurface.from_mesh(v, f + len(v)),
         lambda: __import__("implicitmesh").BlobField(blobs_centres, -1.0),
@@ -563,6 +563,6 @@ def test_error_messages_are_in_python_terms(data, mesh):
 def test_complex_input_is_refused_not_truncated(data):
     p, n = data
     with pytest.raises(ValueError, match="points.*complex"):
-        VariationalSurface.fit(p.astype(complex), n)
+        VariationalSurface.fit(p.astype(complex), n, exact=True)
     with pytest.raises(ValueError, match="shape \\(5, 2\\)"):
-        VariationalSurface.fit(np.zeros((5, 2)), np.zeros((5, 2)))
+        VariationalSurface.fit(np.zeros((5, 2)), np.zeros((5, 2)), exact=True)

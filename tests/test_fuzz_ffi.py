@@ -69,7 +69,7 @@ def refused_naming(call, *names):
 
 @pytest.fixture(scope="module")
 def surface():
-    return im.VariationalSurface.fit(*im.shapes.fibonacci_sphere(60))
+    return im.VariationalSurface.fit(*im.shapes.fibonacci_sphere(60), exact=True)
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +86,7 @@ def test_fit_takes_anything(points, normals):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # merged points
         for fit in (
-            refused_naming(lambda: im.VariationalSurface.fit(points, normals), "points", "normals"),
+            refused_naming(lambda: im.VariationalSurface.fit(points, normals, exact=True), "points", "normals"),
             refused_naming(lambda: im.VariationalSurface.interpolate(points, values), "points", "values"),
         ):
             if fit is not None:
@@ -111,7 +111,7 @@ def test_fit_takes_every_valid_layout(rows, dtype, strided):
     fit, which interpolates its points (zero there) and is negative at the centre."""
     p = _cast(SPHERE_POINTS[rows], dtype, strided)
     n = _cast(SPHERE_NORMALS[rows], dtype, strided)
-    fit = im.VariationalSurface.fit(p, n)
+    fit = im.VariationalSurface.fit(p, n, exact=True)
     values = fit.evaluate(np.asarray(p, dtype=np.float64))
     assert values.shape == (len(rows),)
     assert np.abs(values).max() < 1e-6

@@ -34,7 +34,7 @@ def python_handles_ctrl_c():
 
 @pytest.fixture(scope="module")
 def surface():
-    return im.VariationalSurface.fit(*im.shapes.fibonacci_sphere(1500))
+    return im.VariationalSurface.fit(*im.shapes.fibonacci_sphere(1500), exact=True)
 
 
 @pytest.mark.parametrize(("method", "resolution"), [("dense", 600), ("octree", 1000)])
@@ -165,7 +165,7 @@ def scan():
 def test_partition_fit_reports_progress(scan):
     p, n = scan
     counts: list[int] = []
-    s = im.VariationalSurface.fit(p[:4000], n[:4000], method="partition", progress=counts.append)
+    s = im.VariationalSurface.fit(p[:4000], n[:4000], method="partition", progress=counts.append, exact=True)
     assert s.method == "partition"
     assert counts == sorted(counts)
     # Every constraint is inside at least one patch: the count reaches the constraints.
@@ -177,18 +177,18 @@ def test_ctrl_c_stops_a_partition_fit(scan):
     timer = interrupt_after(0.5)
     try:
         with pytest.raises(KeyboardInterrupt):
-            im.VariationalSurface.fit(p, n, method="partition")
+            im.VariationalSurface.fit(p, n, method="partition", exact=True)
     finally:
         timer.cancel()
     # The next fit works.
-    s = im.VariationalSurface.fit(p[::50], n[::50])
+    s = im.VariationalSurface.fit(p[::50], n[::50], exact=True)
     assert np.abs(s.evaluate(p[::50])).max() < 1e-6
 
 
 def test_fit_progress_must_be_a_bool_or_callable(scan):
     p, n = scan
     with pytest.raises(ValueError, match="progress"):
-        im.VariationalSurface.fit(p[:50], n[:50], progress="yes")
+        im.VariationalSurface.fit(p[:50], n[:50], progress="yes", exact=True)
 
 
 def test_global_fit_reports_progress(scan):
@@ -196,7 +196,7 @@ def test_global_fit_reports_progress(scan):
     # all 2·1500 − 4 of them by the end, in steps.
     p, n = scan
     counts: list[int] = []
-    s = im.VariationalSurface.fit(p[:1500], n[:1500], method="global", progress=counts.append)
+    s = im.VariationalSurface.fit(p[:1500], n[:1500], method="global", progress=counts.append, exact=True)
     assert s.method == "global"
     assert counts == sorted(counts)
     assert counts[-1] == 2 * 1500 - 4
@@ -208,11 +208,11 @@ def test_ctrl_c_stops_a_global_fit(scan):
     timer = interrupt_after(1.0)
     try:
         with pytest.raises(KeyboardInterrupt):
-            im.VariationalSurface.fit(p[:4000], n[:4000], method="global", progress=counts.append)
+            im.VariationalSurface.fit(p[:4000], n[:4000], method="global", progress=counts.append, exact=True)
     finally:
         timer.cancel()
     assert not counts or counts[-1] < 2 * 4000 - 4
-    s = im.VariationalSurface.fit(p[::100], n[::100], method="global")
+    s = im.VariationalSurface.fit(p[::100], n[::100], method="global", exact=True)
     assert np.abs(s.evaluate(p[::100])).max() < 1e-6
 
 

@@ -30,7 +30,7 @@ def test_octree_equals_dense_on_thin_fits(table_mesh, resolution):
     repaired = 0
     for seed, normals, noise in CASES:
         p, n = im.shapes.sample_vertices(*table_mesh, 800, normals=normals, noise_degrees=noise, seed=seed)
-        surface = im.VariationalSurface.fit(p, n)
+        surface = im.VariationalSurface.fit(p, n, exact=True)
         dense = im.polygonize(surface, bounds=BOX, resolution=resolution, method="dense", normals=False)
         octree = im.polygonize(surface, bounds=BOX, resolution=resolution, method="octree", normals=False)
         case = (seed, normals, noise)
@@ -92,7 +92,7 @@ def test_octree_equals_dense_on_random_samplings_of_the_development_meshes(name)
     v, f = np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
     for seed, (normals, noise) in enumerate((("area", 0.0), ("angle", 0.0), ("area", 4.0))):
         p, n = im.shapes.sample_vertices(v, f, 800, normals=normals, noise_degrees=noise, seed=seed)
-        surface = im.VariationalSurface.fit(p, n)
+        surface = im.VariationalSurface.fit(p, n, exact=True)
         dense = im.polygonize(surface, bounds=BOX, resolution=64, method="dense", normals=False)
         octree = im.polygonize(surface, bounds=BOX, resolution=64, method="octree", normals=False)
         c = im.compare(dense, octree)

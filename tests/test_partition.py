@@ -39,7 +39,7 @@ def knot_fits():
     """3,000 vertices of knot_hires with vertex normals, fitted both ways."""
     _, v, f = load("knot")
     p, n = shapes.sample_vertices(v, f, 3000, seed=3)
-    return p, n, VariationalSurface.fit(p, n, method="global"), VariationalSurface.fit(p, n, method="partition")
+    return p, n, VariationalSurface.fit(p, n, method="global", exact=True), VariationalSurface.fit(p, n, method="partition", exact=True)
 
 
 def test_both_fits_interpolate(knot_fits):
@@ -139,7 +139,7 @@ def test_fifty_thousand_scan_points():
     m, _, _ = load("knot")
     p, face = trimesh.sample.sample_surface(m, 50_000, seed=5)
     n = np.asarray(m.face_normals)[face]
-    s = VariationalSurface.fit(p, n)
+    s = VariationalSurface.fit(p, n, exact=True)
     assert s.method == "partition"
     assert np.max(np.abs(s.evaluate(p))) <= 1e-6
     mesh = im.polygonize(s, resolution=RES, method="octree", normals=False)
@@ -174,10 +174,10 @@ def test_interpolate_and_from_mesh_partition():
 def test_auto_chooses_by_size():
     # Global below 2000 constraints: 1000 points with normals, 2000 interpolated values.
     p, n = shapes.fibonacci_sphere(999)
-    assert VariationalSurface.fit(p, n).method == "global"
+    assert VariationalSurface.fit(p, n, exact=True).method == "global"
     p, n = shapes.fibonacci_sphere(1000)
-    assert VariationalSurface.fit(p, n).method == "partition"
-    assert VariationalSurface.fit(p, n, method="global").method == "global"
+    assert VariationalSurface.fit(p, n, exact=True).method == "partition"
+    assert VariationalSurface.fit(p, n, method="global", exact=True).method == "global"
     rng = np.random.default_rng(2)
     q = rng.uniform(-1, 1, size=(2000, 3))
     assert VariationalSurface.interpolate(q[:1999], q[:1999, 0]).method == "global"
@@ -187,7 +187,7 @@ def test_auto_chooses_by_size():
 def test_method_and_bad_input_errors():
     p, n = shapes.fibonacci_sphere(200)
     for call in (
-        lambda: VariationalSurface.fit(p, n, method="dense"),
+        lambda: VariationalSurface.fit(p, n, method="dense", exact=True),
         lambda: VariationalSurface.from_mesh(*shapes.load_model("knot"), method="kdtree"),
         lambda: VariationalSurface.interpolate(p, p[:, 0], method=""),
     ):
@@ -196,32 +196,32 @@ def test_method_and_bad_input_errors():
     bad = p.copy()
     bad[3, 1] = np.nan
     with pytest.raises(ValueError, match="points"):
-        VariationalSurface.fit(bad, n, method="partition")
+        VariationalSurface.fit(bad, n, method="partition", exact=True)
     with pytest.raises(ValueError, match="normals"):
-        VariationalSurface.fit(p, n[:-1], method="partition")
+        VariationalSurface.fit(p, n[:-1], method="partition", exact=True)
     with pytest.warns(UserWarning, match="1 data point"):
-        s = VariationalSurface.fit(np.vstack([p, p[:1]]), np.vstack([n, n[:1]]), method="partition")
+        s = VariationalSurface.fit(np.vstack([p, p[:1]]), np.vstack([n, n[:1]]), method="partition", exact=True)
     assert s.merged_points == 1
     with pytest.raises(ValueError, match="merge_distance"):
-        VariationalSurface.fit(p, n, method="partition", merge_distance=-0.1)
+        VariationalSurface.fit(p, n, method="partition", merge_distance=-0.1, exact=True)
     with pytest.raises(ValueError, match="memory_limit"):
-        VariationalSurface.fit(p, n, method="partition", memory_limit=1000)
+        VariationalSurface.fit(p, n, method="partition", memory_limit=1000, exact=True)
     with pytest.raises(ValueError, match="values"):
         VariationalSurface.interpolate(p, p[:-1, 0], method="partition")
 
 
 def test_partition_options_change_the_patches_and_are_checked():
     p, n = im.shapes.fibonacci_sphere(3000)
-    a = im.VariationalSurface.fit(p, n, method="partition")
-    b = im.VariationalSurface.fit(p, n, method="partition", partition_options={"max_per_leaf": 200, "max_patch": 600})
+    a = im.VariationalSurface.fit(p, n, method="partition", exact=True)
+    b = im.VariationalSurface.fit(p, n, method="partition", partition_options={"max_per_leaf": 200, "max_patch": 600}, exact=True)
     assert len(b.patches["sizes"]) < len(a.patches["sizes"])
     assert np.abs(b.evaluate(p)).max() < 1e-6
     with pytest.raises(ValueError, match="partition_options"):
-        im.VariationalSurface.fit(p, n, partition_options={"patch": 3})
+        im.VariationalSurface.fit(p, n, partition_options={"patch": 3}, exact=True)
     with pytest.raises(ValueError, match="partition_options"):
-        im.VariationalSurface.fit(p, n, partition_options={"overlap": "big"})
+        im.VariationalSurface.fit(p, n, partition_options={"overlap": "big"}, exact=True)
     with pytest.raises(ValueError, match="overlap"):
-        im.VariationalSurface.fit(p, n, method="partition", partition_options={"overlap": 0.5})
+        im.VariationalSurface.fit(p, n, method="partition", partition_options={"overlap": 0.5}, exact=True)
 
 
 def test_near_duplicates_from_overlapping_scans_are_merged():
@@ -233,14 +233,14 @@ def test_near_duplicates_from_overlapping_scans_are_merged():
     q = np.vstack([p, p[again] + 1e-7 * rng.normal(size=(500, 3))])
     m = np.vstack([n, n[again]])
     with pytest.warns(UserWarning, match="500 data points"):
-        s = VariationalSurface.fit(q, m, method="partition")
+        s = VariationalSurface.fit(q, m, method="partition", exact=True)
     assert s.merged_points == 500
     assert np.abs(s.evaluate(p)).max() < 1e-9
     assert np.abs(s.evaluate(q[len(p):])).max() < 1e-5
     t = VariationalSurface.from_state(s.to_state())
     assert t.merged_points == 500
     with pytest.raises(ValueError, match="ill-conditioned"):
-        VariationalSurface.fit(q, m, method="partition", merge_distance=0.0)
+        VariationalSurface.fit(q, m, method="partition", merge_distance=0.0, exact=True)
 
 
 def test_every_patch_sees_a_normal_constraint():
@@ -249,7 +249,7 @@ def test_every_patch_sees_a_normal_constraint():
     # zero over its whole support, and so would the field deep inside the solid. Such patches
     # are completed with constraints from a ball that reaches the normal constraints.
     p, n = im.shapes.fibonacci_sphere(20_000)
-    s = VariationalSurface.fit(p, n, d=0.2, method="partition")
+    s = VariationalSurface.fit(p, n, d=0.2, method="partition", exact=True)
     state = s.to_state()
     weights, start = np.abs(state["patch_normalized_weights"]), state["patch_start"]
     polynomial = np.abs(state["patch_normalized_polynomial"]).reshape(-1, 4).max(axis=1)
@@ -267,8 +267,8 @@ def test_smoothing_partition_fit_approximates_noisy_points():
     p, n = im.shapes.fibonacci_sphere(8_000)
     radius = 0.8 * np.linalg.norm(p[0])
     noisy = 0.8 * p + 0.003 * rng.normal(size=p.shape)
-    exact = VariationalSurface.fit(noisy, n, method="partition")
-    smooth = VariationalSurface.fit(noisy, n, method="partition", smoothing=1e-3)
+    exact = VariationalSurface.fit(noisy, n, method="partition", exact=True)
+    smooth = VariationalSurface.fit(noisy, n, method="partition", smoothing=1e-3, exact=True)
     assert np.abs(exact.evaluate(noisy)).max() < 1e-9
     # The smoothed surface leaves the noisy points and lies closer to the sphere they came from.
     assert np.abs(smooth.evaluate(noisy)).max() > 1e-3

@@ -21,7 +21,7 @@ def test_fit_within_tolerance_uses_fewer_points_and_meets_it(sphere_points):
     p, n = sphere_points
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no "outside the tolerance" warning
-        s = VariationalSurface.fit(p, n, tolerance=1e-4)
+        s = VariationalSurface.fit(p, n, tolerance=1e-4, exact=True)
     r = s.reduction
     assert r["outside"] == 0 and 1 <= r["rounds"] <= 4
     assert r["used"] < len(p) / 2
@@ -39,9 +39,9 @@ def test_fit_within_tolerance_uses_fewer_points_and_meets_it(sphere_points):
 
 def test_exact_fits_and_loaded_surfaces_have_no_reduction(sphere_points):
     p, n = sphere_points
-    s = VariationalSurface.fit(p[:500], n[:500])
+    s = VariationalSurface.fit(p[:500], n[:500], exact=True)
     assert s.reduction is None
-    t = VariationalSurface.fit(p, n, tolerance=1e-3)
+    t = VariationalSurface.fit(p, n, tolerance=1e-3, exact=True)
     assert t.reduction is not None
     u = pickle.loads(pickle.dumps(t))
     assert u.reduction is None
@@ -63,7 +63,7 @@ def test_a_tolerance_out_of_reach_warns_and_reports():
     p, n = shapes.fibonacci_sphere(1500)
     noisy = p + np.random.default_rng(0).normal(scale=2e-3, size=p.shape)
     with pytest.warns(UserWarning, match="farther than tolerance"):
-        s = VariationalSurface.fit(noisy, n, tolerance=1e-15, method="global")
+        s = VariationalSurface.fit(noisy, n, tolerance=1e-15, method="global", exact=True)
     r = s.reduction
     assert r["rounds"] == 2 and r["used"] == len(p)
     assert r["outside"] > 0 and r["largest_residual"] > 1e-15
@@ -73,4 +73,4 @@ def test_a_tolerance_out_of_reach_warns_and_reports():
 def test_bad_tolerance_is_refused_by_name(sphere_points, bad):
     p, n = sphere_points
     with pytest.raises(ValueError, match="tolerance"):
-        VariationalSurface.fit(p, n, tolerance=bad)
+        VariationalSurface.fit(p, n, tolerance=bad, exact=True)

@@ -15,7 +15,7 @@ BOX = [[-1, -1, -1], [1, 1, 1]]
 @pytest.fixture(scope="module", params=["global", "partition"])
 def surface(request):
     p, n = im.shapes.fibonacci_sphere(1200)
-    return im.VariationalSurface.fit(p * 0.8, n, method=request.param)
+    return im.VariationalSurface.fit(p * 0.8, n, method=request.param, exact=True)
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +112,7 @@ def _format_1(state: dict) -> dict:
 
 def test_partition_patches_keep_indices_into_the_constraints(queries):
     p, n = im.shapes.fibonacci_sphere(1200)
-    s = im.VariationalSurface.fit(p * 0.8, n, method="partition")
+    s = im.VariationalSurface.fit(p * 0.8, n, method="partition", exact=True)
     state = s.to_state()
     assert state["format"] == 3 and state["patch_index"].dtype == np.uint32
     # Every data point has its normal constraint, right after the data points.

@@ -48,7 +48,7 @@ def test_shared_meshes_keep_their_topology(name, how):
     m = trimesh.load(require_mesh_dir() / f"{name}_800.ply", process=False)
     v, f = np.asarray(m.vertices), np.asarray(m.faces)
     if how == "fit":
-        surface = im.VariationalSurface.fit(v, np.asarray(m.vertex_normals))
+        surface = im.VariationalSurface.fit(v, np.asarray(m.vertex_normals), exact=True)
     else:
         surface = im.VariationalSurface.from_mesh(v, f)
     check_interpolates(surface, v)
@@ -91,7 +91,7 @@ THIN = [
 @pytest.mark.parametrize("field, count", THIN)
 def test_thin_shapes_keep_their_topology(field, count):
     p, n = thin_samples(field, count)
-    surface = im.VariationalSurface.fit(p, n)
+    surface = im.VariationalSurface.fit(p, n, exact=True)
     check_interpolates(surface, p)
     check_topology(surface, field.genus, (64, 96, 192, 256))
 
@@ -106,7 +106,7 @@ def test_no_surface_away_from_the_data(field, count, seed):
     fit's octree cube, which ends 0.6 × the data's largest side from its centre). Under the
     table, between thin legs, the sign of f comes from patches with no data in their support."""
     p, n = thin_samples(field, count, seed=seed)
-    surface = im.VariationalSurface.fit(p, n)
+    surface = im.VariationalSurface.fit(p, n, exact=True)
     assert surface.method == "partition"
     g = np.linspace(-1.0, 1.0, 61)
     x = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)

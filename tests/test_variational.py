@@ -49,7 +49,7 @@ def test_fit_interpolates_exactly_every_kernel_sphere(sphere_surfaces, kernel):
 @pytest.mark.parametrize("kernel", KERNELS)
 def test_fit_interpolates_exactly_every_kernel_irregular(knot_subset, kernel):
     p, n = knot_subset
-    s = VariationalSurface.fit(p, n, d=D, kernel=kernel)
+    s = VariationalSurface.fit(p, n, d=D, kernel=kernel, exact=True)
     assert s.kernel == kernel
     assert s.constraints["boundary"] == len(p)
     assert max_constraint_error(s) <= INTERP_TOL
@@ -152,10 +152,10 @@ def test_from_mesh_constraint_placement(shared, name):
 def test_fit_placement_default_d_and_custom_w(sphere_data):
     p, n = sphere_data
     # Normals of any non-zero length are normalised.
-    s = VariationalSurface.fit(p, 3.0 * n)
+    s = VariationalSurface.fit(p, 3.0 * n, exact=True)
     default_d = 0.0075 * np.ptp(p, axis=0).max()
     check_placement(s, p, n, default_d)
-    s2 = VariationalSurface.fit(p, n, d=0.02, w=0.05)
+    s2 = VariationalSurface.fit(p, n, d=0.02, w=0.05, exact=True)
     check_placement(s2, p, n, 0.02, w_over_d=0.05 / 0.02)
     assert max_constraint_error(s2) <= INTERP_TOL
 
@@ -167,7 +167,7 @@ def test_cuno_rule_shrinks_offsets_near_other_points():
     extra_p = p[0] + 0.03 * n[0]  # a data point just outside point 0, inside its offset d = 0.05
     points = np.vstack([p, extra_p])
     normals = np.vstack([n, n[0]])
-    s = VariationalSurface.fit(points, normals, d=0.05)
+    s = VariationalSurface.fit(points, normals, d=0.05, exact=True)
     shrunk = check_placement(s, points, normals, 0.05)
     assert 0 in shrunk
     assert s.constraints["d"][0] < 0.05
@@ -265,7 +265,7 @@ def test_gradient_matches_central_differences(sphere_data, sphere_surfaces, kern
 @pytest.mark.parametrize("kernel", KERNELS)
 def test_gradient_matches_central_differences_irregular(knot_subset, kernel):
     p, n = knot_subset
-    s = VariationalSurface.fit(p, n, d=D, kernel=kernel)
+    s = VariationalSurface.fit(p, n, d=D, kernel=kernel, exact=True)
     rng = np.random.default_rng(22)
     pts = rng.uniform(-1.0, 1.0, size=(200, 3))
     g = s.gradient(pts)
@@ -292,7 +292,7 @@ def test_centers_weights_polynomial_reproduce_evaluate(knot_subset, kernel):
     caller's coordinates (the fit works in normalised ones internally)."""
     p, n = knot_subset
     # Data far from the unit box, so that a normalisation bug cannot hide.
-    s = VariationalSurface.fit(10.0 * p + [3.0, -4.0, 5.0], n, kernel=kernel)
+    s = VariationalSurface.fit(10.0 * p + [3.0, -4.0, 5.0], n, kernel=kernel, exact=True)
     c, w, poly = s.centers, s.weights, s.polynomial
     assert c.shape == (len(s), 3) and w.shape == (len(s),) and poly.shape == (4,)
     np.testing.assert_array_equal(c, s.constraints["points"])
@@ -310,8 +310,8 @@ def test_centers_weights_polynomial_reproduce_evaluate(knot_subset, kernel):
 
 def test_scale_and_translation_equivariance(sphere_data):
     p, n = sphere_data
-    s1 = VariationalSurface.fit(p, n, d=0.01)
-    s10 = VariationalSurface.fit(10.0 * p + 5.0, n, d=0.1)
+    s1 = VariationalSurface.fit(p, n, d=0.01, exact=True)
+    s10 = VariationalSurface.fit(10.0 * p + 5.0, n, d=0.1, exact=True)
     q = np.random.default_rng(4).uniform(-1, 1, size=(50, 3))
     np.testing.assert_allclose(s10.evaluate(10.0 * q + 5.0), 10.0 * s1.evaluate(q), rtol=1e-8, atol=1e-9)
 

@@ -139,6 +139,8 @@ def _check(args) -> None:
     if args.command in ("reconstruct", "particles"):
         _check_input_file(args.input)
         _check_output_file(args.output)
+    if args.command == "reconstruct" and args.trim is not None:
+        _check_positive("--trim", args.trim)
     if args.command == "particles":
         for option in ("radius", "cube_size", "smoothing_length", "threshold"):
             _check_positive("--" + option.replace("_", "-"), getattr(args, option))
@@ -155,13 +157,31 @@ def _fit_and_polygonize(kind, a, b, args):
         if kind == "mesh":
             surface = VariationalSurface.from_mesh(a, b, d=args.d, w=args.w, kernel=args.kernel)
         else:
-            surface = VariationalSurface.fit(a, b, d=args.d, w=args.w, kernel=args.kernel)
+            exact = getattr(args, "exact", False)
+            surface = VariationalSurface.fit(a, b, exact=exact, d=args.d, w=args.w, kernel=args.kernel)
         fit_s = time.perf_counter() - t0
     with step(f"polygonizing at {args.resolution}³ ({args.method})"):
         mesh = polygonize(
-            surface, resolution=args.resolution, method=args.method, project=args.project, progress=sys.stderr.isatty()
+            surface,
+            resolution=args.resolution,
+            method=args.method,
+            project=args.project,
+            trim=getattr(args, "trim", None),
+            progress=sys.stderr.isatty(),
         )
     return surface, fit_s, mesh
+
+
+def _scan_rows(report) -> list[tuple[str, str]]:
+    """The scan fit's report as summary rows (none for an exact fit)."""
+    if not report:
+        return []
+    return [
+        ("noise", f"{report['noise']:.3g} (estimated; spacing {report['spacing']:.3g})"),
+        ("outliers", f"{report['outliers']:,} of {report['points']:,} points left out"),
+        ("normals", f"{report['normals_corrected']:,} turned to agree with their neighbours" + (" (all turned outward)" if report["turned_outward"] else "")),
+        ("distances", f"data to surface: mean {report['distance_mean']:.3g}, 99% {report['distance_p99']:.3g}, max {report['distance_max']:.3g}"),
+    ]
 
 
 def _report(surface, fit_s, mesh) -> str:
@@ -171,12 +191,14 @@ def _report(surface, fit_s, mesh) -> str:
         [
             ("constraints", f"{len(surface)}"),
             ("merged", f"{surface.merged_points} data points within merge_distance of another"),
-            ("fit", f"{fit_s:.3f} s ({surface.method}, residual {surface.residual:.1e})"),
+            ("fit", f"{fit_s:.3f} s ({'scan, ' if surface.report else ''}{surface.method}, residual {surface.residual:.1e})"),
+            *_scan_rows(surface.report),
             ("method", f"{st['method']} at {'x'.join(map(str, st['resolution']))} cells"),
             ("evaluations", f"{st['evaluations']:,} ({st['evaluation_percent']:.2f} % of plain marching cubes)"),
             ("polygonize", f"{st['seconds']['total']:.3f} s"),
             ("triangles", f"{len(mesh.faces):,}"),
             ("vertices", f"{len(mesh.vertices):,}"),
+            *([("trimmed", f"{st['trimmed']:,} triangles farther than --trim from the data")] if "trimmed" in st else []),
             ("watertight", "yes" if tm.is_watertight else "no"),
             ("genus", f"{(2 - mesh.euler_number) // 2}"),
         ]
@@ -278,9 +300,21 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--model", default="knot", choices=["knot", "spot"], help="the bundled model (default knot)")
     demo.add_argument("-o", "--output", default="implicitmesh-demo", help="output folder (default implicitmesh-demo)")
     _add_fit_options(demo)
-    rec = sub.add_parser("reconstruct", help="fit a mesh or points with normals and polygonize it")
+    rec = sub.add_parser("reconstruct", help="fit a mesh or points with normals (a scan) and polygonize it")
     rec.add_argument("input", help="a mesh (PLY/OBJ/STL/OFF...), a PLY point set with nx ny nz, .xyz/.txt with 6 columns, or .npz with points and normals")
     rec.add_argument("-o", "--output", required=True, help=f"output mesh, its format from the suffix ({', '.join(MESH_SUFFIXES)})")
+    rec.add_argument(
+        "--exact",
+        action="store_true",
+        help="points: interpolate every point (exact samples); default: the scan fit (noise, outliers and flipped normals handled, unseen regions closed). Meshes are always interpolated",
+    )
+    rec.add_argument(
+        "--trim",
+        type=float,
+        default=None,
+        metavar="D",
+        help="drop the parts of the mesh farther than D (in the data's units) from every data point, leaving it open where no data was",
+    )
     _add_fit_options(rec)
     par = sub.add_parser(
         "particles",

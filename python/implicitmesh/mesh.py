@@ -84,6 +84,32 @@ class Mesh:
             poly.point_data["Normals"] = self.normals
         return poly
 
+    def trimmed(self, keep: np.ndarray) -> "Mesh":
+        """The triangles whose three vertices are kept, with only the vertices they use.
+
+        Parameters
+        ----------
+        keep : (V,) bool
+            The vertices to keep.
+
+        Returns
+        -------
+        Mesh
+            Its ``stats`` are this mesh's, with ``triangles`` and ``vertices`` counted again and
+            ``trimmed``, the triangles dropped.
+        """
+        keep = np.asarray(keep, dtype=bool)
+        if keep.shape != (len(self.vertices),):
+            raise ValueError(f"keep: expected shape ({len(self.vertices)},), got {keep.shape}")
+        faces = self.faces[keep[self.faces].all(axis=1)]
+        used = np.zeros(len(self.vertices), dtype=bool)
+        used[faces.ravel()] = True
+        index = np.cumsum(used) - 1
+        normals = self.normals[used] if len(self.normals) else self.normals
+        stats = dict(self.stats)
+        stats.update(triangles=len(faces), vertices=int(used.sum()), trimmed=len(self.faces) - len(faces))
+        return Mesh(self.vertices[used], index[faces], normals, stats)
+
     def save(self, path: str | PathLike[str]) -> None:
         """Writes the mesh; the format follows the suffix (``.ply``, ``.obj``, ``.stl``, ``.off``,
         ``.glb`` … anything trimesh writes)."""

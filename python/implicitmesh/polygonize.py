@@ -50,6 +50,7 @@ def polygonize(
     corner_test: bool | None = None,
     seeds: Any = None,
     options: OctreeOptions | TrackingOptions | None = None,
+    trim: float | None = None,
     progress: Any = False,
 ) -> Mesh:
     """Triangulates the zero set of a field (negative inside, positive outside).
@@ -142,6 +143,12 @@ def polygonize(
         The settings of ``method`` in one object, instead of the keywords marked "Octree only"
         or "Tracking only" (not with them): :class:`OctreeOptions` for ``"octree"``,
         :class:`TrackingOptions` for ``"tracking"``.
+    trim : float, optional
+        :class:`VariationalSurface` only: drop the triangles with a vertex farther than ``trim``
+        (in the data's units) from every data point (:meth:`VariationalSurface.distance_to_data`),
+        and the vertices no triangle keeps: what is left is the surface where the data was, open
+        where it was not (a scan of a room or a terrain). ``stats["trimmed"]`` counts the
+        triangles dropped. Default ``None``: the whole, closed surface.
     progress : bool or callable
         ``True``: show the field evaluations done so far while the call runs (a tqdm bar when
         tqdm is installed, else a line on standard error); a callable is called with that count
@@ -178,7 +185,12 @@ def polygonize(
     )
     if not isinstance(project, (bool, np.bool_)):
         raise ValueError(f"project: must be True or False, got {project!r}")
-    return _mesh(
+    if trim is not None:
+        if not hasattr(field, "distance_to_data"):
+            raise ValueError("trim: only for a VariationalSurface (a field fitted to data)")
+        if isinstance(trim, bool) or not isinstance(trim, (int, float, np.floating, np.integer)) or not (np.isfinite(trim) and trim > 0):
+            raise ValueError(f"trim: must be a positive distance, got {trim!r}")
+    mesh = _mesh(
         _core.polygonize,
         f"polygonize ({method})",
         progress,
@@ -193,6 +205,9 @@ def polygonize(
         memory_limit=memory_limit,
         **per_method,
     )
+    if trim is not None:
+        mesh = mesh.trimmed(field.distance_to_data(mesh.vertices) <= trim)
+    return mesh
 
 
 def _mesh(polygonizer, what: str, progress, *args, **kwargs) -> Mesh:
