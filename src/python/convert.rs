@@ -297,15 +297,6 @@ impl MeshBuffers {
         }
     }
 
-    /// Copies a mesh that stays with its owner (one copy of each buffer).
-    pub fn copied(mesh: &crate::mesh::Mesh) -> Self {
-        MeshBuffers {
-            faces: flatten_triangles(&mesh.triangles),
-            vertices: bytemuck::cast_slice::<DVec3, f64>(&mesh.vertices).to_vec(),
-            normals: bytemuck::cast_slice::<DVec3, f64>(&mesh.normals).to_vec(),
-        }
-    }
-
     /// Takes a mesh's vertices and normals, with its faces already flat.
     pub fn with_faces(mesh: crate::mesh::Mesh, faces: Vec<i64>) -> Self {
         MeshBuffers {

@@ -467,21 +467,12 @@ impl PyTessellator {
         let f = &*polygonizer_field(&field, &lattice)?;
         let ts = tracking_settings(f, seeds, &lattice, settings)?;
         let tess = &mut self.inner;
-        let on_caller = field.is_callable();
-        // ``blocks``: the walk goes block by block for a field that evaluates whole blocks.
-        let result = if blocks && f.block_field().is_some() {
-            run(py, progress, on_caller, || {
-                tess.polygonize_blocks::<_, i64>(f, &lattice, &ts)
-                    .map(|(mesh, faces, stats)| {
-                        (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
-                    })
-            })
-        } else {
-            run(py, progress, on_caller, || {
-                tess.polygonize(f, &lattice, &ts)
-                    .map(|(m, s)| (MeshBuffers::copied(m), s))
-            })
-        };
+        let result = run(py, progress, field.is_callable(), || {
+            tess.track::<_, i64>(f, &lattice, &ts, blocks)
+                .map(|(mesh, faces, stats)| {
+                    (MeshBuffers::with_faces(mesh, flat_faces(faces)), stats)
+                })
+        });
         if let Some(e) = field.take_error() {
             return Err(e);
         }

@@ -77,6 +77,34 @@ impl Tessellator {
     }
 }
 
+impl Tessellator {
+    /// Tracks the surface block by block ([`Tessellator::polygonize_blocks`]) when `blocks` is
+    /// asked for and the field has block bounds ([`Field::block_field`]), else cell by cell
+    /// ([`Tessellator::polygonize`], the mesh copied out of the caches). The triangles come
+    /// beside the mesh, as `I`, either way.
+    pub fn track<F: Field + ?Sized, I: TriangleIndex>(
+        &mut self,
+        field: &F,
+        lattice: &Lattice,
+        settings: &TrackingSettings,
+        blocks: bool,
+    ) -> Result<(Mesh, Vec<[I; 3]>, Stats)> {
+        if blocks && field.block_field().is_some() {
+            return self.polygonize_blocks(field, lattice, settings);
+        }
+        let (m, stats) = self.polygonize(field, lattice, settings)?;
+        // Runs of 4096 triangles, converted in parallel.
+        let runs: Vec<&[[u32; 3]]> = m.triangles.chunks(4096).collect();
+        let triangles = crate::polygonize::gather_map(&runs, |t| t.map(I::from_u32));
+        let mesh = Mesh {
+            vertices: m.vertices.clone(),
+            triangles: Vec::new(),
+            normals: m.normals.clone(),
+        };
+        Ok((mesh, triangles, stats))
+    }
+}
+
 /// One-shot tracking polygonization cell by cell ([`Tessellator::polygonize`]), with the
 /// vertices' edge keys when [`crate::polygonize::Settings::keys`] asks for them
 /// ([`crate::polygonize::polygonize`] with [`crate::polygonize::Method::Tracking`]).

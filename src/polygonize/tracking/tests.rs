@@ -523,3 +523,32 @@ fn blobs_apart_in_the_last_blocks_one_at_a_time() {
         .iter()
         .any(|v| v.max_element() > l.origin().x + 35.0 * l.cell().x));
 }
+
+/// `track` goes block by block only for a field with block bounds, and both ways give the
+/// settings' mesh: a blob field's every component, a sphere's seeded one.
+#[test]
+fn track_walks_blocks_only_with_block_bounds() {
+    let l = Lattice::cubic(DVec3::splat(-1.0), DVec3::splat(1.0), 24).unwrap();
+    let b = blobs(20, 0.25, 5);
+    let s = TrackingSettings::for_field(&b, &l, Settings::default(), None).unwrap();
+    assert_eq!(s.components, Components::All);
+    let mut tess = Tessellator::new();
+    let (cells, t_cells, _) = tess.track::<_, u32>(&b, &l, &s, false).unwrap();
+    let (blocks, t_blocks, st) = tess.track::<_, i64>(&b, &l, &s, true).unwrap();
+    let canon = |m: &Mesh, t: Vec<[u32; 3]>| canonical(&m.vertices, &t);
+    let wide: Vec<[u32; 3]> = t_blocks.iter().map(|t| t.map(|v| v as u32)).collect();
+    assert_eq!(canon(&cells, t_cells), canon(&blocks, wide));
+    assert!(st.evaluations > 0 && cells.triangles.is_empty());
+    let sphere = crate::field::analytic::Sphere {
+        center: DVec3::ZERO,
+        radius: 0.5,
+    };
+    let s = TrackingSettings::for_field(&sphere, &l, Settings::default(), Some(vec![DVec3::ZERO]))
+        .unwrap();
+    assert_eq!(s.components, Components::Seeded);
+    let (m, t, _) = tess.track::<_, u32>(&sphere, &l, &s, true).unwrap();
+    let d = dense::polygonize(&sphere, &l, &Settings::default())
+        .unwrap()
+        .mesh;
+    assert_eq!(canon(&m, t), canonical(&d.vertices, &d.triangles));
+}
