@@ -13,7 +13,9 @@
 //! 2. **Local planes and noise.** Principal component analysis of each point's neighbours (the
 //!    point itself left out) gives a normal, the plane through the neighbourhood's mean, and the root-mean-square distance of
 //!    the neighbourhood from that plane; the data's noise is the median of the latter. A point
-//!    farther from its plane than `3·rms + 6·median offset + 3·noise` is an outlier too.
+//!    farther from its plane than `3·spread + 6·median offset + 3·noise` is an outlier too, the
+//!    spread being 1.4826 times the median distance of the neighbours from their plane (robust
+//!    to a few stray points among them).
 //! 3. **Normals.** Each point takes its neighbourhood's normal, with the sign of its own normal.
 //!    Then, for [`ScanSettings::voting_rounds`] rounds, a point whose neighbours mostly face the
 //!    other way (more than 1.5 times as many) turns around.
@@ -72,6 +74,9 @@ pub struct Cleaned {
 struct Local {
     normal: DVec3,
     rms: f64,
+    /// 1.4826 × the median distance of the neighbours from their plane: their spread, robust
+    /// to a few stray points among them.
+    spread: f64,
     offset: f64,
 }
 
@@ -237,10 +242,14 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
             let (nb, _) = row(i);
             let others = nb.iter().filter(|&&j| j as usize != i);
             let (mean, normal, variance) =
-                weighted_plane(others.map(|&j| (points[j as usize], 1.0)));
+                weighted_plane(others.clone().map(|&j| (points[j as usize], 1.0)));
+            let mut residuals: Vec<f64> = others
+                .map(|&j| (points[j as usize] - mean).dot(normal).abs())
+                .collect();
             Local {
                 normal,
                 rms: variance.sqrt(),
+                spread: 1.4826 * median(&mut residuals),
                 offset: (points[i] - mean).dot(normal).abs(),
             }
         })
@@ -270,7 +279,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         .map(|i| {
             !isolated[i]
                 && crowded[i]
-                && local[i].offset <= 3.0 * local[i].rms + 6.0 * typical_offset + 3.0 * noise
+                && local[i].offset <= 3.0 * local[i].spread + 6.0 * typical_offset + 3.0 * noise
         })
         .collect();
 
