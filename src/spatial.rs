@@ -275,7 +275,7 @@ impl Bulk {
             centre[k] = at(0.5);
             extent = extent.max(at(0.95) - at(0.05));
         }
-        if !(extent > 0.0) {
+        if extent.is_nan() || extent <= 0.0 {
             let (lo, hi) = points.iter().fold(
                 (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
                 |(lo, hi), p| (lo.min(*p), hi.max(*p)),
@@ -333,7 +333,11 @@ impl Bulk {
 /// depend on how the work was split).
 fn pick(a: Option<(usize, f64)>, b: Option<(usize, f64)>) -> Option<(usize, f64)> {
     match (a, b) {
-        (Some(x), Some(y)) => Some(if y.1 > x.1 || (y.1 == x.1 && y.0 < x.0) { y } else { x }),
+        (Some(x), Some(y)) => Some(if y.1 > x.1 || (y.1 == x.1 && y.0 < x.0) {
+            y
+        } else {
+            x
+        }),
         (x, None) => x,
         (None, y) => y,
     }
@@ -405,7 +409,8 @@ pub fn check_far(name: &'static str, points: &[DVec3]) -> crate::Result<()> {
         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
-    if !((hi - lo).max_element() <= MAX_SPAN) {
+    let span = (hi - lo).max_element();
+    if span.is_nan() || span > MAX_SPAN {
         return Err(crate::Error::invalid(
             name,
             format!(
@@ -439,13 +444,31 @@ mod tests {
         for far in [1e6, 1e200, f64::MAX] {
             p[1000].x = far;
             let e = check_far("points", &p).unwrap_err().to_string();
-            assert!(e.starts_with(&format!("points: entry 1000 lies {far:.3e} from the median")), "{e}");
+            assert!(
+                e.starts_with(&format!(
+                    "points: entry 1000 lies {far:.3e} from the median"
+                )),
+                "{e}"
+            );
         }
         // Spans whose squares overflow: refused whatever the bulk.
-        let two = [DVec3::ZERO, DVec3::ZERO, DVec3::splat(1e200), DVec3::splat(1e200)];
-        assert!(check_far("points", &two).unwrap_err().to_string().contains("squared distances"));
+        let two = [
+            DVec3::ZERO,
+            DVec3::ZERO,
+            DVec3::splat(1e200),
+            DVec3::splat(1e200),
+        ];
+        assert!(check_far("points", &two)
+            .unwrap_err()
+            .to_string()
+            .contains("squared distances"));
         // A bulk of one point repeated makes no point far.
-        let same = [DVec3::ONE, DVec3::ONE, DVec3::ONE, DVec3::new(1.0, 2.0, 1.0)];
+        let same = [
+            DVec3::ONE,
+            DVec3::ONE,
+            DVec3::ONE,
+            DVec3::new(1.0, 2.0, 1.0),
+        ];
         assert_eq!(check_far("points", &same), Ok(()));
         assert_eq!(check_far("points", &[]), Ok(()));
     }

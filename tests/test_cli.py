@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import re
 import subprocess
+from pathlib import Path
 import sys
 
 import numpy as np
@@ -117,6 +118,28 @@ def test_reconstruct_xyz_points_with_normals(mesh_dir, tmp_path):
     np.testing.assert_allclose(m.bounds, src.bounds, atol=0.05)
 
 
+def test_reconstruct_a_scan_prints_its_report_and_trims(tmp_path):
+    from implicitmesh.scanner import scan
+
+    src = trimesh.load(Path(__file__).parent / "data" / "meshes" / "spot_hires.ply", process=False)
+    s = scan(np.asarray(src.vertices), np.asarray(src.faces), 10_000, noise=5e-4, outliers=2e-3, seed=2)
+    npz = tmp_path / "scan.npz"
+    np.savez(npz, points=s.points, normals=s.normals)
+    closed, opened = tmp_path / "closed.ply", tmp_path / "open.ply"
+    r = run_cli("reconstruct", npz, "-o", closed, "--resolution", 64, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "left out" in table_value(r.stdout, "outliers")
+    assert table_value(r.stdout, "watertight") == "yes"
+    spacing = float(table_value(r.stdout, "noise").split("spacing ")[1].rstrip(")"))
+    r = run_cli("reconstruct", npz, "-o", opened, "--resolution", 64, "--trim", 2 * spacing, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert table_value(r.stdout, "watertight") == "no"
+    assert int(table_value(r.stdout, "trimmed").split()[0].replace(",", "")) > 0
+    r = run_cli("reconstruct", npz, "-o", tmp_path / "exact.ply", "--resolution", 32, "--exact", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "outliers" not in r.stdout
+
+
 def test_missing_input_file(tmp_path):
     missing = tmp_path / "no_such_mesh.ply"
     out = tmp_path / "out.ply"
@@ -199,6 +222,8 @@ def test_ply_point_set_without_normals_is_a_clean_error(tmp_path, capsys, binary
         (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--kernel", "gaussian"], "--kernel"),
         (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--d", "-0.01"], "--d"),
         (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--w", "0"], "--w"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--trim", "-1"], "--trim"),
+        (["reconstruct", "{mesh}", "-o", "{tmp}/out.ply", "--trim", "nan"], "--trim"),
         (["reconstruct", "{tmp}/absent.ply", "-o", "{tmp}/out.ply"], "absent.ply"),
         (["demo", "-o", "{tmp}/demo", "--resolution", "0"], "--resolution"),
         (["demo", "-o", "{tmp}/demo", "--method", "sparse"], "--method"),

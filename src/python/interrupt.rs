@@ -35,8 +35,10 @@ pub fn run<T: Send>(
 ) -> PyResult<T> {
     let token = Token::new();
     if on_caller {
-        let result = catch_unwind(AssertUnwindSafe(|| cancel::run_under(token.clone(), || py.detach(work))))
-            .map_err(panic_error)?;
+        let result = catch_unwind(AssertUnwindSafe(|| {
+            cancel::run_under(token.clone(), || py.detach(work))
+        }))
+        .map_err(panic_error)?;
         if let (Some(p), Ok(_)) = (progress, &result) {
             p.call1((token.done(),))?;
         }
@@ -86,7 +88,12 @@ pub fn run<T: Send>(
     let result = match finished.into_inner().unwrap_or_else(|e| e.into_inner()) {
         Some(Ok(r)) => r,
         Some(Err(payload)) => return Err(panic_error(payload)),
-        None => return Err(PyRuntimeError::new_err(format!("{}: the work ended without a result", name()))),
+        None => {
+            return Err(PyRuntimeError::new_err(format!(
+                "{}: the work ended without a result",
+                name()
+            )))
+        }
     };
     if let (Some(p), None, Ok(_)) = (progress, &raised, &result) {
         p.call1((token.done(),))?;
@@ -138,7 +145,10 @@ fn panic_error(payload: Box<dyn Any + Send>) -> PyErr {
 
 /// Runs short `work` without the GIL and without polling for Ctrl-C; a panic in it becomes a
 /// `RuntimeError` as in [`run`].
-pub fn detach<T: Send, E: Into<PyErr> + Send>(py: Python<'_>, work: impl FnOnce() -> Result<T, E> + Send) -> PyResult<T> {
+pub fn detach<T: Send, E: Into<PyErr> + Send>(
+    py: Python<'_>,
+    work: impl FnOnce() -> Result<T, E> + Send,
+) -> PyResult<T> {
     match catch_unwind(AssertUnwindSafe(|| py.detach(work))) {
         Ok(r) => r.map_err(Into::into),
         Err(payload) => Err(panic_error(payload)),

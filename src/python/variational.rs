@@ -316,7 +316,8 @@ impl PyVariationalSurface {
     ///     Outward normals, any non-zero length (they are normalised).
     /// d : float, optional
     ///     Offset of the normal constraints. Default: 0.0075 × the largest side of the points'
-    ///     bounding box (0.015 for data spanning [-1, 1]³, as in the papers), at most 6 × the
+    ///     bounding box, leaving out points more than 50 × the extent of their bulk away
+    ///     (0.015 for data spanning [-1, 1]³, as in the papers), at most 6 × the
     ///     median distance between nearest data points (from 10,000 points on).
     /// w : float, optional
     ///     Value at the normal constraints. Default: 0.75 × d (Cuno's w/d = 3/4).
@@ -782,7 +783,9 @@ impl PyVariationalSurface {
     }
 
     /// (2, 3) float64: a cube holding the surface — centred on the data's bounding box, with
-    /// side 1.2 × its largest side (a 10 % margin). The default ``bounds`` of
+    /// side 1.2 × its largest side (a 10 % margin); the box leaves out data points more than 50 ×
+    /// the extent of their bulk (the largest 5th–95th percentile spread) from their median,
+    /// of which the fit warns. The default ``bounds`` of
     /// :func:`implicitmesh.polygonize` (the papers place their models in a cube too).
     #[getter]
     fn bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {

@@ -41,7 +41,7 @@ impl CellList {
         let mut side = side;
         // Counted in floats: a far point's (e / s) exceeds usize.
         let cells = |s: f64| extent.to_array().map(|e| (e / s).floor() + 1.0);
-        while !(cells(side).iter().product::<f64>() <= MAX_CELLS) && side.is_finite() {
+        while cells(side).iter().product::<f64>() > MAX_CELLS && side.is_finite() {
             side *= 1.25;
         }
         let dims = cells(side).map(|c| if c.is_finite() { c as usize } else { 1 });
