@@ -70,13 +70,13 @@ def _mesh_of(field, bounds, method: str):
 
 
 @CHECK
-@given(clouds(), st.sampled_from(["global", "partition", "auto"]))
-def _fits(p, method):
+@given(clouds(), st.sampled_from(["global", "partition", "auto"]), st.booleans())
+def _fits(p, method, exact):
     rng = np.random.default_rng(0)
     opts = {"method": method}
     if method == "partition":
         opts["partition_options"] = {"max_per_leaf": 8, "min_points": 4, "max_patch": 12}
-    s = refused_or(lambda: im.VariationalSurface.fit(p, unit(rng, len(p)), **opts, exact=True))
+    s = refused_or(lambda: im.VariationalSurface.fit(p, unit(rng, len(p)), **opts, exact=exact))
     refused_or(lambda: im.VariationalSurface.interpolate(p, rng.normal(size=len(p)), **opts))
     if s is not None:
         assert np.isfinite(s.bounds).all()

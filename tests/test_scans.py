@@ -152,3 +152,14 @@ def test_trimming_opens_the_mesh_where_no_data_was():
         im.polygonize(surface, resolution=16, trim=-1.0)
     with pytest.raises(ValueError, match="trim"):
         im.polygonize(lambda p: np.linalg.norm(p, axis=1) - 0.5, bounds=[[-1] * 3, [1] * 3], resolution=8, trim=0.1)
+
+
+@pytest.mark.parametrize("far", [1e6, 1e200])
+def test_a_far_point_in_a_scan_is_left_out_as_an_outlier(far):
+    vertices, faces = _truth("knot")
+    s = scan(vertices, faces, 5_000, noise=5e-4, seed=11)
+    points = s.points.copy()
+    points[17] = [far, 0.0, 0.0]
+    surface = im.VariationalSurface.fit(points, s.normals)
+    assert 17 in surface.outliers
+    assert np.all(np.abs(surface.bounds) < 10)
