@@ -185,11 +185,7 @@ def polygonize(
     )
     if not isinstance(project, (bool, np.bool_)):
         raise ValueError(f"project: must be True or False, got {project!r}")
-    if trim is not None:
-        if not hasattr(field, "distance_to_data"):
-            raise ValueError("trim: only for a VariationalSurface (a field fitted to data)")
-        if isinstance(trim, bool) or not isinstance(trim, (int, float, np.floating, np.integer)) or not (np.isfinite(trim) and trim > 0):
-            raise ValueError(f"trim: must be a positive distance, got {trim!r}")
+    _check_trim(field, trim)
     mesh = _mesh(
         _core.polygonize,
         f"polygonize ({method})",
@@ -205,9 +201,26 @@ def polygonize(
         memory_limit=memory_limit,
         **per_method,
     )
-    if trim is not None:
-        mesh = mesh.trimmed(field.distance_to_data(mesh.vertices) <= trim)
-    return mesh
+    return trimmed(mesh, field, trim)
+
+
+def _check_trim(field, trim) -> None:
+    """A ValueError naming ``trim`` unless it is None, or a positive distance for a field
+    fitted to data."""
+    if trim is None:
+        return
+    if not hasattr(field, "distance_to_data"):
+        raise ValueError("trim: only for a VariationalSurface (a field fitted to data)")
+    if isinstance(trim, bool) or not isinstance(trim, (int, float, np.floating, np.integer)) or not (np.isfinite(trim) and trim > 0):
+        raise ValueError(f"trim: must be a positive distance, got {trim!r}")
+
+
+def trimmed(mesh: Mesh, field, trim: float | None) -> Mesh:
+    """``mesh`` without the triangles that have a vertex farther than ``trim`` from ``field``'s
+    data (``mesh`` itself for ``trim=None``); see :func:`polygonize`."""
+    if trim is None:
+        return mesh
+    return mesh.trimmed(field.distance_to_data(mesh.vertices) <= trim)
 
 
 def _mesh(polygonizer, what: str, progress, *args, **kwargs) -> Mesh:

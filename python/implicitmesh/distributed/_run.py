@@ -19,7 +19,7 @@ from .. import _core
 from .._progress import reporter
 from ..mesh import Mesh
 from ..options import OctreeOptions, TrackingOptions
-from ..polygonize import Ambiguity, _check_positive
+from ..polygonize import Ambiguity, _check_positive, _check_trim, trimmed
 from . import _cut_files, _tile_files, _weld_in_place
 from ._plan import Plan, Window, cut_field, cut_per_tile, make_plan, tile_fields, tile_priority
 from ._tile import SUMMED, TileResult, run_tile
@@ -268,6 +268,7 @@ def polygonize(
     corner_test: bool | None = None,
     seeds: Any = None,
     options: OctreeOptions | TrackingOptions | None = None,
+    trim: float | None = None,
     progress: bool | Callable[[int], object] = False,
     client: Any = None,
     tile: int | Sequence[int] = 256,
@@ -314,6 +315,8 @@ def polygonize(
     start_level, safety, corner_test, options
         As for :func:`implicitmesh.polygonize` (``options``: an :class:`~implicitmesh.OctreeOptions`
         for ``"octree"``).
+    trim : float, optional
+        As for :func:`implicitmesh.polygonize`: applied to the welded mesh on the client.
     seeds : None
         Not taken per tile (tracking a :class:`BlobField` finds every component): a TypeError
         when given.
@@ -365,6 +368,9 @@ def polygonize(
         batch_size=batch_size, memory_limit=memory_limit, start_level=start_level, safety=safety,
         corner_test=corner_test, seeds=seeds, options=options, progress=progress, client=client, tile=tile,
     )
+    _check_trim(field, trim)
+    if trim is not None and output is not None:
+        raise ValueError("trim: not with output (the tiles are written as marching cubes makes them)")
     if output is not None:
         warnings.warn(
             "implicitmesh.distributed.polygonize(output=DIR) is deprecated: use write_tiles(field, DIR, ...)",
@@ -376,7 +382,7 @@ def polygonize(
         return write_tiles(field, output, **keywords)  # type: ignore[return-value]
     plan = _make_plan(field, project=project, **keywords)
     results, welded = _execute(plan, client, progress, None)
-    return _finish(plan, results, welded)
+    return trimmed(_finish(plan, results, welded), field, trim)
 
 
 def _make_plan(field: Any, *, progress: Any, client: Any, project: Any = False, **keywords: Any) -> Plan:
