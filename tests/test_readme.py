@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import re
+
+import numpy as np
 from pathlib import Path
 
 README = Path(__file__).resolve().parents[1] / "README.md"
@@ -22,3 +24,7 @@ def test_readme_tour_runs(tmp_path, monkeypatch):
     assert (back.evaluate(scope["vertices"]) == scope["surface"].evaluate(scope["vertices"])).all()
     assert [len(level.faces) for level in scope["levels"]] == [1600, 6400, 25600]
     assert len(scope["frame"].faces) > 0
+    scan, scanned, closed = scope["scan"], scope["scanned"], scope["closed"]
+    found = np.isin(scan.outliers, scanned.outliers).mean()
+    assert found > 0.8, found
+    assert closed.to_trimesh().is_watertight and len(closed.to_trimesh().split(only_watertight=False)) == 1

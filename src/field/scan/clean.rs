@@ -118,7 +118,8 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
     let scale = (0..6).map(|i| a[i][i].abs()).fold(0.0, f64::max);
     for c in 0..6 {
         let pivot = (c..6).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if !(a[pivot][c].abs() > 1e-12 * scale) {
+        let pivot_ok = a[pivot][c].abs() > 1e-12 * scale;
+        if !pivot_ok {
             return None;
         }
         a.swap(c, pivot);
@@ -152,7 +153,7 @@ fn project_on_quadric(
     h: f64,
 ) -> (DVec3, DVec3) {
     let on_plane = (p - (p - mean).dot(normal) * normal, normal);
-    if !(h > 0.0) {
+    if h.is_nan() || h <= 0.0 {
         return on_plane;
     }
     let (u, v) = normal.any_orthonormal_pair();
@@ -185,6 +186,32 @@ fn project_on_quadric(
     let moved = mean + (x * u + y * v + z * normal) * h;
     let n = (normal - zx * u - zy * v).normalize_or(normal);
     (moved, n)
+}
+
+/// For each point, whether its [`LOCAL_NEIGHBOUR`]th neighbour among the `valid` points (in its
+/// row of `kk` neighbours, itself first, in `idx` and `dist`) lies within [`LOCAL_RATIO`] times
+/// the median of the same distance of its valid neighbours. A point with too few valid
+/// neighbours in its row passes.
+fn crowded(idx: &[u32], dist: &[f64], kk: usize, valid: &[bool]) -> Vec<bool> {
+    let near_of = |i: usize| -> Option<f64> {
+        let row = (i * kk + 1..(i + 1) * kk).filter(|&r| valid[idx[r] as usize]);
+        row.map(|r| dist[r]).nth(LOCAL_NEIGHBOUR - 1)
+    };
+    let near: Vec<Option<f64>> = (0..valid.len()).into_par_iter().map(near_of).collect();
+    (0..valid.len())
+        .into_par_iter()
+        .map(|i| {
+            let Some(own) = near[i] else {
+                return true;
+            };
+            let mut others: Vec<f64> = idx[i * kk + 1..(i + 1) * kk]
+                .iter()
+                .filter(|&&j| valid[j as usize])
+                .filter_map(|&j| near[j as usize])
+                .collect();
+            others.is_empty() || own <= LOCAL_RATIO * median(&mut others)
+        })
+        .collect()
 }
 
 /// The median of `values` (which it reorders); 0 for none.
@@ -266,22 +293,21 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     let noise = bulk(|l| l.rms);
     let typical_offset = bulk(|l| l.offset);
     // A point much farther from its own neighbours than they are from theirs (a local outlier
-    // factor over the distance to the 3rd neighbour) lies off the surface they sample.
-    let near_of = |i: usize| row(i).1[LOCAL_NEIGHBOUR];
-    let crowded: Vec<bool> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let mut others: Vec<f64> = row(i).0[1..].iter().map(|&j| near_of(j as usize)).collect();
-            near_of(i) <= LOCAL_RATIO * median(&mut others)
-        })
-        .collect();
-    let valid: Vec<bool> = (0..n)
+    // factor over the distance to the 3rd neighbour) lies off the surface they sample. The test
+    // runs twice, the second time over the points the first kept, so that a few stray points
+    // close together do not vouch for each other.
+    let mut valid: Vec<bool> = (0..n)
         .map(|i| {
             !isolated[i]
-                && crowded[i]
                 && local[i].offset <= 3.0 * local[i].spread + 6.0 * typical_offset + 3.0 * noise
         })
         .collect();
+    for _ in 0..2 {
+        let crowded = crowded(&idx, &dist, kk, &valid);
+        for (v, c) in valid.iter_mut().zip(crowded) {
+            *v &= c;
+        }
+    }
 
     // 3. Normals: the neighbourhood's, signed by the given one, then neighbours vote.
     let mut oriented: Vec<DVec3> = (0..n)
