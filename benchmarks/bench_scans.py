@@ -300,8 +300,9 @@ def render(raw: dict) -> str:
         "surface normal dropped, PCA normals over 20 neighbours of the same view oriented towards its camera. "
         "Conditions: noise along the rays with σ a fraction of the bounding-box diagonal; misregistered: each "
         "view moved by 0.1 % of the diagonal and rotated by 0.1°; outliers: 0.2 % of the points replaced by "
-        "uniform points in the box with random normals. Ours: `VariationalSurface.fit(points, normals)` then "
+        "uniform points in the box with random normals. Ours: `VariationalSurface.fit(points, normals)` (the scan fit, the default) then "
         "`polygonize(surface, resolution=R, method=\"octree\")` (R = 256 at 5·10⁴ points, 512 at 5·10⁵); "
+        "exact: the same with `fit(..., exact=True)`, the interpolant; "
         "Poisson: Open3D's `create_from_point_cloud_poisson(pcd, depth=d)` (d = 8, 9), untrimmed; both on "
         "the same points in the same process (a fresh one per case), seconds end to end (median of the timed "
         "runs after one warm-up call of each method). Bodies: connected components, with watertightness and each body's "
@@ -333,17 +334,17 @@ def render(raw: dict) -> str:
             cc = [c for c in cases if c["condition"] == cond]
             if not cc:
                 continue
-            ok = lambda m: sum(1 for c in cc if c["methods"][m].get("true_genus_one_body"))  # noqa: E731
+            ok = lambda m: sum(1 for c in cc if c["methods"].get(m, {}).get("true_genus_one_body"))  # noqa: E731
             med = lambda m, k: statistics.median(  # noqa: E731
-                [c["methods"][m][k] for c in cc if k in c["methods"][m]] or [float("nan")])
+                [c["methods"].get(m, {})[k] for c in cc if k in c["methods"].get(m, {})] or [float("nan")])
             row = [cond, " / ".join(f"{ok(m)} of {len(cc)}" for m in methods),
                    " / ".join(f"{med(m, 'chamfer'):.1e}" for m in methods),
                    " / ".join(f"{med(m, 'p99'):.1e}" for m in methods),
                    " / ".join(f"{med(m, 'normal_consistency'):.3f}" for m in methods)]
             for m in others:
-                closer = sum(1 for c in cc if c["methods"][m].get("chamfer", 1e9) <= c["methods"][ref].get("chamfer", -1))
-                ratios = [c["methods"][ref]["seconds"] / c["methods"][m]["seconds"] for c in cc
-                          if "seconds" in c["methods"][m] and "seconds" in c["methods"][ref]]
+                closer = sum(1 for c in cc if c["methods"].get(m, {}).get("chamfer", 1e9) <= c["methods"].get(ref, {}).get("chamfer", -1))
+                ratios = [c["methods"].get(ref, {})["seconds"] / c["methods"].get(m, {})["seconds"] for c in cc
+                          if "seconds" in c["methods"].get(m, {}) and "seconds" in c["methods"].get(ref, {})]
                 row += [f"{closer} of {len(cc)}", f"{statistics.median(ratios):.2f}×" if ratios else "—"]
             rows.append(row)
         slash = " / ".join(name(m) for m in methods)
@@ -355,12 +356,14 @@ def render(raw: dict) -> str:
         rows = []
         for c in cases:
             for m in methods:
-                r = c["methods"][m]
+                r = c["methods"].get(m)
+                if r is None:  # a method added after this case was measured
+                    continue
                 if "error" in r:
                     rows.append([c["model"], c["condition"], f"{c['points']:,}", name(m), "—", _topology_cell(r),
                                  "", "", ""])
                     continue
-                speed = fmt_ratio(c["methods"][ref].get("seconds"), r["seconds"]) if m != ref else ""
+                speed = fmt_ratio(c["methods"].get(ref, {}).get("seconds"), r["seconds"]) if m != ref else ""
                 rows.append([c["model"], c["condition"], f"{c['points']:,}", name(m),
                              fmt_s(r["seconds"]) + (f" ({speed})" if speed else ""), _topology_cell(r),
                              f"{r['chamfer']:.2e}", f"{r['p99']:.2e}", f"{r['normal_consistency']:.4f}"])
