@@ -24,6 +24,11 @@ __all__ = [
     "write_welded_tile",
     "subdivide",
     "butterfly",
+    "ray_cast",
+    "closest_points",
+    "k_nearest",
+    "pca_normals",
+    "_panic_in_worker",
 ]
 
 __version__: str
