@@ -55,9 +55,9 @@ def record() -> dict[str, np.ndarray]:
     flip = a + b > 1
     a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
     pts = tri[pick, 0] + a[:, None] * (tri[pick, 1] - tri[pick, 0]) + b[:, None] * (tri[pick, 2] - tri[pick, 0])
-    fields["partition"] = im.VariationalSurface.fit(pts, n[pick])
-    fields["global"] = im.VariationalSurface.fit(pts[:1500], n[pick][:1500], method="global")
-    fields["within"] = im.VariationalSurface.fit(pts, n[pick], tolerance=1e-3)
+    fields["partition"] = im.VariationalSurface.fit(pts, n[pick], exact=True)
+    fields["global"] = im.VariationalSurface.fit(pts[:1500], n[pick][:1500], method="global", exact=True)
+    fields["within"] = im.VariationalSurface.fit(pts, n[pick], tolerance=1e-3, exact=True)
     for name, s in fields.items():
         _surface(out, f"fit/{name}", s, probe)
     centers = rng.uniform(-0.8, 0.8, (200, 3))
