@@ -206,7 +206,7 @@ impl Fit {
 
     /// The scan fit of `points` with `normals` ([`crate::field::scan`]): the points cleaned by
     /// `scan`, fitted by this fit (within `reduction`, when given, [`Fit::run_within`]), and
-    /// guarded by their winding number. Errors name the argument, as [`scan::clean`]'s and the
+    /// guarded by their winding number. Errors name the argument, as [`scan::clean()`]'s and the
     /// fit's do.
     pub fn run_scan(
         &self,

@@ -7,7 +7,7 @@
 //! and where no view saw the surface it may place sheets and bodies anywhere. The scan fit
 //! works in three steps:
 //!
-//! 1. [`clean`]: spacing and noise are estimated from the data, outliers found and left out,
+//! 1. [`mod@clean`]: spacing and noise are estimated from the data, outliers found and left out,
 //!    normals made consistent with their neighbours, and every point projected onto the plane
 //!    of its neighbourhood — the points the fit interpolates lie on the data's mean surface.
 //! 2. The variational fit of the cleaned points (global or partition of unity).

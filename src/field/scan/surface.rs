@@ -20,7 +20,7 @@ pub struct ScanReport {
     pub outliers: Vec<u32>,
     /// The median distance from a point to its 6th nearest neighbour.
     pub spacing: f64,
-    /// The estimated noise (see [`super::clean`]).
+    /// The estimated noise (see [`mod@super::clean`]).
     pub noise: f64,
     /// Kept points whose normal was turned to agree with its neighbours'.
     pub normals_corrected: usize,
