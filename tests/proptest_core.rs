@@ -58,13 +58,26 @@ fn magnitude() -> impl Strategy<Value = f64> {
 /// point, mixed scales or near-duplicates at the offset (always finite).
 fn extreme_points(max: usize) -> impl Strategy<Value = Vec<DVec3>> {
     let unit = (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z));
-    (prop::collection::vec(unit, 4..max), magnitude(), magnitude(), 0u8..4, magnitude(), any::<prop::sample::Index>())
+    (
+        prop::collection::vec(unit, 4..max),
+        magnitude(),
+        magnitude(),
+        0u8..4,
+        magnitude(),
+        any::<prop::sample::Index>(),
+    )
         .prop_map(|(u, scale, offset, kind, other, at)| {
-            let mut p: Vec<DVec3> = u.iter().map(|q| *q * scale.abs() + DVec3::splat(offset)).collect();
+            let mut p: Vec<DVec3> = u
+                .iter()
+                .map(|q| *q * scale.abs() + DVec3::splat(offset))
+                .collect();
             let n = p.len();
             match kind {
                 0 => p[at.index(n)].x = other,
-                1 => p[..n / 2].iter_mut().zip(&u).for_each(|(q, v)| *q = *v * other.abs()),
+                1 => p[..n / 2]
+                    .iter_mut()
+                    .zip(&u)
+                    .for_each(|(q, v)| *q = *v * other.abs()),
                 2 => {
                     let h = n / 2;
                     for i in h..n {
@@ -73,7 +86,15 @@ fn extreme_points(max: usize) -> impl Strategy<Value = Vec<DVec3>> {
                 }
                 _ => {}
             }
-            p.into_iter().map(|q| if q.is_finite() { q } else { DVec3::splat(1e300) }).collect()
+            p.into_iter()
+                .map(|q| {
+                    if q.is_finite() {
+                        q
+                    } else {
+                        DVec3::splat(1e300)
+                    }
+                })
+                .collect()
         })
 }
 

@@ -85,8 +85,9 @@ impl PyBlobField {
             kernel: BlobKernel::parse(kernel)?,
             precision: Precision::parse(precision)?,
         };
-        let inner =
-            super::interrupt::detach(py, || BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings))?;
+        let inner = super::interrupt::detach(py, || {
+            BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings)
+        })?;
         Ok(PyBlobField { inner })
     }
 
@@ -205,7 +206,9 @@ impl PyBlobField {
             .map(|a| per_primitive(a, "strengths"))
             .transpose()?;
         let inner = &mut self.inner;
-        super::interrupt::detach(py, || inner.update(&c, r.as_ref().map(as_per), a.as_ref().map(as_per)))?;
+        super::interrupt::detach(py, || {
+            inner.update(&c, r.as_ref().map(as_per), a.as_ref().map(as_per))
+        })?;
         Ok(())
     }
 

@@ -11,9 +11,9 @@ use crate::field::rbf::partition::{
     PartitionParts, PartitionSettings, PartitionSurface, PatchParts,
 };
 use crate::field::rbf::Fitted;
+use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use crate::field::scan::surface::guard_of;
 use crate::field::scan::{ScanReport, ScanSettings, ScanSurface};
-use crate::field::rbf::{FitSettings, SurfaceParts, VariationalSurface};
 use glam::DVec3;
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
@@ -470,7 +470,9 @@ pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
     let normals = points_of(d, "scan_normals")?;
     let areas = values_of(d, "scan_areas")?;
     if normals.len() != points.len() || areas.len() != points.len() {
-        return Err(bad("\"scan_points\", \"scan_normals\" and \"scan_areas\" differ in length"));
+        return Err(bad(
+            "\"scan_points\", \"scan_normals\" and \"scan_areas\" differ in length",
+        ));
     }
     let distances = values_of(d, "scan_distances")?;
     let [mean, p99, max]: [f64; 3] = distances

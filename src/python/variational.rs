@@ -166,7 +166,12 @@ impl<'a, 'py> FitOptions<'a, 'py> {
 }
 
 /// A `UserWarning` when points stayed farther than `tolerance` from a reduced fit.
-fn warn_beyond_tolerance(py: Python<'_>, r: &Reduction, tolerance: f64, points: usize) -> PyResult<()> {
+fn warn_beyond_tolerance(
+    py: Python<'_>,
+    r: &Reduction,
+    tolerance: f64,
+    points: usize,
+) -> PyResult<()> {
     if r.outside == 0 {
         return Ok(());
     }

@@ -213,7 +213,10 @@ mod tests {
         let h = 0.01;
         let sums = kernel_sums(&p, h, BlobKernel::CubicSpline).unwrap();
         for (a, s) in p.iter().zip(&sums) {
-            let want: f64 = p.iter().map(|b| BlobKernel::CubicSpline.value((*a - *b).length(), h)).sum();
+            let want: f64 = p
+                .iter()
+                .map(|b| BlobKernel::CubicSpline.value((*a - *b).length(), h))
+                .sum();
             assert!((s - want).abs() <= 1e-12 * want && *s >= 1.0);
         }
         assert!(kernel_sums(&p, 1e-160, BlobKernel::CubicSpline).is_err());

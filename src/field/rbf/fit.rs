@@ -26,11 +26,11 @@ use super::reduction::{self, Reduction, ReductionSettings};
 use super::{FitSettings, VariationalSurface};
 use crate::error::{Error, Result};
 use crate::field::scan::{self, ScanSettings, ScanSurface};
-use crate::knn::PointTree;
-use rayon::prelude::*;
 use crate::field::{DynBlockField, Field, Starts};
+use crate::knn::PointTree;
 use crate::lattice::Lattice;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::Arc;
 

@@ -182,7 +182,10 @@ fn project_on_quadric(
     let d = (p - mean) * inv;
     let (x, y) = (d.dot(u), d.dot(v));
     let z = c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y;
-    let (zx, zy) = (c[1] + 2.0 * c[3] * x + c[4] * y, c[2] + c[4] * x + 2.0 * c[5] * y);
+    let (zx, zy) = (
+        c[1] + 2.0 * c[3] * x + c[4] * y,
+        c[2] + c[4] * x + 2.0 * c[5] * y,
+    );
     let moved = mean + (x * u + y * v + z * normal) * h;
     let n = (normal - zx * u - zy * v).normalize_or(normal);
     (moved, n)
@@ -236,7 +239,10 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     if points.len() <= k {
         return Err(Error::invalid(
             "points",
-            format!("a scan fit needs more than {k} points, got {}", points.len()),
+            format!(
+                "a scan fit needs more than {k} points, got {}",
+                points.len()
+            ),
         ));
     }
     if normals.len() != points.len() {
@@ -253,9 +259,17 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     let row = |i: usize| (&idx[i * kk..(i + 1) * kk], &dist[i * kk..(i + 1) * kk]);
 
     // 1. Spacing and isolation.
-    let spacing = median(&mut (0..n).map(|i| row(i).1[SPACING_NEIGHBOUR]).collect::<Vec<_>>());
+    let spacing = median(
+        &mut (0..n)
+            .map(|i| row(i).1[SPACING_NEIGHBOUR])
+            .collect::<Vec<_>>(),
+    );
     let isolation_limit = settings.isolation
-        * median(&mut (0..n).map(|i| row(i).1[ISOLATION_NEIGHBOUR]).collect::<Vec<_>>());
+        * median(
+            &mut (0..n)
+                .map(|i| row(i).1[ISOLATION_NEIGHBOUR])
+                .collect::<Vec<_>>(),
+        );
     let isolated: Vec<bool> = (0..n)
         .map(|i| row(i).1[ISOLATION_NEIGHBOUR] > isolation_limit)
         .collect();
@@ -356,7 +370,10 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     crate::cancel::check()?;
     // Outward: the flux of the normals through the points' surface about their mean is the
     // enclosed volume (times 3) when they point out, negative when they point in.
-    let kept_mean = (0..n).filter(|&i| valid[i]).map(|i| points[i]).sum::<DVec3>()
+    let kept_mean = (0..n)
+        .filter(|&i| valid[i])
+        .map(|i| points[i])
+        .sum::<DVec3>()
         / (0..n).filter(|&i| valid[i]).count().max(1) as f64;
     let flux: f64 = (0..n)
         .filter(|&i| valid[i])
@@ -384,8 +401,16 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
             let own = oriented[i];
             let items = nb.iter().zip(d).filter_map(|(&j, &dj)| {
                 let j = j as usize;
-                (j == i || (valid[j] && own.dot(oriented[j]) > 0.5))
-                    .then(|| (points[j], if j == i { 1.0 } else { (-dj * dj * inv_h2).exp() }))
+                (j == i || (valid[j] && own.dot(oriented[j]) > 0.5)).then(|| {
+                    (
+                        points[j],
+                        if j == i {
+                            1.0
+                        } else {
+                            (-dj * dj * inv_h2).exp()
+                        },
+                    )
+                })
             });
             let (mean, mut normal, _) = weighted_plane(items.clone());
             if normal.dot(own) < 0.0 {
@@ -393,7 +418,11 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
             }
             let (p, normal) = project_on_quadric(points[i], mean, normal, items, h);
             let r = d[AREA_NEIGHBOUR];
-            (p, normal, std::f64::consts::PI * r * r / AREA_NEIGHBOUR as f64)
+            (
+                p,
+                normal,
+                std::f64::consts::PI * r * r / AREA_NEIGHBOUR as f64,
+            )
         })
         .collect();
     crate::cancel::check()?;
@@ -467,7 +496,11 @@ mod tests {
             .iter()
             .map(|&i| (p[i as usize].length() - 1.0).abs())
             .sum::<f64>();
-        let after: f64 = c.points.iter().map(|q| (q.length() - 1.0).abs()).sum::<f64>();
+        let after: f64 = c
+            .points
+            .iter()
+            .map(|q| (q.length() - 1.0).abs())
+            .sum::<f64>();
         assert!(after < 0.6 * before, "{after} against {before}");
         assert!(c.noise > 0.0 && c.noise < 0.004, "noise {}", c.noise);
     }

@@ -97,7 +97,10 @@ impl Guard {
     fn blend(&self, x: DVec3) -> Blend {
         let (d, p) = self.nearest(x);
         if d <= self.near {
-            return Blend { s: 1.0, ds: DVec3::ZERO };
+            return Blend {
+                s: 1.0,
+                ds: DVec3::ZERO,
+            };
         }
         if d >= self.far {
             return Blend::default();

@@ -24,7 +24,6 @@ pub use guard::{Guard, Guarded};
 pub use surface::{ScanReport, ScanSurface};
 pub use winding::WindingNumber;
 
-
 /// Settings of the scan fit's cleaning and guard.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScanSettings {

@@ -228,10 +228,22 @@ mod tests {
         let (p, n, a) = sphere(20_000);
         let tree = PointTree::new(&p).unwrap();
         let wn = WindingNumber::new(&tree, &p, &n, &a, 0.0).unwrap();
-        for q in [DVec3::ZERO, DVec3::new(0.3, -0.2, 0.5), DVec3::new(0.0, 0.0, 0.8)] {
-            assert!((wn.value(q) - 1.0).abs() < 0.02, "inside {q}: {}", wn.value(q));
+        for q in [
+            DVec3::ZERO,
+            DVec3::new(0.3, -0.2, 0.5),
+            DVec3::new(0.0, 0.0, 0.8),
+        ] {
+            assert!(
+                (wn.value(q) - 1.0).abs() < 0.02,
+                "inside {q}: {}",
+                wn.value(q)
+            );
         }
-        for q in [DVec3::new(1.5, 0.0, 0.0), DVec3::new(2.0, 2.0, -1.0), DVec3::splat(10.0)] {
+        for q in [
+            DVec3::new(1.5, 0.0, 0.0),
+            DVec3::new(2.0, 2.0, -1.0),
+            DVec3::splat(10.0),
+        ] {
             assert!(wn.value(q).abs() < 0.02, "outside {q}: {}", wn.value(q));
         }
     }
@@ -245,12 +257,18 @@ mod tests {
         // Queries a few spacings (about 0.065) or more from the points, where the guard reads
         // the winding number.
         let queries = crate::field::testing::random_points(600, -2.0, 2.0, 5);
-        for q in queries.into_iter().filter(|q| (q.length() - 1.0).abs() > 0.2) {
+        for q in queries
+            .into_iter()
+            .filter(|q| (q.length() - 1.0).abs() > 0.2)
+        {
             let (w, g) = wn.value_gradient(q);
             let (wb, gb) = brute(&p, &n, &a, q, eps * eps);
             assert!((w - wb).abs() < 0.02, "{q}: {w} against {wb}");
             // The dipoles' first-order expansion bounds the gradient's error more loosely.
-            assert!((g - gb).length() < 0.1 * (1.0 + gb.length()), "{q}: {g} against {gb}");
+            assert!(
+                (g - gb).length() < 0.1 * (1.0 + gb.length()),
+                "{q}: {g} against {gb}"
+            );
             let h = 1e-5;
             let fd = DVec3::new(
                 wn.value(q + DVec3::X * h) - wn.value(q - DVec3::X * h),
@@ -258,7 +276,10 @@ mod tests {
                 wn.value(q + DVec3::Z * h) - wn.value(q - DVec3::Z * h),
             ) / (2.0 * h);
             // Away from a change of the traversal, the gradient is the sum's own derivative.
-            assert!((fd - g).length() < 1e-4 * (1.0 + g.length()), "{q}: {g} against {fd}");
+            assert!(
+                (fd - g).length() < 1e-4 * (1.0 + g.length()),
+                "{q}: {g} against {fd}"
+            );
         }
     }
 

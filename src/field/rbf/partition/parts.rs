@@ -92,10 +92,14 @@ impl PartitionSurface {
         if let Some(bulk) = crate::spatial::Bulk::of(&c.points) {
             let reach = crate::spatial::FAR * bulk.extent;
             let far = |q: &PatchParts| {
-                q.centre.is_finite() && q.radius.is_finite() && (bulk.ratio(q.centre) > crate::spatial::FAR || q.radius > reach)
+                q.centre.is_finite()
+                    && q.radius.is_finite()
+                    && (bulk.ratio(q.centre) > crate::spatial::FAR || q.radius > reach)
             };
             if p.patches.iter().any(far) {
-                return Err(bad_state(format!("a patch's ball reaches more than {reach:.3e} from the constraint points")));
+                return Err(bad_state(format!(
+                    "a patch's ball reaches more than {reach:.3e} from the constraint points"
+                )));
             }
         }
         let cut = p.tree.is_some();
