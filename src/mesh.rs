@@ -128,6 +128,78 @@ impl Mesh {
     }
 }
 
+/// The bodies of a mesh: sets of vertices joined by triangles (see [`Mesh::bodies`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Bodies {
+    /// The body of each vertex, `0..count`; [`Bodies::UNUSED`] for a vertex no triangle uses.
+    pub of_vertex: Vec<u32>,
+    /// Triangles of each body.
+    pub triangles: Vec<usize>,
+}
+
+impl Bodies {
+    /// The body of a vertex that no triangle uses.
+    pub const UNUSED: u32 = u32::MAX;
+
+    /// The number of bodies.
+    pub fn count(&self) -> usize {
+        self.triangles.len()
+    }
+}
+
+impl Mesh {
+    /// The bodies (connected components) of the mesh, numbered in the order of their first
+    /// vertex.
+    pub fn bodies(&self) -> Bodies {
+        let mut parent: Vec<u32> = (0..self.vertices.len() as u32).collect();
+        fn root(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                let up = parent[parent[i as usize] as usize];
+                parent[i as usize] = up;
+                i = up;
+            }
+            i
+        }
+        for t in &self.triangles {
+            let a = root(&mut parent, t[0]);
+            for &v in &t[1..] {
+                let b = root(&mut parent, v);
+                if a != b {
+                    parent[b as usize] = a;
+                }
+            }
+        }
+        let mut used = vec![false; self.vertices.len()];
+        for t in &self.triangles {
+            for &v in t {
+                used[v as usize] = true;
+            }
+        }
+        let mut label = vec![Bodies::UNUSED; self.vertices.len()];
+        let mut of_vertex = vec![Bodies::UNUSED; self.vertices.len()];
+        let mut count = 0u32;
+        for v in 0..self.vertices.len() {
+            if !used[v] {
+                continue;
+            }
+            let r = root(&mut parent, v as u32) as usize;
+            if label[r] == Bodies::UNUSED {
+                label[r] = count;
+                count += 1;
+            }
+            of_vertex[v] = label[r];
+        }
+        let mut triangles = vec![0; count as usize];
+        for t in &self.triangles {
+            triangles[of_vertex[t[0] as usize] as usize] += 1;
+        }
+        Bodies {
+            of_vertex,
+            triangles,
+        }
+    }
+}
+
 /// Triangle-by-triangle comparison of two meshes (see [`Mesh::compare`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Comparison {
@@ -177,6 +249,27 @@ impl Mesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bodies_are_the_components_joined_by_triangles() {
+        let tet = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        let mut triangles: Vec<[u32; 3]> = tet.to_vec();
+        // A second tetrahedron on vertices 5..9 and a lone triangle on 9..12; vertex 4 unused.
+        triangles.extend(tet.iter().map(|t| t.map(|v| v + 5)));
+        triangles.push([9, 10, 11]);
+        let m = Mesh {
+            vertices: vec![DVec3::ZERO; 12],
+            triangles,
+            normals: vec![],
+        };
+        let b = m.bodies();
+        assert_eq!(b.count(), 3);
+        assert_eq!(b.triangles, vec![4, 4, 1]);
+        assert_eq!(
+            b.of_vertex,
+            vec![0, 0, 0, 0, Bodies::UNUSED, 1, 1, 1, 1, 2, 2, 2]
+        );
+    }
 
     #[test]
     fn tetrahedron_measures() {

@@ -154,6 +154,35 @@ def test_trimming_opens_the_mesh_where_no_data_was():
         im.polygonize(lambda p: np.linalg.norm(p, axis=1) - 0.5, bounds=[[-1] * 3, [1] * 3], resolution=8, trim=0.1)
 
 
+def test_bubbles_and_voids_the_data_disowns_are_dropped():
+    vertices, faces = _truth("spot")
+    s = scan(vertices, faces, 10_000, noise=5e-4, seed=12)
+    surface = im.VariationalSurface.fit(s.points, s.normals)
+    mesh = im.polygonize(surface, resolution=64, method="octree")
+    assert mesh.stats["bodies_dropped"] == 0
+    spacing = surface.report["spacing"]
+    # A bubble just outside the data beside a point of it, and a void (a sphere turned inside
+    # out) just inside it: the stray bodies a fit may close near a stray point.
+    i = int(np.argmax(s.points[:, 2]))
+    top, up = s.points[i], np.array([0.0, 0.0, 1.0])
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=1.5 * spacing)
+    bubble = ball.vertices + top + 3 * spacing * up
+    void = ball.vertices + top - 4 * spacing * up
+    v = np.concatenate([mesh.vertices, bubble, void])
+    nv, nb = len(mesh.vertices), len(ball.vertices)
+    f = np.concatenate([mesh.faces, ball.faces + nv, ball.faces[:, ::-1] + nv + nb])
+    assert surface(void.mean(0)[None])[0] < 0 < surface(bubble.mean(0)[None])[0]
+    keep, dropped = surface.owned_vertices(v, f)
+    assert dropped == 2
+    assert keep.dtype == bool and keep.tolist() == [True] * nv + [False] * (2 * nb)
+    # An exact fit keeps every body: it interpolates its data and disowns nothing.
+    exact = im.VariationalSurface.fit(s.points[::10], s.normals[::10], exact=True)
+    keep, dropped = exact.owned_vertices(v, f)
+    assert dropped == 0 and keep.all()
+    with pytest.raises(ValueError, match="faces"):
+        surface.owned_vertices(v, f + len(v))
+
+
 @pytest.mark.parametrize("far", [1e6, 1e200])
 def test_a_far_point_in_a_scan_is_left_out_as_an_outlier(far):
     vertices, faces = _truth("knot")

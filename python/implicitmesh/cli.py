@@ -198,6 +198,7 @@ def _report(surface, fit_s, mesh) -> str:
             ("polygonize", f"{st['seconds']['total']:.3f} s"),
             ("triangles", f"{len(mesh.faces):,}"),
             ("vertices", f"{len(mesh.vertices):,}"),
+            *([("bodies dropped", f"{st['bodies_dropped']} (bubbles or voids the data disowns)")] if st.get("bodies_dropped") else []),
             *([("trimmed", f"{st['trimmed']:,} triangles farther than --trim from the data")] if "trimmed" in st else []),
             ("watertight", "yes" if tm.is_watertight else "no"),
             ("genus", f"{(2 - mesh.euler_number) // 2}"),

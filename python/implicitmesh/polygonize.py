@@ -216,8 +216,16 @@ def _check_trim(field, trim) -> None:
 
 
 def trimmed(mesh: Mesh, field, trim: float | None) -> Mesh:
-    """``mesh`` without the triangles that have a vertex farther than ``trim`` from ``field``'s
-    data (``mesh`` itself for ``trim=None``); see :func:`polygonize`."""
+    """``mesh`` without the bodies a scan fit's data disowns (see
+    :meth:`VariationalSurface.owned_vertices`; ``stats["bodies_dropped"]`` counts them) and
+    without the triangles that have a vertex farther than ``trim`` from ``field``'s data (none
+    for ``trim=None``); see :func:`polygonize`."""
+    if getattr(field, "report", None) is not None and len(mesh.faces):
+        owned, dropped = field.owned_vertices(mesh.vertices, mesh.faces)
+        kept = mesh.trimmed(owned)
+        kept.stats.pop("trimmed")
+        kept.stats["bodies_dropped"] = dropped
+        mesh = kept
     if trim is None:
         return mesh
     return mesh.trimmed(field.distance_to_data(mesh.vertices) <= trim)

@@ -1,7 +1,8 @@
 //! `VariationalSurface`: the Python class over the core's fitted surface.
 
 use super::convert::{
-    field_gradients, field_values, points_arg, points_to_py, triangles, values, values_to_py,
+    field_gradients, field_values, points, points_arg, points_to_py, triangles, values,
+    values_to_py,
 };
 use super::errors::value_error;
 use crate::field::rbf::constraints;
@@ -671,6 +672,39 @@ impl PyVariationalSurface {
         let (p, inner) = (p.as_slice(), &self.inner);
         let d = super::interrupt::run(py, None, false, || inner.distances_to_data(p))?;
         Ok(values_to_py(py, d))
+    }
+
+    /// Which vertices of a polygonization of this surface belong to a body its data owns.
+    ///
+    /// A scan fit may close a small bubble or void near a stray point; the data's winding number
+    /// disowns such a body (see ``docs/scans.md``). :func:`implicitmesh.polygonize` drops them.
+    ///
+    /// Parameters
+    /// ----------
+    /// vertices : (V, 3) float64
+    /// faces : (F, 3) int
+    ///
+    /// Returns
+    /// -------
+    /// keep : (V,) bool
+    ///     True for a vertex of a kept body; for an exact fit, True for every vertex a face uses.
+    /// dropped : int
+    ///     The number of bodies disowned (0 for an exact fit).
+    fn owned_vertices<'py>(
+        &self,
+        py: Python<'py>,
+        vertices: &Bound<'py, PyAny>,
+        faces: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyAny>, usize)> {
+        let mesh = crate::mesh::Mesh {
+            vertices: points(vertices, "vertices")?,
+            triangles: triangles(faces, "faces")?,
+            normals: Vec::new(),
+        };
+        let inner = &self.inner;
+        let (keep, dropped) =
+            super::interrupt::run(py, None, false, || inner.owned_vertices(&mesh))?;
+        Ok((PyArray1::from_vec(py, keep).into_any(), dropped))
     }
 
     /// (K,) int64 or None: the indices of the points a scan fit left out as outliers,

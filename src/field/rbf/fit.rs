@@ -400,6 +400,37 @@ impl Fitted {
         let (_, d) = tree.k_nearest(points, 1)?;
         Ok(d)
     }
+    /// Whether each vertex of `mesh`, a polygonization of this surface, is kept, and the number
+    /// of bodies dropped: for a scan fit, every vertex used by a body its data does not disown
+    /// ([`crate::field::scan::bodies`]); for an exact fit, every vertex a triangle uses.
+    pub fn owned_vertices(&self, mesh: &crate::mesh::Mesh) -> Result<(Vec<bool>, usize)> {
+        crate::error::check_finite_points("vertices", &mesh.vertices)?;
+        if let Some(t) = mesh
+            .triangles
+            .iter()
+            .flatten()
+            .find(|&&v| v as usize >= mesh.vertices.len())
+        {
+            return Err(crate::error::Error::invalid(
+                "faces",
+                format!(
+                    "vertex index {t} out of range for {} vertices",
+                    mesh.vertices.len()
+                ),
+            ));
+        }
+        if let Fitted::Scan(s) = self {
+            return Ok(crate::field::scan::bodies::owned_vertices(
+                s.surface.guard(),
+                mesh,
+            ));
+        }
+        let mut used = vec![false; mesh.vertices.len()];
+        for &v in mesh.triangles.iter().flatten() {
+            used[v as usize] = true;
+        }
+        Ok((used, 0))
+    }
     /// The surface as seen from the box `lo..hi`: for a partition fit, only the patches that
     /// values and gradients in the box use ([`PartitionSurface::cut`], the same bits there); a
     /// global fit as it is.

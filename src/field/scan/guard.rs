@@ -29,31 +29,38 @@ pub struct Guard {
     points: Vec<DVec3>,
     normals: Vec<DVec3>,
     areas: Vec<f64>,
+    spacing: f64,
     near: f64,
     far: f64,
 }
 
 impl Guard {
-    /// The guard of `points` (over `tree`, built on them) with their unit `normals`, `areas`
-    /// and `winding` number: the fit alone within `near` of the data, the winding number alone
-    /// beyond `far`.
+    /// The guard of `points` (over `tree`, built on them, `spacing` apart) with their unit
+    /// `normals`, `areas` and `winding` number: the fit alone within `near` of the data, the
+    /// winding number alone beyond `far`.
     pub fn new(
         winding: WindingNumber,
         tree: PointTree,
         (points, normals, areas): (Vec<DVec3>, Vec<DVec3>, Vec<f64>),
-        near: f64,
-        far: f64,
+        spacing: f64,
+        (near, far): (f64, f64),
     ) -> Self {
-        debug_assert!(0.0 <= near && near < far);
+        debug_assert!(0.0 <= near && near < far && spacing > 0.0);
         Guard {
             winding,
             tree,
             points,
             normals,
             areas,
+            spacing,
             near,
             far,
         }
+    }
+
+    /// The data's spacing: the median distance from a point to its 6th nearest neighbour.
+    pub fn spacing(&self) -> f64 {
+        self.spacing
     }
 
     /// The winding number of the data.

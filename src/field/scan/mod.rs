@@ -14,6 +14,7 @@
 //! 3. [`guard`] ([`ScanSurface`]): beyond a few spacings from the data the field is the data's
 //!    [`winding::WindingNumber`], which closes unseen regions and has no surface elsewhere.
 
+pub mod bodies;
 pub mod clean;
 pub mod guard;
 pub mod surface;

@@ -124,8 +124,8 @@ pub fn guard_of(
         winding,
         tree,
         (points, normals, areas),
-        settings.near * spacing,
-        settings.far * spacing,
+        spacing,
+        (settings.near * spacing, settings.far * spacing),
     ))
 }
 
