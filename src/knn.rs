@@ -362,30 +362,23 @@ impl PointTree {
         Ok(out)
     }
 
-    /// The `k` nearest points of each point of the set (itself first, at distance 0, unless
-    /// another point coincides with it and has a smaller index): (indices, distances), flat, `k`
-    /// per point, in the caller's order.
-    pub fn k_nearest_of_points(&self, k: usize) -> Result<(Vec<u32>, Vec<f64>)> {
+    /// The `k` nearest points of each point of the set, as [`Self::k_nearest_of_points`] finds
+    /// them, without their distances: `k` indices per point, stored in leaf order (4 bytes per
+    /// neighbour and one index per point, nothing more).
+    pub fn neighbourhoods(&self, k: usize) -> Result<Neighbourhoods> {
         self.check_k(k)?;
         let n = self.len();
-        let mut idx = vec![0u32; n * k];
-        let mut dist = vec![0.0; n * k];
-        // Queries in leaf order; row s of these buffers belongs to the caller's point order[s].
-        let mut idx_sorted = vec![0u32; n * k];
-        let mut dist_sorted = vec![0.0; n * k];
-        idx_sorted
+        let mut indices = vec![0u32; n * k];
+        indices
             .par_chunks_mut(BATCH * k)
-            .zip(dist_sorted.par_chunks_mut(BATCH * k))
             .zip(self.sorted.par_chunks(BATCH))
             .enumerate()
-            .for_each(|(c, ((idx, dist), q))| {
+            .for_each(|(c, (idx, q))| {
                 let mut found = vec![(0.0, 0u32); k];
-                let rows = q.iter().zip(idx.chunks_mut(k)).zip(dist.chunks_mut(k));
-                for (s, ((p, i), d)) in (c * BATCH..).zip(rows) {
+                for (s, (p, i)) in (c * BATCH..).zip(q.iter().zip(idx.chunks_mut(k))) {
                     self.search(*p, &mut found, self.seed_leaves(s, k));
-                    for ((f, i), d) in found.iter().zip(i).zip(d) {
+                    for (f, i) in found.iter().zip(i) {
                         *i = f.1;
-                        *d = f.0.sqrt();
                     }
                 }
             });
@@ -394,15 +387,59 @@ impl PointTree {
         for (s, &i) in self.order.iter().enumerate() {
             position[i as usize] = s as u32;
         }
+        Ok(Neighbourhoods {
+            indices,
+            position,
+            k,
+        })
+    }
+
+    /// The `k` nearest points of each point of the set (itself first, at distance 0, unless
+    /// another point coincides with it and has a smaller index): (indices, distances), flat, `k`
+    /// per point, in the caller's order.
+    pub fn k_nearest_of_points(&self, k: usize) -> Result<(Vec<u32>, Vec<f64>)> {
+        let near = self.neighbourhoods(k)?;
+        let n = self.len();
+        let mut points = vec![DVec3::ZERO; n];
+        for (p, &i) in self.sorted.iter().zip(&self.order) {
+            points[i as usize] = *p;
+        }
+        let mut idx = vec![0u32; n * k];
+        let mut dist = vec![0.0; n * k];
         idx.par_chunks_mut(k)
             .zip(dist.par_chunks_mut(k))
-            .zip(position.par_iter())
-            .for_each(|((i, d), &s)| {
-                let s = s as usize * k;
-                i.copy_from_slice(&idx_sorted[s..s + k]);
-                d.copy_from_slice(&dist_sorted[s..s + k]);
+            .enumerate()
+            .for_each(|(i, (row, d))| {
+                row.copy_from_slice(near.of(i));
+                for (d, &j) in d.iter_mut().zip(row.iter()) {
+                    *d = (points[j as usize] - points[i]).length();
+                }
             });
         Ok((idx, dist))
+    }
+}
+
+/// The `k` nearest points of every point of a set ([`PointTree::neighbourhoods`]).
+#[derive(Clone, Debug)]
+pub struct Neighbourhoods {
+    /// `k` indices per point, nearest first, rows in the tree's leaf order.
+    indices: Vec<u32>,
+    /// The row of each point, in the caller's order.
+    position: Vec<u32>,
+    k: usize,
+}
+
+impl Neighbourhoods {
+    /// The `k` nearest points of point `i` (the caller's index), nearest first: itself first
+    /// unless another point coincides with it and has a smaller index.
+    pub fn of(&self, i: usize) -> &[u32] {
+        let s = self.position[i] as usize * self.k;
+        &self.indices[s..s + self.k]
+    }
+
+    /// Neighbours per point.
+    pub fn k(&self) -> usize {
+        self.k
     }
 }
 
@@ -541,6 +578,10 @@ mod tests {
                 b.iter().map(|x| x.1).collect::<Vec<_>>()
             );
             assert_eq!(dist[i * k], 0.0);
+        }
+        let near = tree.neighbourhoods(k).unwrap();
+        for i in 0..pts.len() {
+            assert_eq!(near.of(i), &idx[i * k..(i + 1) * k]);
         }
         // The duplicates: the smaller index of the two comes first.
         assert_eq!(idx[3000 * k], 0);

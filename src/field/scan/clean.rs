@@ -29,7 +29,7 @@
 
 use super::ScanSettings;
 use crate::error::{Error, Result};
-use crate::knn::{smallest_eigenvector, PointTree};
+use crate::knn::{smallest_eigenvector, Neighbourhoods, PointTree};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -192,28 +192,41 @@ fn project_on_quadric(
 }
 
 /// For each point, whether its [`LOCAL_NEIGHBOUR`]th neighbour among the `valid` points (in its
-/// row of `kk` neighbours, itself first, in `idx` and `dist`) lies within [`LOCAL_RATIO`] times
-/// the median of the same distance of its valid neighbours. A point with too few valid
-/// neighbours in its row passes.
-fn crowded(idx: &[u32], dist: &[f64], kk: usize, valid: &[bool]) -> Vec<bool> {
+/// neighbourhood, itself first) lies within [`LOCAL_RATIO`] times the median of the same distance
+/// of its valid neighbours. A point with too few valid neighbours in its row passes.
+fn crowded(points: &[DVec3], near: &Neighbourhoods, valid: &[bool]) -> Vec<bool> {
     let near_of = |i: usize| -> Option<f64> {
-        let row = (i * kk + 1..(i + 1) * kk).filter(|&r| valid[idx[r] as usize]);
-        row.map(|r| dist[r]).nth(LOCAL_NEIGHBOUR - 1)
+        let row = near.of(i)[1..].iter().filter(|&&j| valid[j as usize]);
+        row.map(|&j| distance(points, i, j))
+            .nth(LOCAL_NEIGHBOUR - 1)
     };
-    let near: Vec<Option<f64>> = (0..valid.len()).into_par_iter().map(near_of).collect();
+    let local: Vec<Option<f64>> = (0..valid.len()).into_par_iter().map(near_of).collect();
     (0..valid.len())
         .into_par_iter()
         .map(|i| {
-            let Some(own) = near[i] else {
+            let Some(own) = local[i] else {
                 return true;
             };
-            let mut others: Vec<f64> = idx[i * kk + 1..(i + 1) * kk]
+            let mut others: Vec<f64> = near.of(i)[1..]
                 .iter()
                 .filter(|&&j| valid[j as usize])
-                .filter_map(|&j| near[j as usize])
+                .filter_map(|&j| local[j as usize])
                 .collect();
             others.is_empty() || own <= LOCAL_RATIO * median(&mut others)
         })
+        .collect()
+}
+
+/// The distance from point `i` to point `j`.
+fn distance(points: &[DVec3], i: usize, j: u32) -> f64 {
+    (points[j as usize] - points[i]).length()
+}
+
+/// The distance from each point to its `m`th neighbour (the first being itself).
+fn nth_distances(points: &[DVec3], near: &Neighbourhoods, m: usize) -> Vec<f64> {
+    (0..points.len())
+        .into_par_iter()
+        .map(|i| distance(points, i, near.of(i)[m]))
         .collect()
 }
 
@@ -252,27 +265,16 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         ));
     }
     crate::error::check_finite_points("normals", normals)?;
-    let tree = PointTree::new(points)?;
-    let kk = k + 1;
-    let (idx, dist) = tree.k_nearest_of_points(kk)?;
+    let near = PointTree::new(points)?.neighbourhoods(k + 1)?;
     let n = points.len();
-    let row = |i: usize| (&idx[i * kk..(i + 1) * kk], &dist[i * kk..(i + 1) * kk]);
 
     // 1. Spacing and isolation.
-    let spacing = median(
-        &mut (0..n)
-            .map(|i| row(i).1[SPACING_NEIGHBOUR])
-            .collect::<Vec<_>>(),
-    );
-    let isolation_limit = settings.isolation
-        * median(
-            &mut (0..n)
-                .map(|i| row(i).1[ISOLATION_NEIGHBOUR])
-                .collect::<Vec<_>>(),
-        );
-    let isolated: Vec<bool> = (0..n)
-        .map(|i| row(i).1[ISOLATION_NEIGHBOUR] > isolation_limit)
-        .collect();
+    let spacing = median(&mut nth_distances(points, &near, SPACING_NEIGHBOUR));
+    let isolation = nth_distances(points, &near, ISOLATION_NEIGHBOUR);
+    let isolation_limit = settings.isolation * median(&mut isolation.clone());
+    let isolated: Vec<bool> = isolation.iter().map(|&d| d > isolation_limit).collect();
+    drop(isolation);
+    let areas = nth_distances(points, &near, AREA_NEIGHBOUR);
 
     // 2. Local planes and noise.
     let local: Vec<Local> = (0..n)
@@ -280,8 +282,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         .map(|i| {
             // The plane of the neighbours without the point itself, so that a stray point does
             // not pull the plane toward itself.
-            let (nb, _) = row(i);
-            let others = nb.iter().filter(|&&j| j as usize != i);
+            let others = near.of(i).iter().filter(|&&j| j as usize != i);
             let (mean, normal, variance) =
                 weighted_plane(others.clone().map(|&j| (points[j as usize], 1.0)));
             let mut residuals: Vec<f64> = others
@@ -317,7 +318,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         })
         .collect();
     for _ in 0..2 {
-        let crowded = crowded(&idx, &dist, kk, &valid);
+        let crowded = crowded(points, &near, &valid);
         for (v, c) in valid.iter_mut().zip(crowded) {
             *v &= c;
         }
@@ -341,9 +342,8 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
                 if !valid[i] {
                     return false;
                 }
-                let (nb, _) = row(i);
                 let (mut agree, mut disagree) = (0usize, 0usize);
-                for &j in &nb[1..] {
+                for &j in &near.of(i)[1..] {
                     let j = j as usize;
                     if j == i || !valid[j] {
                         continue;
@@ -378,7 +378,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     let flux: f64 = (0..n)
         .filter(|&i| valid[i])
         .map(|i| {
-            let r = row(i).1[AREA_NEIGHBOUR];
+            let r = areas[i];
             r * r * (points[i] - kept_mean).dot(oriented[i])
         })
         .sum();
@@ -397,9 +397,9 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         .par_iter()
         .map(|&i| {
             let i = i as usize;
-            let (nb, d) = row(i);
             let own = oriented[i];
-            let items = nb.iter().zip(d).filter_map(|(&j, &dj)| {
+            let items = near.of(i).iter().filter_map(|&j| {
+                let dj = distance(points, i, j);
                 let j = j as usize;
                 (j == i || (valid[j] && own.dot(oriented[j]) > 0.5)).then(|| {
                     (
@@ -417,7 +417,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
                 normal = -normal;
             }
             let (p, normal) = project_on_quadric(points[i], mean, normal, items, h);
-            let r = d[AREA_NEIGHBOUR];
+            let r = areas[i];
             (
                 p,
                 normal,
