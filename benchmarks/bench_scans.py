@@ -19,6 +19,11 @@ diagonal.
 
     python -m benchmarks.bench_scans [--quick] [--sizes 50000 500000] [--meshes NAME ...]
                                      [--conditions CONDITION ...] [--results DIR]
+    python -m benchmarks.bench_scans --sizes 5000000 --meshes knot --conditions "σ 0.05 %"
+
+From :data:`ALONE_FROM` points on (the 5·10⁶ size, which runs only when asked for) the scan is
+saved, and each of :data:`ALONE_METHODS` runs once in a process of its own, whose peak resident
+size is reported beside its time.
 
 A run of some sizes keeps the stored cases of the other sizes (each with its own run's record).
 """
@@ -46,7 +51,12 @@ CONDITIONS = {
     "0.2 % outliers, σ 0.05 %": {"noise": 5e-4, "outliers": 2e-3},
 }
 #: Points per scan → (our cells, Poisson's depth, timed runs per method after one warm-up).
-SIZES = {50_000: (256, 8, 3), 500_000: (512, 9, 1)}
+SIZES = {50_000: (256, 8, 3), 500_000: (512, 9, 1), 5_000_000: (1024, 10, 1)}
+#: From this many points on, each method runs once, without a warm-up, in a process of its own
+#: (the scan saved in between), and its peak resident size (VmHWM) is reported.
+ALONE_FROM = 1_000_000
+#: The methods run at those sizes (the interpolant's many bodies are shown at the smaller ones).
+ALONE_METHODS = ("ours", "poisson")
 #: The quick run: these meshes and conditions at the smallest size, one timed run.
 QUICK_MESHES = ("knot", "spot")
 QUICK_CONDITIONS = ("clean", "σ 0.05 %")
@@ -234,6 +244,64 @@ def one(model: str, condition: str, n: int, runs: int) -> dict:
             "methods": run_case(truth, genus, s, n, runs)}
 
 
+def vmhwm_mib() -> float:
+    """This process's peak resident size in MiB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def scan_to(model: str, condition: str, n: int, path: str) -> dict:
+    """Makes the scan of one case and saves its points and normals to ``path`` (.npz)."""
+    import numpy as np
+    import trimesh
+
+    import implicitmesh as im
+
+    truth = trimesh.load(MESHES / f"{model}_hires.ply", process=False)
+    t0 = time.perf_counter()
+    s = im.scanner.scan(truth.vertices, truth.faces, n, seed=SCAN_SEED, **CONDITIONS[condition])
+    np.savez(path, points=s.points, normals=s.normals)
+    return {"model": model, "genus": topology(truth.vertices, truth.faces)["genera"][0], "condition": condition,
+            "n": n, "points": len(s), "resolution": s.parameters.resolution, "outliers": int(len(s.outliers)),
+            "scan_s": time.perf_counter() - t0}
+
+
+def method_alone(model: str, n: int, method: str, path: str, genus: int) -> dict:
+    """One method once on the scan saved at ``path``, in this process: seconds, peak memory
+    (the points included) and the measures of its mesh."""
+    import numpy as np
+    import trimesh
+
+    truth = trimesh.load(MESHES / f"{model}_hires.ply", process=False)
+    data = np.load(path)
+    points, normals = data["points"], data["normals"]
+    t0 = time.perf_counter()
+    mesh = METHODS[method][0](points, normals, n)
+    seconds = time.perf_counter() - t0
+    peak = vmhwm_mib()
+    return {"times": [seconds], "seconds": seconds, "peak_mib": peak, **measures(truth, *mesh, genus)}
+
+
+def case_alone(model: str, condition: str, n: int) -> dict:
+    """One case at a size of :data:`ALONE_FROM` or more: the scan in one process, then each of
+    :data:`ALONE_METHODS` in its own."""
+    import tempfile
+
+    case = {"model": model, "condition": condition, "n": n}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = str(Path(tmp) / "scan.npz")
+        c = run_case_process("benchmarks.bench_scans", ["scan", model, condition, str(n), path], case)
+        if "error" in c:
+            return {**case, "genus": None, "points": 0, "methods": {m: {"error": c["error"]} for m in ALONE_METHODS}}
+        c["methods"] = {}
+        for m in ALONE_METHODS:
+            r = run_case_process("benchmarks.bench_scans", ["method", model, str(n), m, path, str(c["genus"])], {})
+            c["methods"][m] = r
+    return c
+
+
 def measure(a: argparse.Namespace) -> dict:
     run = RunRecord("benchmarks.bench_scans", a.quick)
     meshes = [m for m in closed_meshes() if (not a.quick or m in QUICK_MESHES) and (not a.meshes or m in a.meshes)]
@@ -248,7 +316,10 @@ def measure(a: argparse.Namespace) -> dict:
                 log(f"{model}, {condition}, {n:,} points, {runs} run(s) per method")
                 # Each case in a fresh process: a crash of one method costs one case, not the run.
                 case = {"model": model, "condition": condition, "n": n}
-                c = run_case_process("benchmarks.bench_scans", [model, condition, str(n), str(runs)], case)
+                if n >= ALONE_FROM:
+                    c = case_alone(model, condition, n)
+                else:
+                    c = run_case_process("benchmarks.bench_scans", [model, condition, str(n), str(runs)], case)
                 if "error" in c:
                     c = {**case, "genus": None, "points": 0, "methods": {m: {"error": c["error"]} for m in METHODS}}
                 cases.append(c)
@@ -301,11 +372,13 @@ def render(raw: dict) -> str:
         "Conditions: noise along the rays with σ a fraction of the bounding-box diagonal; misregistered: each "
         "view moved by 0.1 % of the diagonal and rotated by 0.1°; outliers: 0.2 % of the points replaced by "
         "uniform points in the box with random normals. Ours: `VariationalSurface.fit(points, normals)` (the scan fit, the default) then "
-        "`polygonize(surface, resolution=R, method=\"octree\")` (R = 256 at 5·10⁴ points, 512 at 5·10⁵); "
+        "`polygonize(surface, resolution=R, method=\"octree\")` (R = 256 at 5·10⁴ points, 512 at 5·10⁵, "
+        "1024 at 5·10⁶); "
         "exact: the same with `fit(..., exact=True)`, the interpolant; "
         "Poisson: Open3D's `create_from_point_cloud_poisson(pcd, depth=d)` (d = 8, 9), untrimmed; both on "
         "the same points in the same process (a fresh one per case), seconds end to end (median of the timed "
-        "runs after one warm-up call of each method). Bodies: connected components, with watertightness and each body's "
+        "runs after one warm-up call of each method; from 10⁶ points on, each method runs once in a fresh "
+        "process of its own, and its peak resident size, the points included, is given). Bodies: connected components, with watertightness and each body's "
         "genus from its Euler characteristic, largest first ((2 − χ) / 2, which is a genus only for a closed body: "
         "on an open or non-manifold mesh it is a count and can be negative); ✓: one watertight body of the true genus. "
         f"Chamfer: the mean of the two one-sided mean distances between {raw['samples']:,} uniform samples of "
@@ -364,10 +437,12 @@ def render(raw: dict) -> str:
                                  "", "", ""])
                     continue
                 speed = fmt_ratio(c["methods"].get(ref, {}).get("seconds"), r["seconds"]) if m != ref else ""
+                peak = f"; {r['peak_mib']:,.0f} MiB" if "peak_mib" in r else ""
                 rows.append([c["model"], c["condition"], f"{c['points']:,}", name(m),
-                             fmt_s(r["seconds"]) + (f" ({speed})" if speed else ""), _topology_cell(r),
+                             fmt_s(r["seconds"]) + (f" ({speed})" if speed else "") + peak, _topology_cell(r),
                              f"{r['chamfer']:.2e}", f"{r['p99']:.2e}", f"{r['normal_consistency']:.4f}"])
-        parts += [md_table(["mesh (true genus)", "condition", "points", "method", "seconds (Poisson ÷ it)",
+        parts += [md_table(["mesh (true genus)", "condition", "points", "method",
+                            "seconds (Poisson ÷ it)" + ("; peak memory" if n >= ALONE_FROM else ""),
                             "bodies", "Chamfer", "p99", "NC"],
                            [[f"{r[0]} ({next(c['genus'] for c in cases if c['model'] == r[0])})", *r[1:]]
                             for r in rows]), ""]
@@ -378,9 +453,15 @@ def main() -> int:
     if len(sys.argv) == 6 and sys.argv[1] == "one":
         print(json.dumps(one(sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5]))))
         return 0
+    if len(sys.argv) == 7 and sys.argv[1] == "one" and sys.argv[2] == "scan":
+        print(json.dumps(scan_to(sys.argv[3], sys.argv[4], int(sys.argv[5]), sys.argv[6])))
+        return 0
+    if len(sys.argv) == 8 and sys.argv[1] == "one" and sys.argv[2] == "method":
+        print(json.dumps(method_alone(sys.argv[3], int(sys.argv[4]), sys.argv[5], sys.argv[6], int(sys.argv[7]))))
+        return 0
     parser = section_parser(__doc__.split("\n")[0], "knot and spot, clean and σ 0.05 %%, 5·10⁴ points, one run")
-    parser.add_argument("--sizes", nargs="+", type=int, default=sorted(SIZES), choices=sorted(SIZES),
-                        help="points per scan (default all)")
+    parser.add_argument("--sizes", nargs="+", type=int, default=[n for n in sorted(SIZES) if n < ALONE_FROM],
+                        choices=sorted(SIZES), help="points per scan (default those below %d)" % ALONE_FROM)
     parser.add_argument("--meshes", nargs="+", default=None, metavar="NAME",
                         help="only these meshes (names before _hires; default every closed one)")
     parser.add_argument("--conditions", nargs="+", default=None, choices=list(CONDITIONS), metavar="CONDITION",
