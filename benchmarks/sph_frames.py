@@ -4,11 +4,11 @@ SPlisHSPlasH (``pip install pysplishsplash``) simulates its shipped ``DamBreakMo
 (DFSPH, a box 4 × 3 × 1.5 m, gravity along -y) with the fluid block enlarged to 1 × 1 × 1.4 m (the
 box's full depth but for 5 cm at each side wall) and the particle radius of the scene's name:
 
-- ``dam-break-1e5``: particle radius 0.0125 m (about 9·10⁴ particles), a few minutes;
-- ``dam-break-5e5``: particle radius 0.007 m (about 5·10⁵ particles), tens of minutes.
+- ``dam-break-1e5``: particle radius 0.0125 m (83,655 particles), a few minutes;
+- ``dam-break-5e5``: particle radius 0.007 m (485,100 particles), tens of minutes.
 
 The particle positions of the frames at :data:`FRAME_TIMES` (the wave running along the floor,
-hitting the far wall and climbing it) are saved as float32 ``.npy`` files, **z up** (the
+hitting the far wall at about 0.85 s and climbing it) are saved as float32 ``.npy`` files, **z up** (the
 simulation's (x, y, z) stored as (x, -z, y): the floor is z = 0, the box spans x in [-2, 2], y in
 [-0.75, 0.75]), in ``CACHE/NAME/t0.700.npy``, beside ``CACHE/NAME/scene.json`` (particle radius,
 counts, the frames' exact times, the box). The cache is ``~/.cache/implicitmesh/sph`` unless
@@ -36,8 +36,8 @@ from pathlib import Path
 
 #: Particle radius (m) of each scene.
 SCENES = {"dam-break-1e5": 0.0125, "dam-break-5e5": 0.007}
-#: Simulated times (s) of the saved frames of each scene: the wave reaches the far wall (x = 2 m)
-#: at about 0.6 s and climbs it.
+#: Simulated times (s) of the saved frames of each scene: the wave's front runs along the floor
+#: (at x = 0.7 m at 0.5 s), reaches the far wall (x = 2 m) at about 0.85 s and climbs it.
 FRAME_TIMES = {"dam-break-1e5": (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2), "dam-break-5e5": (0.6, 0.7, 0.8)}
 #: The fluid block (simulation coordinates, before the scene's translation [-1.45, 0.05, 0]).
 BLOCK = {"start": [-0.5, 0.0, -0.7], "end": [0.5, 1.0, 0.7]}
