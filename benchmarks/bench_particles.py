@@ -385,7 +385,8 @@ def measure(a: argparse.Namespace, save) -> dict:
 
     for layout, method, n in todo:
         runs = 1 if n > ONE_RUN_ABOVE or layout == ANIM else RUNS[a.quick]
-        log(f"{layout}, {method}, {n:,} particles, {runs} run(s)")
+        log(f"{layout}, {method}, " + (f"frame {n / 1000} s" if layout in SCENES else f"{n:,} particles")
+            + f", {runs} run(s)")
         cases.append({"layout": layout, "method": method, "n": n,
                       "runs": [run_one(layout, method, n) for _ in range(runs)]})
         save(raw())

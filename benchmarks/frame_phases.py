@@ -29,13 +29,13 @@ def ours(p, r: float, cell: float, precision: str, normals: bool) -> dict:
 
     cells = np.ceil((p.max(axis=0) + 4 * r + 2 * h - lo) / h).astype(int)
     bounds = np.stack([lo, lo + cells * h])
-    t = time.perf_counter()
+    t, c = time.perf_counter(), frame_cases.cpu_seconds()
     field = im.BlobField.from_particles(p, r, iso_surface_threshold=frame_cases.ISO, precision=precision)
-    field_s = time.perf_counter() - t
-    mesh = im.polygonize(field, bounds=bounds, resolution=[int(c) for c in cells], method="sparse", normals=normals)
-    total = time.perf_counter() - t
+    field_s, field_cpu = time.perf_counter() - t, frame_cases.cpu_seconds() - c
+    mesh = im.polygonize(field, bounds=bounds, resolution=[int(n) for n in cells], method="sparse", normals=normals)
+    total, cpu = time.perf_counter() - t, frame_cases.cpu_seconds() - c
     s = mesh.stats
-    return {"total_s": total, "field_s": field_s, "polygonize_s": total - field_s,
+    return {"total_s": total, "cpu_s": cpu, "field_cpu_s": field_cpu, "field_s": field_s, "polygonize_s": total - field_s,
             **{f"phase_{k}_s": v for k, v in s["seconds"].items()},
             "evaluations": s["evaluations"], "normal_evaluations": s["normal_evaluations"],
             "lattice_points": s["lattice_points"], "cells_visited": s["cells_visited"],
@@ -47,11 +47,11 @@ def splashsurf(p, r: float, cell: float) -> dict:
     import pysplashsurf
 
     q = np.ascontiguousarray(p, dtype=np.float32)
-    t = time.perf_counter()
+    t, c = time.perf_counter(), frame_cases.cpu_seconds()
     out = pysplashsurf.reconstruct_surface(q, particle_radius=r, smoothing_length=2.0, cube_size=cell,
                                            iso_surface_threshold=frame_cases.ISO)
     total = time.perf_counter() - t
-    return {"total_s": total, "triangles": len(frame_cases.mesh_arrays(out)[1])}
+    return {"total_s": total, "cpu_s": frame_cases.cpu_seconds() - c, "triangles": len(frame_cases.mesh_arrays(out)[1])}
 
 
 def medians(fn, runs: int) -> dict:
@@ -80,16 +80,19 @@ def main(argv=None) -> int:
             for normals in (False, True):
                 m = medians(lambda: ours(p, r, cell, precision, normals), args.runs)
                 m["ratio"] = peer["total_s"] / m["total_s"]
+                m["cpu_ratio"] = peer["cpu_s"] / m["cpu_s"]
                 rows.append({"config": f"colour {precision}{' +normals' if normals else ''} cells r*{cell}", **m})
                 print(json.dumps(rows[-1]), flush=True)
     keys = sorted({k for r_ in rows for k in r_ if k.startswith("phase_")})
     print(f"\n{args.scene} t={args.time} s, {len(p):,} particles, r={r}, medians of {args.runs}")
-    print(" | ".join(["config", "total s", "field s", "polygonize s", *keys, "splashsurf/ours", "evaluations",
+    print(" | ".join(["config", "total s", "CPU s", "field CPU s", "field s", "polygonize s", *keys, "splashsurf/ours (CPU)", "evaluations",
                       "triangles"]))
     for r_ in rows:
-        print(" | ".join([r_["config"], f"{r_['total_s']:.3f}", f"{r_.get('field_s', float('nan')):.3f}",
+        print(" | ".join([r_["config"], f"{r_['total_s']:.3f}", f"{r_['cpu_s']:.3f}",
+                          f"{r_.get('field_cpu_s', float('nan')):.3f}", f"{r_.get('field_s', float('nan')):.3f}",
                           f"{r_.get('polygonize_s', float('nan')):.3f}",
-                          *[f"{r_.get(k, float('nan')):.3f}" for k in keys], f"{r_.get('ratio', float('nan')):.2f}",
+                          *[f"{r_.get(k, float('nan')):.3f}" for k in keys],
+                          f"{r_.get('ratio', float('nan')):.2f} (CPU {r_.get('cpu_ratio', float('nan')):.2f})",
                           f"{r_.get('evaluations', 0):,}", f"{r_['triangles']:,}"]))
     return 0
 

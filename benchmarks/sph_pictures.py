@@ -28,7 +28,7 @@ def camera(box) -> list:
     """A camera looking from the near side, above the middle of the tank, towards the far wall
     (z up), as pyvista's (position, focal point, view up)."""
     (x0, y0, _), (x1, y1, _) = box
-    return [(0.5 * (x0 + x1) - 0.6, y0 - 3.0, 2.0), (0.6 * x1, 0.5 * (y0 + y1), 0.45), (0.0, 0.0, 1.0)]
+    return [(0.5 * (x0 + x1) - 0.8, y0 - 3.6, 2.3), (0.55 * x1, 0.5 * (y0 + y1), 0.7), (0.0, 0.0, 1.0)]
 
 
 def render(vertices, faces, box, path: Path, title: str) -> None:
