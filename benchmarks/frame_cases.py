@@ -210,6 +210,13 @@ def render(raw: dict, ratio: Callable, seconds: Callable, median: Callable, tabl
                "patches"], rows, "llrlrrrrrrrrrrr"),
         "",
     ]
+    run = raw["run"]
+    busy = run.get("foreign_load")
+    if busy is not None and busy > 0.3 and ("--cases" not in run["command"] or any(x in run["command"] for x in SCENES)):
+        lines[-2:-2] = [
+            f"Measured in the run of {run['date']} while other processes kept {busy:.2f} cores busy on average (of "
+            f"{run['machine']['cores']}): the wall-clock seconds and their ratios varied by up to 2× between "
+            "neighbouring cases; the CPU seconds (all threads of the process) are the steadier comparison.", ""]
     lines += [f"- skipped ({', '.join(f'`{m}`' for m in dict.fromkeys(methods))}): {why}"
               for why, methods in skipped.items()]
     return lines + ([""] if skipped else [])
