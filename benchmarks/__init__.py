@@ -9,4 +9,9 @@ exact counts, the machine and the run) and ``render(raw) -> str`` (its markdown 
 raw results are kept in ``benchmarks/results/NAME.json`` and the section in
 ``benchmarks/results/NAME.md``. The package is not part of the wheel (``pyproject.toml`` packages
 ``python/implicitmesh`` alone).
+
+Real fluid frames: ``python -m benchmarks.sph_frames`` simulates SPlisHSPlasH's dam break and caches
+its frames (``pip install pysplishsplash``); ``bench_particles --cases dam-break-1e5`` meshes them
+(:mod:`benchmarks.frame_cases`) and measures smoothness (:mod:`benchmarks.smoothness`);
+``sph_pictures`` draws them for the docs; ``frame_phases`` times our phases on a frame.
 """

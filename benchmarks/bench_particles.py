@@ -26,7 +26,15 @@ s/4, s/2 and s (``@s/4``, ``@s/2``, ``@s``), beside splashsurf f32 per frame at 
 10⁵ particles (``--sizes`` sets them too; 2·10⁴ with ``--quick``), one process per case (the
 frames are the repetitions).
 
+Real frames (``--cases dam-break-1e5``, ``dam-break-5e5``, or ``SCENE/METHOD``): frames of
+SPlisHSPlasH's dam break made by :mod:`benchmarks.sph_frames` (in its cache, ``--frames DIR``;
+missing frames make the cases skip; a run without ``--cases`` runs the scenes whose frames exist), meshed by splashsurf plain and smoothed and by our colour field
+(isotropic, and anisotropic once the core has it), with the smoothness metrics of
+:mod:`benchmarks.smoothness`; see :mod:`benchmarks.frame_cases`. For these the "particles" slot of
+a case (and of ``one``) is the frame's simulated time in milliseconds.
+
     python -m benchmarks.bench_particles [--quick] [--results DIR] [--sizes N,...] [--cases NAME,...]
+    python -m benchmarks.bench_particles --cases dam-break-1e5 [--frames DIR]
     python -m benchmarks.bench_particles one LAYOUT METHOD PARTICLES   # one JSON line
 """
 
@@ -34,10 +42,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from functools import lru_cache
 
+from benchmarks import frame_cases
 from benchmarks.bench_scale import median, vmhwm_mib
 from benchmarks.timing import (RunRecord, fmt_ratio, fmt_s, load_raw, md_table, results_dir, run_case_process,
                                run_markdown, save_raw, section_parser)
@@ -71,6 +81,9 @@ ANIM_PEERS = tuple(f"splashsurf-f32@{c}" for c in CELLS)
 ANIM_OURS = tuple(f"{engine}{precision}{normals}@{c}" for c in CELLS for engine in ("sparse", "tessellator")
                   for precision in ("", "-f32") for normals in ("", "+normals"))
 ANIM_METHODS = ANIM_PEERS + ANIM_OURS
+#: The real-frame layouts (scenes of :mod:`benchmarks.sph_frames`) and their methods.
+SCENES = frame_cases.SCENES
+SCENE_METHODS = frame_cases.METHODS
 
 
 def lattice_ball(radius: float, center, rng):
@@ -205,12 +218,16 @@ def cpu_seconds() -> float:
 
 def check_case(layout: str, method: str) -> None:
     """Refuses a layout or method this benchmark does not know (ValueError naming the choices)."""
+    if layout in SCENES:
+        if method not in SCENE_METHODS:
+            raise ValueError(f"unknown method {method!r} of a real frame; choose from {', '.join(SCENE_METHODS)}")
+        return
     if layout == ANIM:
         if method not in ANIM_METHODS:
             raise ValueError(f"unknown animation method {method!r}; choose from {', '.join(ANIM_METHODS)}")
         return
     if layout not in LAYOUTS:
-        raise ValueError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS + (ANIM,))}")
+        raise ValueError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS + (ANIM,) + SCENES)}")
     if method not in PEERS + OURS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(PEERS + OURS)}")
 
@@ -221,6 +238,8 @@ def one(layout: str, method: str, n: int) -> dict:
     check_case(layout, method)
     if layout == ANIM:
         return animate(method, n, FRAMES)
+    if layout in SCENES:
+        return frame_cases.one(layout, method, n, vmhwm_mib)
 
     p = particles(layout, n)
     if method.startswith("triquet"):
@@ -324,23 +343,28 @@ def selected(a: argparse.Namespace) -> list[tuple[str, str, int]]:
     """The (layout, method, particles) cases ``a`` asks for, in the order they run."""
     sizes = a.sizes or SIZES[a.quick]
     names = a.cases or []
-    unknown = [c for c in names if c not in LAYOUTS + PEERS + OURS + (ANIM,)
+    unknown = [c for c in names if c not in LAYOUTS + PEERS + OURS + (ANIM,) + SCENES
                and not (c.count("/") == 1 and c.split("/")[0] in LAYOUTS and c.split("/")[1] in PEERS + OURS)
-               and not (c.startswith(ANIM + "/") and c[len(ANIM) + 1:] in ANIM_METHODS)]
+               and not (c.startswith(ANIM + "/") and c[len(ANIM) + 1:] in ANIM_METHODS)
+               and not (c.count("/") == 1 and c.split("/")[0] in SCENES and c.split("/")[1] in SCENE_METHODS)]
     if unknown:
         raise ValueError(f"unknown case {unknown[0]!r}: give layouts ({', '.join(LAYOUTS + (ANIM,))}), methods "
-                         f"({', '.join(PEERS + OURS)}), LAYOUT/METHOD or {ANIM}/METHOD ({', '.join(ANIM_METHODS)})")
+                         f"({', '.join(PEERS + OURS)}), LAYOUT/METHOD, {ANIM}/METHOD ({', '.join(ANIM_METHODS)}), "
+                         f"scenes ({', '.join(SCENES)}) or SCENE/METHOD ({', '.join(SCENE_METHODS)})")
     wanted = lambda layout, method: not names or bool({layout, method, f"{layout}/{method}"} & set(names))
     anim = [(ANIM, method, n) for n in a.sizes or ANIM_SIZES[a.quick] for method in ANIM_METHODS
             if not names or ANIM in names or f"{ANIM}/{method}" in names]
+    scenes = [(scene, method, ms) for scene in SCENES for ms in frame_cases.FRAMES[scene] for method in SCENE_METHODS
+              if scene in names or f"{scene}/{method}" in names
+              or (not names and frame_cases.sph_frames.scene_info(scene) is not None)]
     return [(layout, method, n) for layout in LAYOUTS for n in sizes for method in PEERS + OURS
-            if wanted(layout, method)] + anim
+            if wanted(layout, method)] + anim + scenes
 
 
 def case_order(case: dict) -> tuple:
     """Sort key of a result: layout, particles asked for, method, in the order they run."""
-    return ((LAYOUTS + (ANIM,)).index(case["layout"]), case["n"],
-            (PEERS + OURS + ANIM_METHODS).index(case["method"]))
+    methods = SCENE_METHODS if case["layout"] in SCENES else PEERS + OURS + ANIM_METHODS
+    return (LAYOUTS + (ANIM,) + SCENES).index(case["layout"]), case["n"], methods.index(case["method"])
 
 
 def measure(a: argparse.Namespace, save) -> dict:
@@ -361,7 +385,8 @@ def measure(a: argparse.Namespace, save) -> dict:
 
     for layout, method, n in todo:
         runs = 1 if n > ONE_RUN_ABOVE or layout == ANIM else RUNS[a.quick]
-        log(f"{layout}, {method}, {n:,} particles, {runs} run(s)")
+        log(f"{layout}, {method}, " + (f"frame {n / 1000} s" if layout in SCENES else f"{n:,} particles")
+            + f", {runs} run(s)")
         cases.append({"layout": layout, "method": method, "n": n,
                       "runs": [run_one(layout, method, n) for _ in range(runs)]})
         save(raw())
@@ -373,7 +398,7 @@ def render(raw: dict) -> str:
     rows = []
     by = {(c["layout"], c["method"], c["n"]): c["runs"] for c in raw["cases"]}
     for c in raw["cases"]:
-        if c["layout"] == ANIM:
+        if c["layout"] == ANIM or c["layout"] in SCENES:
             continue
         runs = c["runs"]
         head = [c["layout"], f"{runs[0].get('n', c['n']):,}", c["method"]]
@@ -411,6 +436,7 @@ def render(raw: dict) -> str:
                   "triangles", "area", "volume"], rows, "llrrrrrrrr"),
         "",
         *render_animation(raw),
+        *frame_cases.render(raw, fmt_ratio, fmt_s, median, md_table),
     ])
 
 
@@ -483,8 +509,13 @@ def main() -> int:
                    help="particle counts to run (default 10⁵, 10⁶ and 4·10⁶; with --quick 2·10⁴)")
     p.add_argument("--cases", type=lambda t: [c.strip() for c in t.split(",") if c.strip()], metavar="NAME,...",
                    help=f"only these layouts ({', '.join(LAYOUTS)}), methods ({', '.join(PEERS + OURS)}), "
-                        f"LAYOUT/METHOD pairs, {ANIM} (the animation) or {ANIM}/METHOD")
+                        f"LAYOUT/METHOD pairs, {ANIM} (the animation) or {ANIM}/METHOD, real-frame scenes "
+                        f"({', '.join(SCENES)}) or SCENE/METHOD ({', '.join(SCENE_METHODS)})")
+    p.add_argument("--frames", default=None, metavar="DIR",
+                   help="the real frames' cache (default $IMPLICITMESH_SPH_FRAMES or ~/.cache/implicitmesh/sph)")
     a = p.parse_args()
+    if a.frames:
+        os.environ[frame_cases.sph_frames.ENV_CACHE] = str(frame_cases.sph_frames.cache_dir(a.frames))
     try:
         selected(a)
     except ValueError as e:
