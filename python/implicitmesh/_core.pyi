@@ -132,6 +132,7 @@ class BlobField:
         voxel_size: float | None = None,
         kernel: str = "triquet",
         precision: str = "double",
+        shapes: _ArrayLike | None = None,
     ) -> BlobField: ...
     @staticmethod
     def from_particles(
@@ -143,6 +144,7 @@ class BlobField:
         kernel: str = "cubic_spline",
         voxel_size: float | None = None,
         precision: str = "double",
+        anisotropic: Any = None,
         progress: bool | Callable[[int], object] | None = None,
     ) -> BlobField: ...
     def update(
@@ -170,6 +172,8 @@ class BlobField:
     def centers(self) -> npt.NDArray[np.float64]: ...
     @property
     def radii(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def shapes(self) -> npt.NDArray[np.float64] | None: ...
     @property
     def strengths(self) -> npt.NDArray[np.float64]: ...
     @property
