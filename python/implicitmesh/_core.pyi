@@ -18,6 +18,7 @@ __all__ = [
     "polygonize",
     "lattice",
     "project_mesh",
+    "small_bodies",
     "weld_tiles",
     "StreamedWeld",
     "WeldPlan",
@@ -175,6 +176,8 @@ class BlobField:
     @property
     def shapes(self) -> npt.NDArray[np.float64] | None: ...
     @property
+    def reaches(self) -> npt.NDArray[np.float64]: ...
+    @property
     def strengths(self) -> npt.NDArray[np.float64]: ...
     @property
     def threshold(self) -> float: ...
@@ -243,6 +246,7 @@ def polygonize(
 
 def lattice(bounds: _ArrayLike, resolution: int | Sequence[int]) -> tuple[list[int], list[float], list[float]]: ...
 def project_mesh(field: _Field, bounds: _ArrayLike, resolution: int | Sequence[int], vertices: _ArrayLike, faces: _ArrayLike, *, normals: bool = True, batch_size: int = 262144, progress: Callable[[int], object] | None = None) -> _MeshTuple: ...
+def small_bodies(vertices: _ArrayLike, faces: _ArrayLike, particles: _ArrayLike, min_particles: int) -> tuple[npt.NDArray[np.bool_], int, int]: ...
 def weld_tiles(
     tiles: Sequence[tuple[_ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike]],
     cells: Sequence[int],

@@ -72,12 +72,12 @@ class AnisotropyOptions:
     ----------
     neighbour_radius : float, optional
         Radius of the neighbourhood whose weighted covariance shapes a kernel, as a multiple of
-        the kernel's support H. Default 2.0.
+        the kernel's support H. Default 2.0 (Yu & Turk's).
     k_r : float, optional
         Largest ratio of a kernel's longest axis to its shortest (1 to 100). Default 4.
     k_s : float, optional
-        Scale of the stretched kernels relative to a full neighbourhood's spread: 1 keeps the
-        kernels inside the fluid round of support H. Default 1.
+        A stretched kernel's longest axis as a multiple of H (inside the fluid the kernels are
+        about round, of support k_s·H). Default 1.
     k_n : float, optional
         Radius of the round kernel of a particle with too few neighbours, as a multiple of H.
         Default 0.5.
@@ -86,7 +86,7 @@ class AnisotropyOptions:
         Default 25.
     smoothing : float, optional
         λ in [0, 1]: how far each kernel's centre moves to its neighbours' weighted mean.
-        Default 0.9.
+        Default 0.9. The smoothed centres move surfaces inwards (see the particles doc).
     """
 
     neighbour_radius: float | None = None

@@ -332,6 +332,12 @@ impl PyBlobField {
         };
         values_to_py(py, r.to_vec())
     }
+    /// (N,) float64: the radius of a sphere about each centre holding its kernel's support
+    /// (the radii without shapes).
+    #[getter]
+    fn reaches<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        values_to_py(py, self.inner.radii().to_vec())
+    }
     /// (N, 3, 3) float64 or None: the kernels' shapes Sᵢ (see the class docstring).
     #[getter]
     fn shapes<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {

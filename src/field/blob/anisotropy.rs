@@ -6,11 +6,13 @@
 //! weights wᵢⱼ = 1 − (|xᵢ − xⱼ|/rₙ)³:
 //! - the weighted mean x̂ᵢ = Σ wᵢⱼ xⱼ / Σ wᵢⱼ and covariance Cᵢ = Σ wᵢⱼ (xⱼ − x̂ᵢ)(xⱼ − x̂ᵢ)ᵀ / Σ wᵢⱼ;
 //! - the kernel's centre x̄ᵢ = (1 − λ) xᵢ + λ x̂ᵢ (Laplacian smoothing of the centres);
-//! - Cᵢ = V diag(σ₁, σ₂, σ₃) Vᵀ with σ₁ ≥ σ₂ ≥ σ₃; with more than N_ε neighbours (itself not
-//!   counted) the stretch Σ̃ = k_s diag(σ₁, max(σ₂, σ₁/k_r), max(σ₃, σ₁/k_r)) / σ_ref, else
-//!   Σ̃ = k_n I; σ_ref = 0.15 rₙ² is each σ of a uniformly filled neighbourhood (∫ w x² / ∫ w
-//!   over the ball), so k_s = 1 leaves the kernels inside the fluid about round (Yu & Turk's
-//!   k_s, 1400 in their units, is this 1/σ_ref);
+//! - Cᵢ = V diag(σ₁, σ₂, σ₃) Vᵀ with σ₁ ≥ σ₂ ≥ σ₃; with at least N_ε neighbours (itself not
+//!   counted) the stretch Σ̃ = k_s diag(σ₁, max(σ₂, σ₁/k_r), max(σ₃, σ₁/k_r)) / σ₁, else
+//!   Σ̃ = k_n I. Yu & Turk divide by a constant (their k_s, 1400, holds its inverse), so that
+//!   a full neighbourhood gives Σ̃ ≈ I; dividing by σ₁ gives the same inside the fluid and on
+//!   flat surfaces (their tangential σ₁ is a full neighbourhood's), and keeps the longest
+//!   axis k_s·H where the neighbours fill a corner or an edge, whose σ are all small (their
+//!   kernels would shrink to specks that come apart from the body);
 //! - the shape Sᵢ = V Σ̃⁻¹ Vᵀ: the kernel A·w(|Sᵢ (x − x̄ᵢ)|/H)·det Sᵢ reaches H·Σ̃ₖ along
 //!   eigenvector k, and det Sᵢ keeps its integral that of the round kernel.
 
@@ -24,18 +26,18 @@ use rayon::prelude::*;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AnisotropySettings {
     /// The neighbour radius rₙ as a multiple of the kernel's compact support H. Default 2.0
-    /// (Yu & Turk's rᵢ = 2hᵢ).
+    /// (Yu & Turk's rᵢ = 2hᵢ: four particle spacings at splashsurf's default support).
     pub neighbour_radius: f64,
     /// k_r: the largest ratio of a kernel's longest axis to its shortest. Default 4.
     pub k_r: f64,
-    /// k_s: the stretched kernels' scale, relative to a full neighbourhood's spread (see the
-    /// module docs). Default 1.
+    /// k_s: the stretched kernels' longest axis as a multiple of H (see the module docs).
+    /// Default 1.
     pub k_s: f64,
     /// k_n: the radius of a round kernel (a particle with too few neighbours) as a multiple of
     /// H. Default 0.5.
     pub k_n: f64,
     /// N_ε: the fewest neighbours (the particle itself not counted) for a stretched kernel.
-    /// Default 25.
+    /// Default 25 (about 270 inside the fluid at the default radius, 135 on a flat surface).
     pub min_neighbours: usize,
     /// λ: how far each kernel's centre moves towards its neighbours' weighted mean, in [0, 1].
     /// Default 0.9.
@@ -107,9 +109,9 @@ pub fn shapes(
     }
     let radius = settings.neighbour_radius * support;
     crate::field::blob::densities::check_support("neighbour_radius", radius)?;
-    // Cells of a third of the radius, seven per axis around each particle: about 12.7 r³ of
+    // Cells of half the radius, five per axis around each particle: about 15.6 r³ of
     // candidates for the 4.2 r³ of the ball, where cells of r would take 27 r³.
-    const REACH: usize = 3;
+    const REACH: usize = 2;
     let list = CellList::new(particles, radius / REACH as f64);
     let mut centres = vec![DVec3::ZERO; n];
     let mut forms = vec![[0.0; 9]; n];
@@ -120,7 +122,7 @@ pub fn shapes(
         let own = &list.sorted[first..first + out.len()];
         out.par_iter_mut().zip(own.par_iter()).for_each(|(o, &p)| {
             let hood = neighbourhood(&list, REACH, p, radius);
-            *o = kernel_of(p, &hood, radius, settings);
+            *o = kernel_of(p, &hood, settings);
         });
         crate::cancel::advance(out.len() as u64)?;
     }
@@ -177,12 +179,7 @@ fn neighbourhood(list: &CellList, reach: usize, p: DVec3, radius: f64) -> Neighb
 }
 
 /// The centre and the shape of the kernel of the particle at `p` with neighbourhood `h`.
-fn kernel_of(
-    p: DVec3,
-    h: &Neighbourhood,
-    radius: f64,
-    s: &AnisotropySettings,
-) -> (DVec3, [f64; 9]) {
+fn kernel_of(p: DVec3, h: &Neighbourhood, s: &AnisotropySettings) -> (DVec3, [f64; 9]) {
     let mean = h.first / h.weight;
     let centre = p + mean * s.smoothing;
     if h.count < s.min_neighbours {
@@ -209,13 +206,12 @@ fn kernel_of(
     ];
     let (values, v) = symmetric_eigen(c);
     let largest = values.iter().fold(0.0f64, |m, &x| m.max(x));
-    let reference = 0.15 * radius * radius;
     if largest <= 0.0 || largest.is_nan() {
         let k = 1.0 / s.k_n;
         return (centre, [k, 0.0, 0.0, 0.0, k, 0.0, 0.0, 0.0, k]);
     }
     // 1/Σ̃ per eigenvector.
-    let inverse = values.map(|x| reference / (s.k_s * x.max(largest / s.k_r)));
+    let inverse = values.map(|x| largest / (s.k_s * x.max(largest / s.k_r)));
     let mut shape = [0.0; 9];
     for a in 0..3 {
         for b in 0..3 {
@@ -263,7 +259,7 @@ mod tests {
         }
         let top = 8 + 16 * (8 + 16 * 7);
         let m = to_rows(&shapes[top]);
-        // Squashed along z: S's zz entry (1/Σ̃) the largest, about k_r times the others'.
+        // Squashed along z: S's zz entry (1/Σ̃) the largest, up to k_r times the others'.
         assert!(m[2][2] > 2.5 * m[0][0] && m[2][2] > 2.5 * m[1][1], "{m:?}");
         assert!(centres[top].z < p[top].z);
         let lone = shapes.last().unwrap();
