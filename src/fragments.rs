@@ -6,6 +6,7 @@
 
 use crate::error::{Error, Result};
 use crate::knn::PointTree;
+use crate::mesh::{Bodies, Mesh};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -20,50 +21,12 @@ pub struct Fragments {
     pub particles: usize,
 }
 
-/// The body of each vertex, numbered from 0 in order of first vertex, and the number of bodies
-/// (union–find over the triangles' edges; a vertex in no triangle is a body of its own).
-pub fn bodies(vertices: usize, faces: &[[u32; 3]]) -> (Vec<u32>, usize) {
-    let mut parent: Vec<u32> = (0..vertices as u32).collect();
-    fn root(parent: &mut [u32], mut v: u32) -> u32 {
-        while parent[v as usize] != v {
-            let up = parent[parent[v as usize] as usize];
-            parent[v as usize] = up;
-            v = up;
-        }
-        v
-    }
-    for f in faces {
-        let a = root(&mut parent, f[0]);
-        for &v in &f[1..] {
-            let b = root(&mut parent, v);
-            if a != b {
-                parent[b as usize] = a;
-            }
-        }
-    }
-    let mut label = vec![u32::MAX; vertices];
-    let mut body = vec![0u32; vertices];
-    let mut count = 0usize;
-    for v in 0..vertices as u32 {
-        let r = root(&mut parent, v) as usize;
-        if label[r] == u32::MAX {
-            label[r] = count as u32;
-            count += 1;
-        }
-        body[v as usize] = label[r];
-    }
-    (body, count)
-}
-
-/// The bodies of the mesh (`vertices`, `faces`) holding fewer than `min_particles` of
-/// `particles` (see the module docs). Errors naming `faces` for an index that is no vertex.
-pub fn small_bodies(
-    vertices: &[DVec3],
-    faces: &[[u32; 3]],
-    particles: &[DVec3],
-    min_particles: usize,
-) -> Result<Fragments> {
-    if let Some(f) = faces
+/// The bodies of `mesh` ([`Mesh::bodies`]) holding fewer than `min_particles` of `particles`
+/// (see the module docs). Errors naming `faces` for an index that is no vertex.
+pub fn small_bodies(mesh: &Mesh, particles: &[DVec3], min_particles: usize) -> Result<Fragments> {
+    let vertices = &mesh.vertices;
+    if let Some(f) = mesh
+        .triangles
         .iter()
         .find(|f| f.iter().any(|&v| v as usize >= vertices.len()))
     {
@@ -72,8 +35,9 @@ pub fn small_bodies(
             format!("{f:?} names a vertex past the {} vertices", vertices.len()),
         ));
     }
-    let (body, count) = bodies(vertices.len(), faces);
-    let mut held = vec![0usize; count];
+    let bodies = mesh.bodies();
+    let body = &bodies.of_vertex;
+    let mut held = vec![0usize; bodies.count()];
     if !vertices.is_empty() && !particles.is_empty() {
         let tree = PointTree::new(vertices)?;
         let nearest: Vec<u32> = particles
@@ -85,12 +49,17 @@ pub fn small_bodies(
             })
             .collect();
         for b in nearest {
-            held[b as usize] += 1;
+            if b != Bodies::UNUSED {
+                held[b as usize] += 1;
+            }
         }
     }
     let dropped: Vec<bool> = held.iter().map(|&h| h < min_particles).collect();
     Ok(Fragments {
-        keep: body.iter().map(|&b| !dropped[b as usize]).collect(),
+        keep: body
+            .iter()
+            .map(|&b| b != Bodies::UNUSED && !dropped[b as usize])
+            .collect(),
         bodies: dropped.iter().filter(|&&d| d).count(),
         particles: held
             .iter()
@@ -120,11 +89,20 @@ mod tests {
             .collect();
         let mut p = vec![DVec3::splat(0.2); 10];
         p.extend([DVec3::splat(10.2); 2]);
-        let r = small_bodies(&v, &faces, &p, 3).unwrap();
+        let mesh = Mesh {
+            vertices: v.to_vec(),
+            triangles: faces,
+            normals: Vec::new(),
+        };
+        let r = small_bodies(&mesh, &p, 3).unwrap();
         assert_eq!((r.bodies, r.particles), (1, 2));
         assert_eq!(r.keep, [true, true, true, true, false, false, false, false]);
-        let r = small_bodies(&v, &faces, &p, 2).unwrap();
+        let r = small_bodies(&mesh, &p, 2).unwrap();
         assert_eq!((r.bodies, r.particles), (0, 0));
-        assert!(small_bodies(&v, &[[0, 1, 9]], &p, 2).is_err());
+        let bad = Mesh {
+            triangles: vec![[0, 1, 9]],
+            ..mesh
+        };
+        assert!(small_bodies(&bad, &p, 2).is_err());
     }
 }

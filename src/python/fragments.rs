@@ -27,11 +27,14 @@ pub fn small_bodies<'py>(
     min_particles: usize,
 ) -> PyResult<(Bound<'py, PyAny>, usize, usize)> {
     let _call = super::interrupt::call("small_bodies");
-    let v = points(vertices, "vertices")?;
-    let f = triangles(faces, "faces")?;
+    let mesh = crate::mesh::Mesh {
+        vertices: points(vertices, "vertices")?,
+        triangles: triangles(faces, "faces")?,
+        normals: Vec::new(),
+    };
     let p = points(particles, "particles")?;
     let r = super::interrupt::detach(py, || {
-        crate::fragments::small_bodies(&v, &f, &p, min_particles)
+        crate::fragments::small_bodies(&mesh, &p, min_particles)
     })?;
     Ok((
         numpy::PyArray1::from_vec(py, r.keep).into_any(),
