@@ -443,10 +443,10 @@ impl Neighbourhoods {
     }
 }
 
-/// The unit eigenvector of the symmetric 3×3 matrix `a` with the smallest eigenvalue (cyclic
-/// Jacobi rotations to convergence). A matrix with a repeated smallest eigenvalue gives one unit
-/// vector of that eigenspace.
-pub fn smallest_eigenvector(a: [[f64; 3]; 3]) -> DVec3 {
+/// The eigenvalues of the symmetric 3×3 matrix `a` and its unit eigenvectors (the columns of
+/// the second: eigenvector m is `(v[0][m], v[1][m], v[2][m])`), by cyclic Jacobi rotations to
+/// convergence.
+pub fn symmetric_eigen(a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
     let mut a = a;
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _sweep in 0..32 {
@@ -482,8 +482,16 @@ pub fn smallest_eigenvector(a: [[f64; 3]; 3]) -> DVec3 {
             }
         }
     }
+    ([a[0][0], a[1][1], a[2][2]], v)
+}
+
+/// The unit eigenvector of the symmetric 3×3 matrix `a` with the smallest eigenvalue
+/// ([`symmetric_eigen`]). A matrix with a repeated smallest eigenvalue gives one unit vector of
+/// that eigenspace.
+pub fn smallest_eigenvector(a: [[f64; 3]; 3]) -> DVec3 {
+    let (values, v) = symmetric_eigen(a);
     let m = (0..3)
-        .min_by(|&i, &j| a[i][i].total_cmp(&a[j][j]))
+        .min_by(|&i, &j| values[i].total_cmp(&values[j]))
         .unwrap_or(0);
     DVec3::new(v[0][m], v[1][m], v[2][m]).normalize_or(DVec3::Z)
 }

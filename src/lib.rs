@@ -54,6 +54,7 @@ pub mod bvh;
 pub mod cancel;
 pub mod error;
 pub mod field;
+pub mod fragments;
 pub mod knn;
 pub mod lattice;
 pub mod linalg;

@@ -234,6 +234,8 @@ def test_ply_point_set_without_normals_is_a_clean_error(tmp_path, capsys, binary
         (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--smoothing-length", "0"], "--smoothing-length"),
         (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--threshold", "nan"], "--threshold"),
         (["particles", "{points}", "-o", "{tmp}/out.xyz.gz", "--radius", "0.1"], "--output"),
+        (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--min-particles", "-1"], "--min-particles"),
+        (["particles", "{points}", "-o", "{tmp}/out.ply", "--radius", "0.1", "--precision", "half"], "--precision"),
     ],
     ids=lambda a: " ".join(a) if isinstance(a, list) else a,
 )
@@ -294,3 +296,38 @@ def test_every_option_has_help():
     for name in ("demo", "reconstruct"):
         method = next(a for a in sub.choices[name]._actions if "--method" in a.option_strings)
         assert "sparse" not in method.choices and "octree" in method.choices
+
+
+def test_particles_anisotropic_single_and_fragments(tmp_path, capsys):
+    """``particles --anisotropic --precision single --min-particles K``: the field of
+    ``from_particles(..., anisotropic=True, precision="single")``, the droplet of 8 particles
+    dropped and counted, and the lattice's actual cell side printed."""
+    from implicitmesh.cli import main
+
+    import implicitmesh as im
+
+    rng = np.random.default_rng(3)
+    i = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    drop = np.stack(np.meshgrid(*[np.arange(2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) + 20
+    p = np.vstack([i, drop]) * 0.1 + rng.uniform(-0.01, 0.01, (len(i) + 8, 3))
+    np.save(tmp_path / "f.npy", p)
+    out = tmp_path / "s.ply"
+    code = main(["particles", str(tmp_path / "f.npy"), "-o", str(out), "--radius", "0.05", "--anisotropic", "--precision", "single", "--min-particles", "10"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "1 bodies of fewer than 10 particles (8 particles)" in text
+    field = im.BlobField.from_particles(p, 0.05, anisotropic=True, precision="single")
+    lo, hi = field.bounds
+    cells = int(round(float((hi - lo).max()) / 0.025))
+    mesh = im.polygonize(field, resolution=cells, method="sparse", min_particles=10)
+    side = float((np.asarray(mesh.stats["bounds"])[1, 0] - np.asarray(mesh.stats["bounds"])[0, 0]) / cells)
+    assert f"of side {side:.6g}" in text and side != 0.025
+    written = im.Mesh(*_read_ply(out))
+    assert len(written.faces) == len(mesh.faces) and written.euler_number == 2
+
+
+def _read_ply(path):
+    import trimesh
+
+    m = trimesh.load(path, process=False)
+    return np.asarray(m.vertices, dtype=float), np.asarray(m.faces), np.zeros((0, 3)), {}

@@ -20,7 +20,7 @@ simulation frames (``.npy``, ``.npz``, ``.ply``, meshio formats).
 
 from ._core import BlobField, VariationalSurface, __version__
 from .mesh import Mesh, compare
-from .options import OctreeOptions, PartitionOptions, TrackingOptions
+from .options import AnisotropyOptions, OctreeOptions, PartitionOptions, TrackingOptions
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
 from . import scanner
@@ -28,4 +28,4 @@ from .subdivision import blend, butterfly, subdivide
 from .io import load, save
 from .frames import read_particles
 
-__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "OctreeOptions", "TrackingOptions", "PartitionOptions", "shapes", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "OctreeOptions", "TrackingOptions", "PartitionOptions", "AnisotropyOptions", "shapes", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]

@@ -18,6 +18,7 @@ __all__ = [
     "polygonize",
     "lattice",
     "project_mesh",
+    "small_bodies",
     "weld_tiles",
     "StreamedWeld",
     "WeldPlan",
@@ -132,6 +133,7 @@ class BlobField:
         voxel_size: float | None = None,
         kernel: str = "triquet",
         precision: str = "double",
+        shapes: _ArrayLike | None = None,
     ) -> BlobField: ...
     @staticmethod
     def from_particles(
@@ -143,6 +145,7 @@ class BlobField:
         kernel: str = "cubic_spline",
         voxel_size: float | None = None,
         precision: str = "double",
+        anisotropic: Any = None,
         progress: bool | Callable[[int], object] | None = None,
     ) -> BlobField: ...
     def update(
@@ -170,6 +173,10 @@ class BlobField:
     def centers(self) -> npt.NDArray[np.float64]: ...
     @property
     def radii(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def shapes(self) -> npt.NDArray[np.float64] | None: ...
+    @property
+    def reaches(self) -> npt.NDArray[np.float64]: ...
     @property
     def strengths(self) -> npt.NDArray[np.float64]: ...
     @property
@@ -239,6 +246,7 @@ def polygonize(
 
 def lattice(bounds: _ArrayLike, resolution: int | Sequence[int]) -> tuple[list[int], list[float], list[float]]: ...
 def project_mesh(field: _Field, bounds: _ArrayLike, resolution: int | Sequence[int], vertices: _ArrayLike, faces: _ArrayLike, *, normals: bool = True, batch_size: int = 262144, progress: Callable[[int], object] | None = None) -> _MeshTuple: ...
+def small_bodies(vertices: _ArrayLike, faces: _ArrayLike, particles: _ArrayLike, min_particles: int) -> tuple[npt.NDArray[np.bool_], int, int]: ...
 def weld_tiles(
     tiles: Sequence[tuple[_ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike, _ArrayLike]],
     cells: Sequence[int],

@@ -144,6 +144,8 @@ def _check(args) -> None:
     if args.command == "particles":
         for option in ("radius", "cube_size", "smoothing_length", "threshold"):
             _check_positive("--" + option.replace("_", "-"), getattr(args, option))
+        if args.min_particles is not None and args.min_particles < 0:
+            raise UsageError(f"--min-particles: must be a non-negative integer, got {args.min_particles}")
 
 
 def _summary(rows: list[tuple[str, str]]) -> str:
@@ -240,26 +242,42 @@ def cmd_particles(args) -> int:
 
     with step(f"reading {args.input}"):
         positions = read_particles(args.input, key=args.key) if args.key else read_particles(args.input)
-    with step(f"colour field of {len(positions):,} particles"):
+    kind = "anisotropic colour field" if args.anisotropic else "colour field"
+    with step(f"{kind} of {len(positions):,} particles"):
         field = BlobField.from_particles(
             positions,
             args.radius,
             smoothing_length=args.smoothing_length,
             iso_surface_threshold=args.threshold,
             kernel=args.kernel,
+            precision=args.precision,
+            anisotropic=args.anisotropic,
         )
     lo, hi = field.bounds
     cells = max(1, int(round(float((hi - lo).max()) / (args.cube_size * args.radius))))
     with step(f"polygonizing at {cells} cells (sparse)"):
-        mesh = polygonize(field, resolution=cells, method="sparse", normals=args.normals, progress=sys.stderr.isatty())
+        mesh = polygonize(
+            field,
+            resolution=cells,
+            method="sparse",
+            normals=args.normals,
+            min_particles=args.min_particles,
+            progress=sys.stderr.isatty(),
+        )
     mesh.save(args.output)
     st = mesh.stats
+    box = np.asarray(st["bounds"], dtype=float)
+    side = float((box[1, 0] - box[0, 0]) / st["resolution"][0])
+    dropped = []
+    if args.min_particles is not None:
+        dropped = [("dropped", f"{st['fragments_dropped']:,} bodies of fewer than {args.min_particles} particles ({st['fragment_particles']:,} particles)")]
     print(
         _summary(
             [
                 ("particles", f"{len(positions):,} ({positions.dtype})"),
-                ("cells", f"{'x'.join(map(str, st['resolution']))} of side {args.cube_size * args.radius:g}"),
+                ("cells", f"{'x'.join(map(str, st['resolution']))} of side {side:.6g}"),
                 ("polygonize", f"{st['seconds']['total']:.3f} s"),
+                *dropped,
                 ("triangles", f"{len(mesh.faces):,}"),
                 ("vertices", f"{len(mesh.vertices):,}"),
                 ("wrote", f"{args.output}"),
@@ -336,6 +354,21 @@ def main(argv: list[str] | None = None) -> int:
         help="SPH kernel of the colour field: cubic_spline (default) or wendland",
     )
     par.add_argument("--key", default=None, help=".npz only: the array of positions")
+    par.add_argument(
+        "--anisotropic",
+        action="store_true",
+        help="anisotropic kernels (Yu & Turk): flat water flat, thin sheets thin, lone particles round",
+    )
+    par.add_argument(
+        "--precision", default="double", choices=["double", "single"], help="float type of the field's values (default double)"
+    )
+    par.add_argument(
+        "--min-particles",
+        type=int,
+        default=None,
+        metavar="K",
+        help="drop the bodies of the mesh holding fewer than K particles (stray droplets)",
+    )
     par.add_argument(
         "--normals", action=argparse.BooleanOptionalAction, default=True, help="vertex normals (default: yes)"
     )

@@ -24,7 +24,7 @@ def _state(field: Field) -> dict[str, Any]:
         return {"field": "VariationalSurface", **field.to_state()}
     if isinstance(field, BlobField):
         (centers, radii, strengths, threshold), kwargs = field.__getnewargs_ex__()
-        return {
+        state = {
             "field": "BlobField",
             "centers": centers,
             "radii": radii,
@@ -34,6 +34,9 @@ def _state(field: Field) -> dict[str, Any]:
             "kernel": kwargs["kernel"],
             "precision": kwargs["precision"],
         }
+        if kwargs["shapes"] is not None:
+            state["shapes"] = kwargs["shapes"]
+        return state
     raise ValueError(f"field: expected a VariationalSurface or a BlobField, got {type(field).__name__}")
 
 
@@ -86,5 +89,6 @@ def load(path: str | os.PathLike[str]) -> Field:
             voxel_size=state["voxel_size"],
             kernel=state.get("kernel", "triquet"),
             precision=state.get("precision", "double"),
+            shapes=state.get("shapes"),
         )
     raise ValueError(f"path: {os.fspath(path)!r} does not hold a field written by implicitmesh.save")

@@ -1,7 +1,9 @@
 """Options objects: the settings of one polygonizer (:class:`OctreeOptions`,
-:class:`TrackingOptions`, for :func:`implicitmesh.polygonize`'s ``options=``) or of the
-partition fit (:class:`PartitionOptions`, for the fits' ``partition_options=``), each mirroring
-the core's settings of the same name."""
+:class:`TrackingOptions`, for :func:`implicitmesh.polygonize`'s ``options=``), of the
+partition fit (:class:`PartitionOptions`, for the fits' ``partition_options=``) or of
+anisotropic particle kernels (:class:`AnisotropyOptions`, for
+:meth:`BlobField.from_particles`'s ``anisotropic=``), each mirroring the core's settings of the
+same name."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["OctreeOptions", "TrackingOptions", "PartitionOptions"]
+__all__ = ["OctreeOptions", "TrackingOptions", "PartitionOptions", "AnisotropyOptions"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,41 @@ class TrackingOptions:
     def keywords(self) -> dict[str, Any]:
         """The settings as :func:`polygonize`'s keywords."""
         return {"seeds": self.seeds}
+
+
+@dataclass(frozen=True)
+class AnisotropyOptions:
+    """Anisotropic kernels for :meth:`BlobField.from_particles` (``anisotropic=``; the core's
+    ``AnisotropySettings``, after Yu & Turk 2013, whose names they keep). Each left None takes
+    the default.
+
+    Parameters
+    ----------
+    neighbour_radius : float, optional
+        Radius of the neighbourhood whose weighted covariance shapes a kernel, as a multiple of
+        the kernel's support H. Default 2.0 (Yu & Turk's).
+    k_r : float, optional
+        Largest ratio of a kernel's longest axis to its shortest (1 to 100). Default 4.
+    k_s : float, optional
+        A stretched kernel's longest axis as a multiple of H (inside the fluid the kernels are
+        about round, of support k_s·H). Default 1.
+    k_n : float, optional
+        Radius of the round kernel of a particle with too few neighbours, as a multiple of H.
+        Default 0.5.
+    min_neighbours : int, optional
+        N_ε: fewer neighbours than this (the particle not counted) give a round kernel.
+        Default 25.
+    smoothing : float, optional
+        λ in [0, 1]: how far each kernel's centre moves to its neighbours' weighted mean.
+        Default 0.9. The smoothed centres move surfaces inwards (see the particles doc).
+    """
+
+    neighbour_radius: float | None = None
+    k_r: float | None = None
+    k_s: float | None = None
+    k_n: float | None = None
+    min_neighbours: int | None = None
+    smoothing: float | None = None
 
 
 #: The options class of each method that has settings of its own.

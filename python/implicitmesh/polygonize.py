@@ -51,6 +51,7 @@ def polygonize(
     seeds: Any = None,
     options: OctreeOptions | TrackingOptions | None = None,
     trim: float | None = None,
+    min_particles: int | None = None,
     progress: Any = False,
 ) -> Mesh:
     """Triangulates the zero set of a field (negative inside, positive outside).
@@ -149,6 +150,12 @@ def polygonize(
         and the vertices no triangle keeps: what is left is the surface where the data was, open
         where it was not (a scan of a room or a terrain). ``stats["trimmed"]`` counts the
         triangles dropped. Default ``None``: the whole, closed surface.
+    min_particles : int, optional
+        :class:`BlobField` only (a field of particles): drop the bodies of the mesh (connected
+        components) holding fewer than ``min_particles`` of the field's centres, each centre
+        counted for the body of its nearest vertex: stray droplets and spray.
+        ``stats["fragments_dropped"]`` and ``stats["fragment_particles"]`` count the bodies
+        dropped and their particles. Default ``None``: every body.
     progress : bool or callable
         ``True``: show the field evaluations done so far while the call runs (a tqdm bar when
         tqdm is installed, else a line on standard error); a callable is called with that count
@@ -186,6 +193,7 @@ def polygonize(
     if not isinstance(project, (bool, np.bool_)):
         raise ValueError(f"project: must be True or False, got {project!r}")
     _check_trim(field, trim)
+    _check_min_particles(field, min_particles)
     mesh = _mesh(
         _core.polygonize,
         f"polygonize ({method})",
@@ -201,7 +209,30 @@ def polygonize(
         memory_limit=memory_limit,
         **per_method,
     )
-    return trimmed(mesh, field, trim)
+    return without_fragments(trimmed(mesh, field, trim), field, min_particles)
+
+
+def _check_min_particles(field, min_particles) -> None:
+    """A ValueError naming ``min_particles`` unless it is None, or a non-negative int for a
+    :class:`BlobField`."""
+    if min_particles is None:
+        return
+    if not isinstance(field, _core.BlobField):
+        raise ValueError("min_particles: only for a BlobField (a field of particles)")
+    if isinstance(min_particles, bool) or not isinstance(min_particles, (int, np.integer)) or min_particles < 0:
+        raise ValueError(f"min_particles: must be a non-negative int, got {min_particles!r}")
+
+
+def without_fragments(mesh: Mesh, field, min_particles: int | None) -> Mesh:
+    """``mesh`` without its bodies holding fewer than ``min_particles`` of ``field``'s centres
+    (``mesh`` itself for ``None``); see :func:`polygonize`."""
+    if min_particles is None:
+        return mesh
+    keep, bodies, particles = _core.small_bodies(mesh.vertices, mesh.faces, field.centers, int(min_particles))
+    out = mesh.trimmed(keep)
+    out.stats.pop("trimmed", None)
+    out.stats.update(fragments_dropped=bodies, fragment_particles=particles)
+    return out
 
 
 def _check_trim(field, trim) -> None:

@@ -1,6 +1,10 @@
 //! `BlobField`: the Python class over the core's blob field.
 
-use super::convert::{field_gradients, field_values, points, points_to_py, values, values_to_py};
+use super::convert::{
+    field_gradients, field_values, matrices, matrices_to_py, points, points_to_py, values,
+    values_to_py,
+};
+use crate::field::blob::anisotropy::AnisotropySettings;
 use crate::field::blob::kernel::BlobKernel;
 use crate::field::blob::particles::{self, ParticleSettings};
 use crate::field::blob::{self, BlobField, PerPrimitive, Precision};
@@ -53,6 +57,10 @@ fn as_per(v: &Result<f64, Vec<f64>>) -> PerPrimitive<'_> {
 ///     and normals stay float64. The mesh has the same faces as in double precision wherever no
 ///     lattice value lies within float32 rounding (about 1e-7 of the potential) of the
 ///     threshold.
+/// shapes : (N, 3, 3) float64, optional
+///     Ellipsoidal kernels: primitive i adds A·w(‖Sᵢ (x − cᵢ)‖/Rᵢ) with Sᵢ its shape
+///     (invertible, singular values within a factor 10⁴; the identity gives the round kernel).
+///     :meth:`from_particles` with ``anisotropic=True`` makes them. Default None (round).
 #[pyclass(name = "BlobField", module = "implicitmesh")]
 pub struct PyBlobField {
     pub inner: BlobField,
@@ -61,7 +69,7 @@ pub struct PyBlobField {
 #[pymethods]
 impl PyBlobField {
     #[new]
-    #[pyo3(signature = (centers, radii, strengths=None, threshold=0.5, *, voxel_size=None, kernel="triquet", precision="double"))]
+    #[pyo3(signature = (centers, radii, strengths=None, threshold=0.5, *, voxel_size=None, kernel="triquet", precision="double", shapes=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -72,6 +80,7 @@ impl PyBlobField {
         voxel_size: Option<f64>,
         kernel: &str,
         precision: &str,
+        shapes: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let _call = super::interrupt::call("BlobField");
         let c = points(centers, "centers")?;
@@ -85,8 +94,10 @@ impl PyBlobField {
             kernel: BlobKernel::parse(kernel)?,
             precision: Precision::parse(precision)?,
         };
-        let inner = super::interrupt::detach(py, || {
-            BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings)
+        let shapes = shapes.map(|s| matrices(s, "shapes")).transpose()?;
+        let inner = super::interrupt::detach(py, || match &shapes {
+            None => BlobField::new(&c, as_per(&r), as_per(&a), threshold, settings),
+            Some(s) => BlobField::with_shapes(&c, as_per(&r), as_per(&a), threshold, settings, s),
         })?;
         Ok(PyBlobField { inner })
     }
@@ -122,6 +133,12 @@ impl PyBlobField {
     /// precision : {"double", "single"}
     ///     The float type of the field's values (see the class docstring); the densities are
     ///     computed in float64 either way. Default ``"double"``.
+    /// anisotropic : bool or AnisotropyOptions
+    ///     Anisotropic kernels (Yu & Turk 2013): each particle's kernel stretched along the
+    ///     principal axes of its neighbours (weighted covariance), flattened at the surface, its
+    ///     strength times det Sᵢ and its centre moved towards its neighbours' mean, so flat water
+    ///     comes out flat. ``True`` takes the defaults of :class:`AnisotropyOptions`. Default
+    ///     False (round kernels: splashsurf's field).
     /// progress : bool or callable, optional
     ///     ``True``: show the particle densities computed so far (a tqdm bar when tqdm is
     ///     installed, else a line on standard error); a callable gets that count (an int) about
@@ -140,7 +157,7 @@ impl PyBlobField {
     ///     For a wrong shape, NaN/inf positions, a non-positive radius, smoothing length,
     ///     threshold or voxel size, or an unknown kernel or precision.
     #[staticmethod]
-    #[pyo3(signature = (particles, particle_radius, *, smoothing_length=2.0, iso_surface_threshold=0.6, kernel="cubic_spline", voxel_size=None, precision="double", progress=None))]
+    #[pyo3(signature = (particles, particle_radius, *, smoothing_length=2.0, iso_surface_threshold=0.6, kernel="cubic_spline", voxel_size=None, precision="double", anisotropic=None, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_particles(
         py: Python<'_>,
@@ -151,9 +168,11 @@ impl PyBlobField {
         kernel: &str,
         voxel_size: Option<f64>,
         precision: &str,
+        anisotropic: Option<&Bound<'_, PyAny>>,
         progress: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let _call = super::interrupt::call("BlobField.from_particles");
+        let anisotropy = anisotropy_settings(anisotropic)?;
         let p = points(particles, "particles")?;
         let settings = ParticleSettings {
             smoothing_length,
@@ -161,10 +180,12 @@ impl PyBlobField {
             kernel: BlobKernel::parse(kernel)?,
             voxel_size: voxel_size.unwrap_or(ParticleSettings::default().voxel_size),
             precision: Precision::parse(precision)?,
+            anisotropy,
         };
+        let steps = if anisotropy.is_some() { 2 } else { 1 };
         let r = py.import("implicitmesh._progress")?.call_method1(
             "reporter",
-            (progress, "from_particles", p.len(), "particle densities"),
+            (progress, "from_particles", steps * p.len(), "particles"),
         )?;
         let (report, end): (Bound<'_, PyAny>, Bound<'_, PyAny>) = r.extract()?;
         let report = (!report.is_none()).then_some(report);
@@ -302,10 +323,28 @@ impl PyBlobField {
     fn centers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         points_to_py(py, self.inner.centers().to_vec())
     }
-    /// (N,) float64: radii of influence.
+    /// (N,) float64: radii of influence R (as given, with or without shapes).
     #[getter]
     fn radii<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        let r = match self.inner.shapes() {
+            Some((_, r)) => r,
+            None => self.inner.radii(),
+        };
+        values_to_py(py, r.to_vec())
+    }
+    /// (N,) float64: the radius of a sphere about each centre holding its kernel's support
+    /// (the radii without shapes).
+    #[getter]
+    fn reaches<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
         values_to_py(py, self.inner.radii().to_vec())
+    }
+    /// (N, 3, 3) float64 or None: the kernels' shapes Sᵢ (see the class docstring).
+    #[getter]
+    fn shapes<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.inner
+            .shapes()
+            .map(|(s, _)| matrices_to_py(py, s))
+            .transpose()
     }
     /// (N,) float64: strengths A.
     #[getter]
@@ -362,6 +401,7 @@ impl PyBlobField {
         kwargs.set_item("voxel_size", self.inner.settings().voxel_size)?;
         kwargs.set_item("kernel", self.kernel())?;
         kwargs.set_item("precision", self.precision())?;
+        kwargs.set_item("shapes", self.shapes(py)?)?;
         Ok((
             (
                 self.centers(py)?,
@@ -384,4 +424,59 @@ impl PyBlobField {
             self.precision()
         )
     }
+}
+
+/// The core's anisotropy settings from ``anisotropic`` (None or False: none; True: the
+/// defaults; an object with the attributes of `AnisotropyOptions`: those, each None for the
+/// default).
+fn anisotropy_settings(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Option<AnisotropySettings>> {
+    let Some(obj) = obj else { return Ok(None) };
+    if obj.is_none() {
+        return Ok(None);
+    }
+    if let Ok(b) = obj.cast::<pyo3::types::PyBool>() {
+        return Ok(b.is_true().then(AnisotropySettings::default));
+    }
+    if !obj.hasattr("k_r")? {
+        return Err(super::errors::value_error(
+            "anisotropic",
+            "expected a bool or an AnisotropyOptions",
+        ));
+    }
+    let mut s = AnisotropySettings::default();
+    let get = |name: &str| -> PyResult<Option<f64>> {
+        obj.getattr(name)?.extract::<Option<f64>>().map_err(|_| {
+            super::errors::value_error("anisotropic", format!("{name} must be a float"))
+        })
+    };
+    if let Some(v) = get("neighbour_radius")? {
+        s.neighbour_radius = v;
+    }
+    if let Some(v) = get("k_r")? {
+        s.k_r = v;
+    }
+    if let Some(v) = get("k_s")? {
+        s.k_s = v;
+    }
+    if let Some(v) = get("k_n")? {
+        s.k_n = v;
+    }
+    if let Some(v) = get("smoothing")? {
+        s.smoothing = v;
+    }
+    if let Some(v) = obj
+        .getattr("min_neighbours")?
+        .extract::<Option<i64>>()
+        .map_err(|_| super::errors::value_error("anisotropic", "min_neighbours must be an int"))?
+    {
+        if v < 0 {
+            return Err(super::errors::value_error(
+                "min_neighbours",
+                format!("must be non-negative, got {v}"),
+            ));
+        }
+        s.min_neighbours = v as usize;
+    }
+    s.check()?;
+    Ok(Some(s))
 }

@@ -149,6 +149,35 @@ pub fn values(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<f64>> 
     Ok(a.as_array().iter().copied().collect())
 }
 
+/// An (N, 3, 3) array of float64 matrices, each row-major.
+pub fn matrices(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[f64; 9]>> {
+    let arr = asarray(obj, "float64")
+        .map_err(|e| value_error(name, format!("not convertible to a float64 array ({e})")))?;
+    let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
+    if shape.len() != 3 || shape[1] != 3 || shape[2] != 3 {
+        return Err(value_error(
+            name,
+            format!(
+                "expected an array of shape (N, 3, 3), got shape {}",
+                python_shape(&shape)
+            ),
+        ));
+    }
+    let a: numpy::PyReadonlyArray3<f64> = arr.extract()?;
+    let a = a.as_array();
+    Ok((0..shape[0])
+        .map(|i| std::array::from_fn(|k| a[[i, k / 3, k % 3]]))
+        .collect())
+}
+
+/// (N, 3, 3) float64 from row-major matrices.
+pub fn matrices_to_py<'py>(py: Python<'py>, m: &[[f64; 9]]) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f64> = m.iter().flatten().copied().collect();
+    Ok(numpy::PyArray1::from_vec(py, flat)
+        .reshape([m.len(), 3, 3])?
+        .into_any())
+}
+
 /// An (F, 3) array of vertex indices, checked non-negative and below 2³².
 pub fn triangles(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[u32; 3]>> {
     let py = obj.py();

@@ -6,6 +6,7 @@ mod blob;
 mod convert;
 mod errors;
 mod field;
+mod fragments;
 mod interrupt;
 mod polygonize;
 mod scan;
@@ -50,6 +51,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(polygonize::polygonize, m)?)?;
     m.add_function(wrap_pyfunction!(polygonize::lattice, m)?)?;
     m.add_function(wrap_pyfunction!(polygonize::project_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(fragments::small_bodies, m)?)?;
     m.add_function(wrap_pyfunction!(weld::weld_tiles, m)?)?;
     m.add_class::<weld::PyStreamedWeld>()?;
     m.add_class::<weld::PyWeldPlan>()?;

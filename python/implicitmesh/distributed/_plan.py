@@ -69,7 +69,7 @@ def cut_blobs(field: _core.BlobField, lo: np.ndarray, hi: np.ndarray) -> _core.B
     ``[lo, hi]`` ((3,) float each), in their order (so values and gradients in the box are the
     same bits as the whole field's), or None when no primitive reaches it (the field is
     positive there)."""
-    keep = _reaches(field.centers, field.radii * (1.0 + RADIUS_MARGIN), lo, hi)
+    keep = _reaches(field.centers, field.reaches * (1.0 + RADIUS_MARGIN), lo, hi)
     return field._subset(np.flatnonzero(keep).astype(np.uint32)) if keep.any() else None
 
 

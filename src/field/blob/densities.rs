@@ -18,21 +18,21 @@ const STEP: usize = 1 << 16;
 const CHUNK: usize = 1 << 10;
 
 /// The particles sorted by cell, z slowest, then y, then x.
-struct CellList {
+pub(super) struct CellList {
     origin: DVec3,
     inv_side: f64,
     dims: [usize; 3],
     /// `start[c]..start[c + 1]`: the sorted particles of cell c.
     start: Vec<u32>,
     /// Positions in cell order.
-    sorted: Vec<DVec3>,
+    pub(super) sorted: Vec<DVec3>,
     /// The index among the caller's particles of each sorted one.
-    order: Vec<u32>,
+    pub(super) order: Vec<u32>,
 }
 
 impl CellList {
     /// Cells of side `side` at least, over the bounding box of `points` (finite, not empty).
-    fn new(points: &[DVec3], side: f64) -> Self {
+    pub(super) fn new(points: &[DVec3], side: f64) -> Self {
         let (lo, hi) = points.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |(lo, hi), &p| (lo.min(p), hi.max(p)),
@@ -90,12 +90,18 @@ impl CellList {
 
     /// The nine runs of sorted particles in the cells next to `p`'s (its own included): per
     /// (y, z) neighbour row, the cells x − 1 ..= x + 1 in the box.
-    fn runs(&self, p: DVec3, mut f: impl FnMut(&[DVec3])) {
+    fn runs(&self, p: DVec3, f: impl FnMut(&[DVec3])) {
+        self.runs_within(p, 1, f)
+    }
+
+    /// The runs of sorted particles in the cells within `m` cells of `p`'s along each axis
+    /// (its own included): per (y, z) neighbour row, the cells x − m ..= x + m in the box.
+    pub(super) fn runs_within(&self, p: DVec3, m: usize, mut f: impl FnMut(&[DVec3])) {
         let [x, y, z] = self.coords(p);
         let [dx, dy, dz] = self.dims;
-        let (x0, x1) = (x.saturating_sub(1), (x + 1).min(dx - 1));
-        for zz in z.saturating_sub(1)..=(z + 1).min(dz - 1) {
-            for yy in y.saturating_sub(1)..=(y + 1).min(dy - 1) {
+        let (x0, x1) = (x.saturating_sub(m), (x + m).min(dx - 1));
+        for zz in z.saturating_sub(m)..=(z + m).min(dz - 1) {
+            for yy in y.saturating_sub(m)..=(y + m).min(dy - 1) {
                 let row = dx * (yy + dy * zz);
                 let (a, b) = (self.start[row + x0], self.start[row + x1 + 1]);
                 f(&self.sorted[a as usize..b as usize]);

@@ -87,6 +87,10 @@ impl BlobField {
     /// vector path of `isa` (which the CPU must have). False when a strength of the list is
     /// not positive.
     pub(super) fn block_inside(&self, isa: Isa, list: &[u32], block: &BlockCoords) -> bool {
+        // The pairs bound is made for round kernels only (the `ellipsoids` module).
+        if self.shapes.is_some() {
+            return false;
+        }
         with_profile!(self.settings.kernel, K => match isa {
             // SAFETY: the caller passes an instruction set the CPU has.
             #[cfg(target_arch = "x86_64")]
@@ -177,6 +181,9 @@ impl BlobField {
     /// and [`BlobField::block_inside`] cannot succeed: this costs one term per primitive and
     /// corner, where `block_inside` takes one per primitive and pair of points reached.
     pub(super) fn corners_inside(&self, isa: Isa, list: &[u32], block: &BlockCoords) -> bool {
+        if self.shapes.is_some() {
+            return false;
+        }
         let BlockCoords { xs, ys, zs, n, .. } = block;
         let last = n.map(|v| v as usize - 1);
         let corner = |c: usize, axis: &[f64; BLOCK_POINTS], a: usize| {

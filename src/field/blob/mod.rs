@@ -9,7 +9,9 @@
 //! the first point query: the sparse polygonizer without normals never needs it). The
 //! hand-written vector paths serve the default profile; the others run the generic loops.
 
+pub mod anisotropy;
 pub mod densities;
+pub mod ellipsoids;
 mod hints;
 mod interior;
 mod kept;
@@ -81,6 +83,8 @@ pub struct BlobField {
     /// Block lists kept from one polygonization to the next on the same lattice (an
     /// animation's frames): see the `kept` module.
     kept: kept::Kept,
+    /// Ellipsoidal kernels (the `ellipsoids` module), when the field has them.
+    shapes: Option<Arc<ellipsoids::Shapes>>,
 }
 
 /// One primitive as point queries read it.
@@ -185,6 +189,19 @@ impl BlobField {
     /// lists in place. The number of primitives may change; when it does not, nothing is
     /// reallocated.
     pub fn update(
+        &mut self,
+        centers: &[DVec3],
+        radii: Option<PerPrimitive>,
+        strengths: Option<PerPrimitive>,
+    ) -> Result<()> {
+        if self.shapes.is_some() {
+            return self.update_shaped(centers, radii, strengths);
+        }
+        self.update_primitives(centers, radii, strengths)
+    }
+
+    /// [`BlobField::update`] of the primitives' arrays (`radii`: the spheres' radii).
+    fn update_primitives(
         &mut self,
         centers: &[DVec3],
         radii: Option<PerPrimitive>,
@@ -306,6 +323,9 @@ impl BlobField {
 
     /// Potential F(p) by brute force over all primitives (the reference for tests).
     pub fn potential_brute_force(&self, p: DVec3) -> f64 {
+        if let Some(s) = &self.shapes {
+            return self.shaped_potential_brute_force(s, p);
+        }
         let packed = self.packed();
         with_profile!(self.settings.kernel, K => packed.iter().map(|q| term::<K>(q, p)).sum())
     }
@@ -339,6 +359,9 @@ impl BlobField {
     /// order, as any other list that holds every primitive reaching `p`).
     #[inline(always)]
     fn gradient_over<K: Profile>(&self, list: &[u32], p: DVec3) -> DVec3 {
+        if let Some(s) = &self.shapes {
+            return self.shaped_gradient::<K>(s, list, p);
+        }
         let mut g = DVec3::ZERO;
         for &i in list {
             let i = i as usize;
@@ -354,6 +377,9 @@ impl BlobField {
     /// precision the f32 sum, widened.
     #[inline(always)]
     pub fn potential(&self, p: DVec3) -> f64 {
+        if let Some(s) = &self.shapes {
+            return self.shaped_potential(s, p);
+        }
         match self.settings.precision {
             Precision::Double => {
                 with_profile!(self.settings.kernel, K => self.potential_with::<K>(p))
@@ -603,6 +629,9 @@ impl BlobField {
     /// Fills a block's values (see [`BlockField::block_values`]) from the primitives of `list`
     /// with the vector path of `isa` (which the CPU must have): the same bits on every path.
     fn splat_block(&self, isa: Isa, list: &[u32], block: &BlockCoords, out: &mut [f64; 512]) {
+        if let Some(s) = &self.shapes {
+            return self.shaped_block(isa, s, list, block, out);
+        }
         if self.settings.precision == Precision::Single {
             return self.splat_block_single(isa, list, block, out);
         }
@@ -699,6 +728,11 @@ impl BlobField {
     /// [`BlobField::gradient_over`] at each point, with the vector path of `isa` (which the CPU
     /// must have) for whole vectors of points: the same bits on every path.
     fn gradients_over(&self, isa: Isa, list: &[u32], points: &[DVec3], out: &mut [DVec3]) {
+        if self.shapes.is_some() {
+            return with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
+                self.gradient_over::<K>(list, p)
+            }));
+        }
         with_profile!(self.settings.kernel, K => self.gradients_over_with::<K>(isa, list, points, out))
     }
 
@@ -1046,6 +1080,9 @@ impl Field for BlobField {
     /// list. With this as the octree's safety factor, its rejection test never rejects a block
     /// the surface crosses.
     fn gradient_bound(&self) -> Option<f64> {
+        if let Some(s) = &self.shapes {
+            return Some(self.shaped_gradient_bound(s));
+        }
         let k = self.settings.kernel.max_slope();
         Some(
             self.grid()
@@ -1072,6 +1109,15 @@ impl Field for BlobField {
         let xs: Vec<f64> = (0..px).map(|i| lattice.point([i, 0, 0]).x).collect();
         let ys: Vec<f64> = (0..py).map(|j| lattice.point([0, j, 0]).y).collect();
         let isa = Isa::detect();
+        if let Some(s) = &self.shapes {
+            return out
+                .par_chunks_mut(plane)
+                .enumerate()
+                .for_each(|(dz, slab)| {
+                    let z = lattice.point([0, 0, z0 + dz as u32]).z;
+                    self.shaped_plane(s, lattice, [&xs, &ys], z, slab)
+                });
+        }
         with_profile!(self.settings.kernel, K => out.par_chunks_mut(plane)
         .enumerate()
         .for_each(|(dz, slab)| {
@@ -1099,6 +1145,9 @@ impl Field for BlobField {
 
     #[inline]
     fn value(&self, p: DVec3) -> f64 {
+        if let Some(s) = &self.shapes {
+            return self.shaped_value(s, p);
+        }
         match self.settings.precision {
             Precision::Double => self.threshold - self.potential(p),
             Precision::Single => {
@@ -1115,6 +1164,9 @@ impl Field for BlobField {
     /// The batch loops call the point functions inlined: a call per point (the trait's default)
     /// costs as much as the terms themselves here.
     fn values(&self, points: &[DVec3], out: &mut [f64]) {
+        if let Some(s) = &self.shapes {
+            return map_points(points, out, |p| self.shaped_value(s, p));
+        }
         match self.settings.precision {
             Precision::Double => {
                 with_profile!(self.settings.kernel, K => map_points(points, out, |p| {
@@ -1244,7 +1296,7 @@ impl BlobField {
             let (near, far) = box_distances2(c, plo, phi);
             let (big, small) = (
                 a * K::value(1.0 - near * inv),
-                a * K::value(1.0 - far * inv),
+                a * K::value(1.0 - far * self.far_inv(i)),
             );
             fmax += big.max(small);
             fmin += big.min(small);

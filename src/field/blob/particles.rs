@@ -9,6 +9,7 @@
 //! the strength of particle i is Aᵢ = 1 / Σⱼ w(|xᵢ − xⱼ|/H) and neither m, ρ₀ nor σ appears.
 
 use crate::error::{check_finite_points, Error, Result};
+use crate::field::blob::anisotropy::{self, AnisotropySettings};
 use crate::field::blob::densities::kernel_sums;
 use crate::field::blob::kernel::BlobKernel;
 use crate::field::blob::{BlobField, BlobSettings, PerPrimitive, Precision};
@@ -30,6 +31,10 @@ pub struct ParticleSettings {
     /// The field's precision ([`BlobSettings::precision`]); the densities are computed in f64
     /// whichever it is.
     pub precision: Precision,
+    /// Anisotropic kernels (Yu & Turk, [`crate::field::blob::anisotropy`]) when set: each
+    /// particle's kernel stretched along its neighbourhood's principal axes, its strength
+    /// times det Sᵢ, its centre smoothed. Default None (round kernels, splashsurf's field).
+    pub anisotropy: Option<AnisotropySettings>,
 }
 
 impl Default for ParticleSettings {
@@ -40,6 +45,7 @@ impl Default for ParticleSettings {
             kernel: BlobKernel::CubicSpline,
             voxel_size: BlobSettings::default().voxel_size,
             precision: Precision::Double,
+            anisotropy: None,
         }
     }
 }
@@ -55,21 +61,40 @@ pub fn colour_field(
     check_finite_points("particles", particles)?;
     crate::spatial::check_far("particles", particles)?;
     let support = compact_support(particle_radius, settings)?;
+    if let Some(a) = &settings.anisotropy {
+        a.check()?;
+    }
     let blob = BlobSettings {
         voxel_size: settings.voxel_size,
         kernel: settings.kernel,
         precision: Precision::Double,
     };
-    let mut field = BlobField::new(
-        particles,
-        PerPrimitive::All(support),
-        PerPrimitive::All(1.0),
-        settings.iso_surface_threshold,
-        blob,
-    )?;
     let sums = kernel_sums(particles, support, settings.kernel)?;
-    let strengths: Vec<f64> = sums.iter().map(|s| 1.0 / s).collect();
-    field.set_strengths(PerPrimitive::Each(&strengths))?;
+    let mut strengths: Vec<f64> = sums.iter().map(|s| 1.0 / s).collect();
+    let threshold = settings.iso_surface_threshold;
+    let mut field = match &settings.anisotropy {
+        None => BlobField::new(
+            particles,
+            PerPrimitive::All(support),
+            PerPrimitive::Each(&strengths),
+            threshold,
+            blob,
+        )?,
+        Some(a) => {
+            let (centres, shapes) = anisotropy::shapes(particles, support, a)?;
+            for (s, m) in strengths.iter_mut().zip(&shapes) {
+                *s *= anisotropy::determinant(m);
+            }
+            BlobField::with_shapes(
+                &centres,
+                PerPrimitive::All(support),
+                PerPrimitive::Each(&strengths),
+                threshold,
+                blob,
+                &shapes,
+            )?
+        }
+    };
     field.set_precision(settings.precision);
     Ok(field)
 }

@@ -152,6 +152,16 @@ impl BlobField {
         let centers: Vec<DVec3> = keep.iter().map(|&i| self.centers()[i as usize]).collect();
         let radii: Vec<f64> = keep.iter().map(|&i| self.radii()[i as usize]).collect();
         let strengths: Vec<f64> = keep.iter().map(|&i| self.strengths()[i as usize]).collect();
+        if let Some((shapes, radii)) = self.shapes_of(keep) {
+            return BlobField::with_shapes(
+                &centers,
+                PerPrimitive::Each(&radii),
+                PerPrimitive::Each(&strengths),
+                self.threshold(),
+                self.settings(),
+                &shapes,
+            );
+        }
         BlobField::new(
             &centers,
             PerPrimitive::Each(&radii),
