@@ -25,7 +25,7 @@ From :data:`ALONE_FROM` points on (the 5·10⁶ size, which runs only when asked
 saved, and each of :data:`ALONE_METHODS` runs once in a process of its own, whose peak resident
 size is reported beside its time.
 
-A run of some sizes keeps the stored cases of the other sizes (each with its own run's record).
+A run of some cases keeps the other stored cases (each with its own run's record).
 """
 
 from __future__ import annotations
@@ -330,14 +330,16 @@ def measure(a: argparse.Namespace) -> dict:
     raw = {"cases": cases, "methods": list(METHODS), "reference": REFERENCE, "samples": SAMPLES,
            "sizes": {str(n): list(SIZES[n]) for n in sizes}, "conditions": {c: CONDITIONS[c] for c in conditions},
            "run": run.finish(("numpy", "scipy", "trimesh", "open3d", "implicitmesh"))}
-    # A run of some sizes keeps the stored cases of the others, with their own run's record.
+    # A run of some cases keeps the other stored cases, each with its own run's record.
     stored = None if a.quick else load_raw(results_dir(a.results, a.quick), "scans")
     if stored:
-        kept = [c for c in stored["cases"] if c["n"] not in sizes]
+        ran = {(c["model"], c["condition"], c["n"]) for c in cases}
+        kept = [c for c in stored["cases"] if (c["model"], c["condition"], c["n"]) not in ran]
         for c in kept:
             c.setdefault("run", stored["run"])
         raw["cases"] += kept
-        raw["sizes"].update({k: v for k, v in stored["sizes"].items() if int(k) not in sizes})
+        raw["sizes"].update({k: v for k, v in stored["sizes"].items() if k not in raw["sizes"]})
+        raw["conditions"].update({k: v for k, v in stored["conditions"].items() if k not in raw["conditions"]})
     return raw
 
 
@@ -394,13 +396,17 @@ def render(raw: dict) -> str:
         if not cases:
             continue
         cells, depth, runs = raw["sizes"][str(n)]
-        other_run = cases[0].get("run")
         parts += [f"### {n:,} points ({cells} cells against depth {depth}; {runs if not run['quick'] else 1} "
                   "timed run(s))", ""]
-        if other_run:
-            parts += [f"Measured in an earlier run, {other_run['date']} (`{other_run['command']}`; other processes "
-                      f"used {other_run['foreign_load'] if other_run['foreign_load'] is None else round(other_run['foreign_load'], 2)} "
-                      "cores on average).", ""]
+        earlier: dict[str, tuple[dict, list]] = {}
+        for c in cases:
+            if "run" in c:
+                earlier.setdefault(c["run"]["date"], (c["run"], []))[1].append(c)
+        for other_run, cc in earlier.values():
+            which = "All cases" if len(cc) == len(cases) else ", ".join(f"{c['model']} {c['condition']}" for c in cc)
+            load = other_run["foreign_load"]
+            parts += [f"{which}: measured in an earlier run, {other_run['date']} (`{other_run['command']}`; other "
+                      f"processes used {load if load is None else round(load, 2)} cores on average).", ""]
         # The summary per condition, as issue 53 states its targets.
         rows = []
         for cond in conditions:

@@ -110,7 +110,13 @@ def run_case_process(module: str, args: Sequence[str], case: dict) -> dict:
     line it prints, or ``case`` with the last line of its error output under ``"error"``."""
     r = subprocess.run([sys.executable, "-m", module, "one", *args], capture_output=True, text=True, cwd=ROOT)
     if r.returncode != 0:
-        return {**case, "error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"}
+        if r.returncode < 0:
+            import signal
+
+            why = f"the process died of {signal.Signals(-r.returncode).name}"
+        else:
+            why = f"exit status {r.returncode}"
+        return {**case, "error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else why}
     return json.loads(r.stdout)
 
 
