@@ -58,9 +58,10 @@ class VariationalSurface:
     @staticmethod
     def fit(
         points: _ArrayLike,
-        normals: _ArrayLike,
+        normals: _ArrayLike | None = None,
         *,
         exact: bool = False,
+        viewpoints: _ArrayLike | None = None,
         d: float | None = None,
         w: float | None = None,
         tolerance: float | None = None,
