@@ -77,8 +77,8 @@ def _read_input(path: Path):
         return "points", data["points"], data["normals"] if "normals" in data else None
     if suffix in (".xyz", ".txt", ".csv", ".pts"):
         arr = np.loadtxt(path, delimiter="," if suffix == ".csv" else None, ndmin=2)
-        if arr.shape[1] < 3:
-            raise ValueError(f"{path}: expected 3 columns x y z (or 6: x y z nx ny nz), got shape {arr.shape}")
+        if arr.shape[1] not in (3,) and arr.shape[1] < 6:
+            raise ValueError(f"{path}: expected 3 columns x y z or 6 columns x y z nx ny nz, got shape {arr.shape}")
         return "points", arr[:, :3], arr[:, 3:6] if arr.shape[1] >= 6 else None
     import trimesh
 
