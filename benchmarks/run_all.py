@@ -39,7 +39,7 @@ from benchmarks.timing import (
 
 #: The sections of BENCHMARKS.md, in order: ``benchmarks.bench_NAME`` modules with
 #: ``measure(args) -> dict`` and ``render(raw) -> str``.
-SECTIONS = ("blobs", "distributed", "octree", "particles", "partition", "rbf", "scale", "scans", "subdivision")
+SECTIONS = ("blobs", "distributed", "normals", "octree", "particles", "partition", "rbf", "scale", "scans", "subdivision")
 #: The packages whose versions the header names.
 PACKAGES = ("numpy", "scipy", "scikit-image", "ferreus_rbf", "pysplashsurf", "distributed", "implicitmesh")
 

@@ -336,30 +336,53 @@ impl PointTree {
         k: usize,
         per_point: impl Fn(&[(f64, u32)]) -> T + Sync,
     ) -> Result<Vec<T>> {
+        let in_leaf_order =
+            self.map_neighbourhoods_in_leaf_order(k, |_, found| per_point(found))?;
+        let mut out = vec![T::default(); self.len()];
+        out.par_iter_mut()
+            .zip(self.positions().par_iter())
+            .for_each(|(o, &s)| *o = in_leaf_order[s as usize]);
+        Ok(out)
+    }
+
+    /// The leaf position of each point of the set, in the caller's order: the point at leaf
+    /// position `s` is the caller's `order[s]` ([`PointTree::layout`]).
+    pub(crate) fn positions(&self) -> Vec<u32> {
+        let mut position = vec![0u32; self.len()];
+        for (s, &i) in self.order.iter().enumerate() {
+            position[i as usize] = s as u32;
+        }
+        position
+    }
+
+    /// `per_point(s, neighbours)` of the point at each leaf position `s`, with its `k` nearest
+    /// points (the caller's indices, itself among them), in leaf order, on rayon's threads.
+    /// Reports each batch of points done to the caller's token ([`crate::cancel`]).
+    pub(crate) fn map_neighbourhoods_in_leaf_order<T: Send + Sync + Copy + Default>(
+        &self,
+        k: usize,
+        per_point: impl Fn(usize, &[(f64, u32)]) -> T + Sync,
+    ) -> Result<Vec<T>> {
         self.check_k(k)?;
+        let token = crate::cancel::current();
         let mut in_leaf_order = vec![T::default(); self.len()];
         in_leaf_order
             .par_chunks_mut(BATCH)
             .zip(self.sorted.par_chunks(BATCH))
             .enumerate()
-            .for_each(|(c, (out, p))| {
+            .try_for_each(|(c, (out, p))| {
                 let mut found = vec![(0.0, 0u32); k];
                 for (s, (o, p)) in (c * BATCH..).zip(out.iter_mut().zip(p)) {
                     self.search(*p, &mut found, self.seed_leaves(s, k));
-                    *o = per_point(&found);
+                    *o = per_point(s, &found);
                 }
-            });
+                match &token {
+                    Some(t) => t.advance(p.len() as u64),
+                    None => Ok(()),
+                }
+            })?;
         crate::cancel::check()?;
-        let mut out = vec![T::default(); self.len()];
-        // The caller's order: the point at leaf position s is the caller's order[s].
-        let mut position = vec![0u32; self.len()];
-        for (s, &i) in self.order.iter().enumerate() {
-            position[i as usize] = s as u32;
-        }
-        out.par_iter_mut()
-            .zip(position.par_iter())
-            .for_each(|(o, &s)| *o = in_leaf_order[s as usize]);
-        Ok(out)
+        Ok(in_leaf_order)
     }
 
     /// The `k` nearest points of each point of the set, as [`Self::k_nearest_of_points`] finds
@@ -383,13 +406,9 @@ impl PointTree {
                 }
             });
         crate::cancel::check()?;
-        let mut position = vec![0u32; n];
-        for (s, &i) in self.order.iter().enumerate() {
-            position[i as usize] = s as u32;
-        }
         Ok(Neighbourhoods {
             indices,
-            position,
+            position: self.positions(),
             k,
         })
     }

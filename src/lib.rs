@@ -60,6 +60,7 @@ pub mod lattice;
 pub mod linalg;
 pub(crate) mod memory;
 pub mod mesh;
+pub mod normals;
 pub mod polygonize;
 pub(crate) mod simd;
 pub mod spatial;

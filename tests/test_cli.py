@@ -198,15 +198,17 @@ def test_reconstruct_ply_point_set_with_normals(mesh_dir, tmp_path, capsys, bina
 
 
 @pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
-def test_ply_point_set_without_normals_is_a_clean_error(tmp_path, capsys, binary):
+def test_ply_point_set_without_normals_gets_them_estimated(tmp_path, capsys, binary):
     from implicitmesh.cli import main
 
     ply = tmp_path / "points.ply"
-    write_point_ply(ply, np.random.default_rng(0).normal(size=(50, 3)), binary=binary)
-    code = main(["reconstruct", str(ply), "-o", str(tmp_path / "out.ply"), "--resolution", "16"])
-    assert code == 2
-    err = capsys.readouterr().err
-    assert "error" in err and "normals" in err
+    s = np.random.default_rng(0).normal(size=(2000, 3))
+    write_point_ply(ply, s / np.linalg.norm(s, axis=1)[:, None], binary=binary)
+    code = main(["reconstruct", str(ply), "-o", str(tmp_path / "out.ply"), "--resolution", "24"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert table_value(out, "normals").startswith("estimated")
+    assert table_value(out, "watertight") == "yes"
 
 
 @pytest.mark.parametrize(

@@ -13,7 +13,8 @@ for animation; :class:`OctreeOptions` and :class:`TrackingOptions` hold a method
 :class:`PartitionOptions` the partition fit's. Mesh refinement: :func:`subdivide` (1-to-4 with Newton projection onto the
 field, Jin et al.), :func:`butterfly` and :func:`blend`.
 Results are :class:`Mesh` objects with numpy arrays that trimesh and pyvista take as they are;
-:func:`compare` counts the triangles two meshes do not share. Fitted fields pickle, and
+:func:`compare` counts the triangles two meshes do not share; :func:`estimate_normals` gives
+points without normals oriented ones. Fitted fields pickle, and
 :func:`save` and :func:`load` keep them in ``.npz`` files. :func:`read_particles` reads
 simulation frames (``.npy``, ``.npz``, ``.ply``, meshio formats).
 """
@@ -24,8 +25,9 @@ from .options import AnisotropyOptions, OctreeOptions, PartitionOptions, Trackin
 from .polygonize import METHODS, Ambiguity, Tessellator, polygonize
 from . import shapes
 from . import scanner
+from .normals import estimate_normals
 from .subdivision import blend, butterfly, subdivide
 from .io import load, save
 from .frames import read_particles
 
-__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "OctreeOptions", "TrackingOptions", "PartitionOptions", "AnisotropyOptions", "shapes", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]
+__all__ = ["VariationalSurface", "BlobField", "Tessellator", "Mesh", "compare", "polygonize", "Ambiguity", "METHODS", "OctreeOptions", "TrackingOptions", "PartitionOptions", "AnisotropyOptions", "shapes", "estimate_normals", "subdivide", "butterfly", "blend", "save", "load", "read_particles", "__version__"]

@@ -29,6 +29,7 @@ __all__ = [
     "closest_points",
     "k_nearest",
     "pca_normals",
+    "estimate_normals",
     "_panic_in_worker",
 ]
 
@@ -58,9 +59,10 @@ class VariationalSurface:
     @staticmethod
     def fit(
         points: _ArrayLike,
-        normals: _ArrayLike,
+        normals: _ArrayLike | None = None,
         *,
         exact: bool = False,
+        viewpoints: _ArrayLike | None = None,
         d: float | None = None,
         w: float | None = None,
         tolerance: float | None = None,
@@ -290,6 +292,7 @@ def ray_cast(vertices: _ArrayLike, faces: _ArrayLike, origins: _ArrayLike, direc
 def closest_points(vertices: _ArrayLike, faces: _ArrayLike, points: _ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int64]]: ...
 def k_nearest(points: _ArrayLike, k: int, queries: _ArrayLike | None = None) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]: ...
 def pca_normals(points: _ArrayLike, k: int = 20) -> npt.NDArray[np.float64]: ...
+def estimate_normals(points: _ArrayLike, neighbours: int = 20, viewpoints: _ArrayLike | None = None, progress: Callable[[int], object] | None = None) -> tuple[npt.NDArray[np.float64], dict[str, int]]: ...
 
 # Testing only: panics inside a rayon worker of the interruptible runner (or on the calling thread
 # with on_caller=True); raises RuntimeError naming "_panic_in_worker" (tests/test_extreme.py).

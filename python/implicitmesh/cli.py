@@ -70,16 +70,16 @@ def step(message: str):
 
 
 def _read_input(path: Path):
-    """Returns ("mesh", vertices, faces) or ("points", points, normals)."""
+    """Returns ("mesh", vertices, faces) or ("points", points, normals or None)."""
     suffix = path.suffix.lower()
     if suffix in (".npz",):
         data = np.load(path)
-        return "points", data["points"], data["normals"]
+        return "points", data["points"], data["normals"] if "normals" in data else None
     if suffix in (".xyz", ".txt", ".csv", ".pts"):
-        arr = np.loadtxt(path, delimiter="," if suffix == ".csv" else None)
-        if arr.ndim != 2 or arr.shape[1] < 6:
-            raise ValueError(f"{path}: expected 6 columns x y z nx ny nz, got shape {arr.shape}")
-        return "points", arr[:, :3], arr[:, 3:6]
+        arr = np.loadtxt(path, delimiter="," if suffix == ".csv" else None, ndmin=2)
+        if arr.shape[1] not in (3,) and arr.shape[1] < 6:
+            raise ValueError(f"{path}: expected 3 columns x y z or 6 columns x y z nx ny nz, got shape {arr.shape}")
+        return "points", arr[:, :3], arr[:, 3:6] if arr.shape[1] >= 6 else None
     import trimesh
 
     loaded = trimesh.load(str(path), process=False)
@@ -94,8 +94,8 @@ def _read_input(path: Path):
         if raw is not None and names and all(k in names for k in ("nx", "ny", "nz")):
             normals = np.stack([np.asarray(raw[k]).ravel() for k in ("nx", "ny", "nz")], axis=1).astype(np.float64)
             return "points", np.asarray(loaded.vertices), normals
-        raise ValueError(f"{path}: a point set needs normals (PLY properties nx, ny, nz)")
-    raise ValueError(f"{path}: neither a triangle mesh nor a point set with normals")
+        return "points", np.asarray(loaded.vertices, dtype=np.float64), None
+    raise ValueError(f"{path}: neither a triangle mesh nor a point set")
 
 
 def _check_positive(option: str, value: float) -> None:
@@ -141,6 +141,8 @@ def _check(args) -> None:
         _check_output_file(args.output)
     if args.command == "reconstruct" and args.trim is not None:
         _check_positive("--trim", args.trim)
+    if args.command == "reconstruct" and args.viewpoint is not None and not all(map(math.isfinite, args.viewpoint)):
+        raise UsageError(f"--viewpoint: must be three finite numbers, got {args.viewpoint}")
     if args.command == "particles":
         for option in ("radius", "cube_size", "smoothing_length", "threshold"):
             _check_positive("--" + option.replace("_", "-"), getattr(args, option))
@@ -160,7 +162,12 @@ def _fit_and_polygonize(kind, a, b, args):
             surface = VariationalSurface.from_mesh(a, b, d=args.d, w=args.w, kernel=args.kernel)
         else:
             exact = getattr(args, "exact", False)
-            surface = VariationalSurface.fit(a, b, exact=exact, d=args.d, w=args.w, kernel=args.kernel)
+            viewpoint = getattr(args, "viewpoint", None)
+            if b is None and exact:
+                raise UsageError("--exact: the points have no normals; the exact fit needs them (leave out --exact to estimate them)")
+            if b is not None and viewpoint is not None:
+                raise UsageError("--viewpoint: the points have normals; it is only used to estimate them")
+            surface = VariationalSurface.fit(a, b, exact=exact, viewpoints=viewpoint, d=args.d, w=args.w, kernel=args.kernel)
         fit_s = time.perf_counter() - t0
     with step(f"polygonizing at {args.resolution}³ ({args.method})"):
         mesh = polygonize(
@@ -181,7 +188,7 @@ def _scan_rows(report) -> list[tuple[str, str]]:
     return [
         ("noise", f"{report['noise']:.3g} (estimated; spacing {report['spacing']:.3g})"),
         ("outliers", f"{report['outliers']:,} of {report['points']:,} points left out"),
-        ("normals", f"{report['normals_corrected']:,} turned to agree with their neighbours" + (" (all turned outward)" if report["turned_outward"] else "")),
+        ("normals", ("estimated from the points; " if report.get("normals_estimated") else "") + f"{report['normals_corrected']:,} turned to agree with their neighbours" + (" (all turned outward)" if report["turned_outward"] else "")),
         ("distances", f"data to surface: mean {report['distance_mean']:.3g}, 99% {report['distance_p99']:.3g}, max {report['distance_max']:.3g}"),
     ]
 
@@ -319,8 +326,8 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--model", default="knot", choices=["knot", "spot"], help="the bundled model (default knot)")
     demo.add_argument("-o", "--output", default="implicitmesh-demo", help="output folder (default implicitmesh-demo)")
     _add_fit_options(demo)
-    rec = sub.add_parser("reconstruct", help="fit a mesh or points with normals (a scan) and polygonize it")
-    rec.add_argument("input", help="a mesh (PLY/OBJ/STL/OFF...), a PLY point set with nx ny nz, .xyz/.txt with 6 columns, or .npz with points and normals")
+    rec = sub.add_parser("reconstruct", help="fit a mesh or points (a scan, with or without normals) and polygonize it")
+    rec.add_argument("input", help="a mesh (PLY/OBJ/STL/OFF...), a PLY point set (normals nx ny nz optional), .xyz/.txt with 3 or 6 columns, or .npz with points (and normals)")
     rec.add_argument("-o", "--output", required=True, help=f"output mesh, its format from the suffix ({', '.join(MESH_SUFFIXES)})")
     rec.add_argument(
         "--exact",
@@ -333,6 +340,14 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         metavar="D",
         help="drop the parts of the mesh farther than D (in the data's units) from every data point, leaving it open where no data was",
+    )
+    rec.add_argument(
+        "--viewpoint",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="points without normals: where the sensor was, so that the estimated normals face it",
     )
     _add_fit_options(rec)
     par = sub.add_parser(

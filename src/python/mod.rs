@@ -8,6 +8,7 @@ mod errors;
 mod field;
 mod fragments;
 mod interrupt;
+mod normals;
 mod polygonize;
 mod scan;
 mod state;
@@ -58,6 +59,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(weld::write_welded_tile, m)?)?;
     subdivision::register(m)?;
     scan::register(m)?;
+    normals::register(m)?;
     // For tests only: a panic in a worker must come back as a RuntimeError (tests/test_extreme.py).
     m.add_function(wrap_pyfunction!(interrupt::_panic_in_worker, m)?)?;
     Ok(())

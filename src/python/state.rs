@@ -138,6 +138,7 @@ pub fn state<'py>(py: Python<'py>, fitted: &Fitted) -> PyResult<Bound<'py, PyDic
     d.set_item("scan_noise", r.noise)?;
     d.set_item("scan_normals_corrected", r.normals_corrected)?;
     d.set_item("scan_turned_outward", r.turned_outward)?;
+    d.set_item("scan_normals_estimated", r.normals_estimated)?;
     d.set_item(
         "scan_distances",
         values_to_py(py, vec![r.distance_mean, r.distance_p99, r.distance_max]),
@@ -485,6 +486,10 @@ pub fn from_state(d: &Bound<'_, PyDict>) -> PyResult<Fitted> {
         noise: number(d, "scan_noise")?,
         normals_corrected: number(d, "scan_normals_corrected")?,
         turned_outward: number(d, "scan_turned_outward")?,
+        normals_estimated: match d.get_item("scan_normals_estimated")? {
+            Some(v) => v.extract()?,
+            None => false,
+        },
         distance_mean: mean,
         distance_p99: p99,
         distance_max: max,

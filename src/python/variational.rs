@@ -11,6 +11,7 @@ use crate::field::rbf::partition;
 use crate::field::rbf::reduction::{Reduction, ReductionSettings};
 use crate::field::rbf::{self, Fit, FitData, FitMethod, Fitted};
 use crate::field::scan::ScanSettings;
+use crate::normals::Viewpoints;
 use glam::DVec3;
 use numpy::PyArray1;
 use pyo3::exceptions::PyUserWarning;
@@ -92,7 +93,8 @@ impl<'a, 'py> FitOptions<'a, 'py> {
         self,
         py: Python<'py>,
         points: &[DVec3],
-        normals: &[DVec3],
+        normals: Option<&[DVec3]>,
+        viewpoints: Viewpoints<'_>,
         tolerance: Option<f64>,
     ) -> PyResult<PyVariationalSurface> {
         let fit = self.fit;
@@ -106,7 +108,7 @@ impl<'a, 'py> FitOptions<'a, 'py> {
         let scan = ScanSettings::default();
         let (report, end) = reporter(py, self.progress, "fit (scan)")?;
         let fitted = super::interrupt::run(py, report.as_ref(), false, || {
-            fit.run_scan(points, normals, &scan, reduction.as_ref())
+            fit.run_scan(points, normals, viewpoints, &scan, reduction.as_ref())
         });
         end.call0()?;
         let (inner, r) = fitted?;
@@ -318,8 +320,13 @@ impl PyVariationalSurface {
     ///     ``merge_distance`` are merged (with a ``UserWarning``): the first keeps its position,
     ///     the normals are summed. C-contiguous float64 arrays (here and in ``normals``) are read
     ///     in place, not copied: do not change them from another thread during the fit.
-    /// normals : (N, 3) float64
-    ///     Outward normals, any non-zero length (they are normalised).
+    /// normals : (N, 3) float64, optional
+    ///     Outward normals, any non-zero length (they are normalised). When None (points
+    ///     alone), the scan fit estimates them (:func:`implicitmesh.estimate_normals`, with
+    ///     ``viewpoints``) and its :attr:`report` says so; an exact fit needs them.
+    /// viewpoints : (3,) or (N, 3) float64, optional
+    ///     Where the sensor was, for estimating normals (see
+    ///     :func:`implicitmesh.estimate_normals`); only with ``normals=None``.
     /// d : float, optional
     ///     Offset of the normal constraints. Default: 0.0075 × the largest side of the points'
     ///     bounding box, leaving out points more than 50 × the extent of their bulk away
@@ -383,13 +390,14 @@ impl PyVariationalSurface {
     ///     ``merge_distance``, zero-length normals, a singular system, a system over the memory limit or an unknown
     ///     method.
     #[staticmethod]
-    #[pyo3(signature = (points, normals, *, exact=false, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
+    #[pyo3(signature = (points, normals=None, *, exact=false, viewpoints=None, d=None, w=None, kernel="triharmonic", smoothing=0.0, memory_limit=None, method="auto", progress=None, partition_options=None, merge_distance=None, tolerance=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
-        normals: &Bound<'_, PyAny>,
+        normals: Option<&Bound<'_, PyAny>>,
         exact: bool,
+        viewpoints: Option<&Bound<'_, PyAny>>,
         d: Option<f64>,
         w: Option<f64>,
         kernel: &str,
@@ -412,12 +420,28 @@ impl PyVariationalSurface {
             merge_distance,
             (d, w),
         )?;
-        let (p, n) = (
-            points_arg(points, "points")?,
-            points_arg(normals, "normals")?,
-        );
-        let (p, n) = (p.as_slice(), n.as_slice());
+        let p = points_arg(points, "points")?;
+        let p = p.as_slice();
         warn_outside(py, "points", p)?;
+        let Some(normals) = normals else {
+            if exact {
+                return Err(value_error(
+                    "normals",
+                    "an exact fit (exact=True) needs normals; leave exact=False to estimate them",
+                ));
+            }
+            let views = super::normals::viewpoints_arg(viewpoints)?;
+            let views = views.as_viewpoints();
+            return fit.run_scan(py, p, None, views, tolerance);
+        };
+        if viewpoints.is_some() {
+            return Err(value_error(
+                "viewpoints",
+                "only used to estimate normals (normals=None)",
+            ));
+        }
+        let n = points_arg(normals, "normals")?;
+        let n = n.as_slice();
         if n.len() != p.len() {
             return Err(value_error(
                 "normals",
@@ -429,7 +453,7 @@ impl PyVariationalSurface {
             ));
         }
         if !exact {
-            return fit.run_scan(py, p, n, tolerance);
+            return fit.run_scan(py, p, Some(n), Viewpoints::None, tolerance);
         }
         let data = FitData::Normals {
             points: p,
@@ -721,7 +745,8 @@ impl PyVariationalSurface {
     /// neighbour), ``"noise"`` (the estimated noise: the median root-mean-square distance of a
     /// neighbourhood from its plane, in the points' units), ``"normals_corrected"`` (kept points
     /// whose normal was turned to agree with its neighbours'), ``"turned_outward"`` (True when
-    /// the normals pointed inward and all were turned), and the distance from the kept points,
+    /// the normals pointed inward and all were turned), ``"normals_estimated"`` (True when the
+    /// points came without normals), and the distance from the kept points,
     /// as given, to the surface: ``"distance_mean"``, ``"distance_p99"``,
     /// ``"distance_max"``. None for an exact fit.
     #[getter]
@@ -737,6 +762,7 @@ impl PyVariationalSurface {
         d.set_item("noise", r.noise)?;
         d.set_item("normals_corrected", r.normals_corrected)?;
         d.set_item("turned_outward", r.turned_outward)?;
+        d.set_item("normals_estimated", r.normals_estimated)?;
         d.set_item("distance_mean", r.distance_mean)?;
         d.set_item("distance_p99", r.distance_p99)?;
         d.set_item("distance_max", r.distance_max)?;

@@ -29,6 +29,7 @@ use crate::field::scan::{self, ScanSettings, ScanSurface};
 use crate::field::{DynBlockField, Field, Starts};
 use crate::knn::PointTree;
 use crate::lattice::Lattice;
+use crate::normals::{estimate_normals, NormalSettings, Viewpoints};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -204,17 +205,32 @@ impl Fit {
         Ok(Fitted::Global(Arc::new(surface?)))
     }
 
-    /// The scan fit of `points` with `normals` ([`crate::field::scan`]): the points cleaned by
-    /// `scan`, fitted by this fit (within `reduction`, when given, [`Fit::run_within`]), and
+    /// The scan fit of `points` with `normals` ([`crate::field::scan`]), or with normals
+    /// estimated from the points and `viewpoints` when `None` ([`estimate_normals`], over
+    /// `scan.neighbours` neighbours): the points cleaned by `scan`, fitted by this fit (within `reduction`, when given, [`Fit::run_within`]), and
     /// guarded by their winding number. Errors name the argument, as [`scan::clean()`]'s and the
     /// fit's do.
     pub fn run_scan(
         &self,
         points: &[DVec3],
-        normals: &[DVec3],
+        normals: Option<&[DVec3]>,
+        viewpoints: Viewpoints<'_>,
         scan: &ScanSettings,
         reduction: Option<&ReductionSettings>,
     ) -> Result<(Fitted, Option<Reduction>)> {
+        let estimated;
+        let was_estimated = normals.is_none();
+        let normals = match normals {
+            Some(n) => n,
+            None => {
+                let settings = NormalSettings {
+                    neighbours: scan.neighbours,
+                    ..NormalSettings::default()
+                };
+                estimated = estimate_normals(points, viewpoints, &settings)?.normals;
+                &estimated
+            }
+        };
         let cleaned = scan::clean(points, normals, scan)?;
         let data = FitData::Normals {
             points: &cleaned.points,
@@ -227,7 +243,8 @@ impl Fit {
             }
             None => (self.run(&data)?, None),
         };
-        let surface = ScanSurface::new(fitted, &cleaned, scan, points)?;
+        let mut surface = ScanSurface::new(fitted, &cleaned, scan, points)?;
+        surface.report.normals_estimated = was_estimated;
         Ok((Fitted::Scan(Arc::new(surface)), r))
     }
 

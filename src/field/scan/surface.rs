@@ -26,6 +26,9 @@ pub struct ScanReport {
     pub normals_corrected: usize,
     /// Whether the normals pointed into the body the points enclose, and all were turned.
     pub turned_outward: bool,
+    /// Whether the points came without normals and the fit estimated them
+    /// ([`crate::normals::estimate_normals`]).
+    pub normals_estimated: bool,
     /// Mean distance from the kept points, as given, to the surface (|f| / |∇f|).
     pub distance_mean: f64,
     /// The 99th percentile of those distances.
@@ -78,6 +81,7 @@ impl<F: Field> ScanSurface<F> {
             noise: cleaned.noise,
             normals_corrected: cleaned.normals_corrected,
             turned_outward: cleaned.turned_outward,
+            normals_estimated: false,
             distance_mean: mean,
             distance_p99: p99,
             distance_max: max,
