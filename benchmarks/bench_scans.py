@@ -402,8 +402,13 @@ def render(raw: dict) -> str:
         for c in cases:
             if "run" in c:
                 earlier.setdefault(c["run"]["date"], (c["run"], []))[1].append(c)
+        current = [c for c in cases if "run" not in c]
+        named = lambda cc: "; ".join(f"{c['model']}, {c['condition']}" for c in cc)  # noqa: E731
         for other_run, cc in earlier.values():
-            which = "All cases" if len(cc) == len(cases) else ", ".join(f"{c['model']} {c['condition']}" for c in cc)
+            if len(earlier) == 1:
+                which = f"Every case but {named(current)}" if current else "Every case"
+            else:
+                which = named(cc)
             load = other_run["foreign_load"]
             parts += [f"{which}: measured in an earlier run, {other_run['date']} (`{other_run['command']}`; other "
                       f"processes used {load if load is None else round(load, 2)} cores on average).", ""]
