@@ -360,6 +360,8 @@ def render(raw: dict) -> str:
     ref = raw["reference"]
     others = [m for m in methods if m != ref]
     sizes = sorted({c["n"] for c in raw["cases"]})
+    order = {c: i for i, c in enumerate(CONDITIONS)}
+    raw["cases"].sort(key=lambda c: (c["n"], c["model"], order.get(c["condition"], len(order))))
     conditions = list(dict.fromkeys(c["condition"] for c in raw["cases"]))
     label = {"ours": "ours", "poisson": "Poisson"}
     name = lambda m: label.get(m, m)  # noqa: E731
