@@ -880,6 +880,12 @@ def test_one_call_shape_with_implicitmesh_polygonize(client, blobs, knot, tmp_pa
         if name != "method":
             assert ours[name].default == p.default, name
     assert ours["method"].default == "sparse"
+    # The stray-fragment option acts on the welded mesh as on one machine's.
+    big = max(len(blobs.centers) // 4, 2)
+    one = im.polygonize(blobs, bounds=BOX, resolution=24, method="sparse", min_particles=big)
+    assert_same_mesh(imd.polygonize(blobs, bounds=BOX, resolution=24, client=client, tile=8, min_particles=big), one)
+    assert one.stats["fragments_dropped"] == imd.polygonize(
+        blobs, bounds=BOX, resolution=24, client=client, tile=8, min_particles=big).stats["fragments_dropped"]
     surface = knot[1]
     flat = imd.polygonize(surface, resolution=32, method="octree", safety=2.0, client=client, tile=11)
     boxed = imd.polygonize(surface, resolution=32, method="octree", options=im.OctreeOptions(safety=2.0), client=client, tile=11)

@@ -19,7 +19,7 @@ from .. import _core
 from .._progress import reporter
 from ..mesh import Mesh
 from ..options import OctreeOptions, TrackingOptions
-from ..polygonize import Ambiguity, _check_positive, _check_trim, trimmed
+from ..polygonize import Ambiguity, _check_min_particles, _check_positive, _check_trim, trimmed, without_fragments
 from . import _cut_files, _tile_files, _weld_in_place
 from ._plan import Plan, Window, cut_field, cut_per_tile, make_plan, tile_fields, tile_priority
 from ._tile import SUMMED, TileResult, run_tile
@@ -269,6 +269,7 @@ def polygonize(
     seeds: Any = None,
     options: OctreeOptions | TrackingOptions | None = None,
     trim: float | None = None,
+    min_particles: int | None = None,
     progress: bool | Callable[[int], object] = False,
     client: Any = None,
     tile: int | Sequence[int] = 256,
@@ -315,7 +316,7 @@ def polygonize(
     start_level, safety, corner_test, options
         As for :func:`implicitmesh.polygonize` (``options``: an :class:`~implicitmesh.OctreeOptions`
         for ``"octree"``).
-    trim : float, optional
+    trim, min_particles : optional
         As for :func:`implicitmesh.polygonize`: applied to the welded mesh on the client.
     seeds : None
         Not taken per tile (tracking a :class:`BlobField` finds every component): a TypeError
@@ -369,8 +370,10 @@ def polygonize(
         corner_test=corner_test, seeds=seeds, options=options, progress=progress, client=client, tile=tile,
     )
     _check_trim(field, trim)
-    if trim is not None and output is not None:
-        raise ValueError("trim: not with output (the tiles are written as marching cubes makes them)")
+    _check_min_particles(field, min_particles)
+    for name, value in (("trim", trim), ("min_particles", min_particles)):
+        if value is not None and output is not None:
+            raise ValueError(f"{name}: not with output (the tiles are written as marching cubes makes them)")
     if output is not None:
         warnings.warn(
             "implicitmesh.distributed.polygonize(output=DIR) is deprecated: use write_tiles(field, DIR, ...)",
@@ -382,7 +385,7 @@ def polygonize(
         return write_tiles(field, output, **keywords)  # type: ignore[return-value]
     plan = _make_plan(field, project=project, **keywords)
     results, welded = _execute(plan, client, progress, None)
-    return trimmed(_finish(plan, results, welded), field, trim)
+    return without_fragments(trimmed(_finish(plan, results, welded), field, trim), field, min_particles)
 
 
 def _make_plan(field: Any, *, progress: Any, client: Any, project: Any = False, **keywords: Any) -> Plan:
