@@ -120,7 +120,7 @@ def test_bad_input_is_refused():
 def test_frame_case_runs_ours_and_splashsurf_on_a_cached_frame(tmp_path, monkeypatch):
     """A frame case of benchmarks/frame_cases.py end to end on a jittered slab stored as a cached
     frame: our colour field and splashsurf make the same surface (volume and flatness), the
-    anisotropic case runs or says why it is skipped."""
+    anisotropic case runs and is flatter."""
     import json
 
     from benchmarks import frame_cases, sph_frames
@@ -144,6 +144,11 @@ def test_frame_case_runs_ours_and_splashsurf_on_a_cached_frame(tmp_path, monkeyp
     assert ours["plane_rms_r"] == pytest.approx(peer["plane_rms_r"], abs=0.01)
     # The slab's top face (a jittered lattice, isotropic kernels) is within a few hundredths of r of a plane.
     assert ours["plane_rms_r"] < 0.1
+    # The anisotropic case runs on the same patches and is flatter there (its volume loss on a
+    # slab this thin is documented in docs/particles.md, not asserted).
     aniso = frame_cases.one(scene, "colour-aniso-f32", 500, lambda: 0.0)
-    assert "skipped" in aniso or aniso["volume"] == pytest.approx(ours["volume"], rel=0.05)
+    assert "skipped" not in aniso
+    assert aniso["flat_patches"] == ours["flat_patches"]
+    assert 0 < aniso["plane_rms_r"] < ours["plane_rms_r"]
+    assert 0 < aniso["volume"] < ours["volume"]
     assert frame_cases.one(scene, "colour", 600, lambda: 0.0)["skipped"].startswith("no frame at 0.6 s")

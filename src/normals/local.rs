@@ -47,7 +47,7 @@ impl Local {
 }
 
 /// The local plane of every point of `tree` (in leaf order) over its `k` nearest neighbours;
-/// `position` maps the caller's indices to leaf positions ([`PointTree::positions`]).
+/// `position` maps the caller's indices to leaf positions (from the tree's leaf order).
 pub fn local_planes(tree: &PointTree, position: &[u32], k: usize) -> Result<Vec<Local>> {
     let (sorted, ..) = tree.layout();
     tree.map_neighbourhoods_in_leaf_order(k, |s, found| {
