@@ -178,6 +178,19 @@ pub fn matrices_to_py<'py>(py: Python<'py>, m: &[[f64; 9]]) -> PyResult<Bound<'p
         .into_any())
 }
 
+/// A mesh of (V, 3) ``vertices`` and (F, 3) ``faces`` arrays, without normals (each checked as
+/// [`points`] and [`triangles`] check it; the indices are not checked against V).
+pub fn mesh_arg(
+    vertices: &Bound<'_, PyAny>,
+    faces: &Bound<'_, PyAny>,
+) -> PyResult<crate::mesh::Mesh> {
+    Ok(crate::mesh::Mesh {
+        vertices: points(vertices, "vertices")?,
+        triangles: triangles(faces, "faces")?,
+        normals: Vec::new(),
+    })
+}
+
 /// An (F, 3) array of vertex indices, checked non-negative and below 2³².
 pub fn triangles(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[u32; 3]>> {
     let py = obj.py();

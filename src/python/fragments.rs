@@ -1,6 +1,6 @@
 //! `small_bodies`: the stray fragments of a particle surface (the core's `fragments` module).
 
-use super::convert::{points, triangles};
+use super::convert::points;
 use pyo3::prelude::*;
 
 /// The bodies of a mesh holding fewer than ``min_particles`` of ``particles`` (each particle
@@ -27,11 +27,7 @@ pub fn small_bodies<'py>(
     min_particles: usize,
 ) -> PyResult<(Bound<'py, PyAny>, usize, usize)> {
     let _call = super::interrupt::call("small_bodies");
-    let mesh = crate::mesh::Mesh {
-        vertices: points(vertices, "vertices")?,
-        triangles: triangles(faces, "faces")?,
-        normals: Vec::new(),
-    };
+    let mesh = super::convert::mesh_arg(vertices, faces)?;
     let p = points(particles, "particles")?;
     let r = super::interrupt::detach(py, || {
         crate::fragments::small_bodies(&mesh, &p, min_particles)

@@ -1,8 +1,7 @@
 //! `VariationalSurface`: the Python class over the core's fitted surface.
 
 use super::convert::{
-    field_gradients, field_values, points, points_arg, points_to_py, triangles, values,
-    values_to_py,
+    field_gradients, field_values, points_arg, points_to_py, triangles, values, values_to_py,
 };
 use super::errors::value_error;
 use crate::field::rbf::constraints;
@@ -720,11 +719,7 @@ impl PyVariationalSurface {
         vertices: &Bound<'py, PyAny>,
         faces: &Bound<'py, PyAny>,
     ) -> PyResult<(Bound<'py, PyAny>, usize)> {
-        let mesh = crate::mesh::Mesh {
-            vertices: points(vertices, "vertices")?,
-            triangles: triangles(faces, "faces")?,
-            normals: Vec::new(),
-        };
+        let mesh = super::convert::mesh_arg(vertices, faces)?;
         let inner = &self.inner;
         let (keep, dropped) =
             super::interrupt::run(py, None, false, || inner.owned_vertices(&mesh))?;

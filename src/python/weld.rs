@@ -196,16 +196,6 @@ pub fn weld_tiles<'py>(
     welded_tuple(py, welded)
 }
 
-/// Tiles of fewer triangles and vertices than this are welded on the calling thread, without the
-/// machinery that lets Ctrl-C stop a long call.
-const SMALL_TILE: usize = 1 << 16;
-
-/// Tiles of fewer triangles and vertices than this are welded holding the GIL: their weld takes
-/// tens of microseconds, while giving the GIL to another thread and taking it back can wait
-/// for the interpreter's switch interval (5 ms) whenever another thread runs Python (Dask's
-/// event loop, in a tiled run's client).
-const TINY_TILE: usize = 1 << 12;
-
 /// The weld of tile meshes added one at a time, in window order, as a tiled run's tiles arrive
 /// (each tile can be freed once added); ``result()`` is the mesh :func:`weld_tiles` makes of
 /// the tiles added, array for array.
@@ -269,10 +259,10 @@ impl PyStreamedWeld {
             pyo3::exceptions::PyRuntimeError::new_err("StreamedWeld: result() was taken")
         })?;
         let rows = tile.faces.len() + tile.vertices.len();
-        if rows < TINY_TILE {
+        if rows < crate::polygonize::weld::TINY_TILE {
             return weld.add(&tile, lattice).map_err(PyErr::from);
         }
-        if rows < SMALL_TILE {
+        if rows < crate::polygonize::weld::SMALL_TILE {
             // Done before Ctrl-C would be looked at: no task to poll.
             return super::interrupt::detach(py, || weld.add(&tile, lattice));
         }

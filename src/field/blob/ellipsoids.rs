@@ -350,14 +350,7 @@ impl BlobField {
         let (px, py) = (xs.len(), ys.len());
         slab.fill(T::of(0.0));
         let (o, inv_h) = (lattice.origin(), DVec3::ONE / lattice.cell());
-        let range = |c: f64, r: f64, o: f64, inv_h: f64, n: usize| -> Option<(usize, usize)> {
-            let lo = ((c - r - o) * inv_h).floor() - 1.0;
-            let hi = ((c + r - o) * inv_h).ceil() + 1.0;
-            if hi < 0.0 || lo > (n - 1) as f64 {
-                return None;
-            }
-            Some((lo.max(0.0) as usize, (hi as usize).min(n - 1)))
-        };
+        let range = super::index_range;
         for (i, form) in s.forms.iter().enumerate() {
             let c = self.centers[i];
             let dz = z - c.z;

@@ -430,16 +430,7 @@ impl BlobField {
         let (px, py) = (xs.len(), ys.len());
         slab.fill(T::of(0.0));
         let inv_h = DVec3::ONE / lattice.cell();
-        // Index range of the lattice points in [c - r, c + r] along an axis, with a point of
-        // margin for rounding (the exact test is t > 0 in the row loop); empty when outside.
-        let range = |c: f64, r: f64, o: f64, inv_h: f64, n: usize| -> Option<(usize, usize)> {
-            let lo = ((c - r - o) * inv_h).floor() - 1.0;
-            let hi = ((c + r - o) * inv_h).ceil() + 1.0;
-            if hi < 0.0 || lo > (n - 1) as f64 {
-                return None;
-            }
-            Some((lo.max(0.0) as usize, (hi as usize).min(n - 1)))
-        };
+        let range = index_range;
         for i in 0..self.centers.len() {
             let (c, r, inv, a) = (
                 self.centers[i],
@@ -1744,6 +1735,18 @@ impl BlockField for BlobField {
         }
         self.gradients_over(Isa::detect(), list, points, out);
     }
+}
+
+/// The index range of the lattice points in `[c − r, c + r]` along an axis (origin `o`, inverse
+/// cell side `inv_h`, `n` points), with a point of margin for rounding (the exact test is made
+/// per point); `None` when the interval misses the lattice.
+pub(crate) fn index_range(c: f64, r: f64, o: f64, inv_h: f64, n: usize) -> Option<(usize, usize)> {
+    let lo = ((c - r - o) * inv_h).floor() - 1.0;
+    let hi = ((c + r - o) * inv_h).ceil() + 1.0;
+    if hi < 0.0 || lo > (n - 1) as f64 {
+        return None;
+    }
+    Some((lo.max(0.0) as usize, (hi as usize).min(n - 1)))
 }
 
 #[cfg(test)]

@@ -22,6 +22,16 @@ use crate::error::{Error, Result};
 use crate::lattice::Lattice;
 use glam::DVec3;
 
+/// Tiles of fewer triangles and vertices than this are welded on the calling thread, without the
+/// machinery that lets Ctrl-C stop a long call.
+pub const SMALL_TILE: usize = 1 << 16;
+
+/// Tiles of fewer triangles and vertices than this are welded holding the GIL: their weld takes
+/// tens of microseconds, while giving the GIL to another thread and taking it back can wait
+/// for the interpreter's switch interval (5 ms) whenever another thread runs Python (Dask's
+/// event loop, in a tiled run's client).
+pub const TINY_TILE: usize = 1 << 12;
+
 /// One tile's mesh, as a polygonizer run on a window of the lattice makes it.
 #[derive(Clone, Copy, Debug)]
 pub struct Tile<'a> {
