@@ -675,6 +675,32 @@ pub(crate) mod testing {
         .unwrap()
     }
 
+    /// `n` blobs summing `kernel`, of radii in [0.1, 0.3] (strength 1, threshold 0.5), at random
+    /// centres in [-0.8, 0.8]³ ([`random_points`] of `seed`; the radii of `seed + 1`).
+    pub fn sized_blobs(
+        n: usize,
+        seed: u64,
+        kernel: super::blob::kernel::BlobKernel,
+    ) -> super::blob::BlobField {
+        use super::blob::{BlobField, BlobSettings, PerPrimitive};
+        let c = random_points(n, -0.8, 0.8, seed);
+        let r: Vec<f64> = random_points(n, 0.1, 0.3, seed + 1)
+            .iter()
+            .map(|p| p.x)
+            .collect();
+        BlobField::new(
+            &c,
+            PerPrimitive::Each(&r),
+            PerPrimitive::All(1.0),
+            0.5,
+            BlobSettings {
+                kernel,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    }
+
     /// Random blob clusters to polygonize, as (blobs, radius, cells per axis over [-1, 1]³,
     /// seed): from one blob at 7³ cells to 500 small ones, on lattices cut in partial blocks.
     pub const BLOB_CASES: [(usize, f64, u32, u64); 6] = [

@@ -20,8 +20,9 @@
 //! per pair along x they proved blocks at three times the cost of splatting them; such blocks
 //! are splatted.
 
+use super::block::BlockCoords;
 use super::kernel::{with_profile, Profile, Real};
-use super::{BlobField, BlockCoords, PerPrimitive, Precision, BLOCK_POINTS};
+use super::{BlobField, PerPrimitive, Precision, BLOCK_POINTS};
 use crate::error::{Error, Result};
 use crate::knn::symmetric_eigen;
 use crate::lattice::Lattice;
@@ -350,7 +351,7 @@ impl BlobField {
         let (px, py) = (xs.len(), ys.len());
         slab.fill(T::of(0.0));
         let (o, inv_h) = (lattice.origin(), DVec3::ONE / lattice.cell());
-        let range = super::index_range;
+        let range = super::plane::index_range;
         for (i, form) in s.forms.iter().enumerate() {
             let c = self.centers[i];
             let dz = z - c.z;

@@ -4,7 +4,7 @@
 //!
 //! Each primitive's term at both points of a pair is at least its term with the larger of their
 //! two squared x-offsets (as dx²/R²), put through the splat's rounded operations in the splat's
-//! order ([`BlobField::splat_block_with`], [`super::unit_t`]). Each of those rounded steps is
+//! order ([`BlobField::splat_block_with`], [`super::point::unit_t`]). Each of those rounded steps is
 //! monotone, so the bound's t is at most each point's t; with positive strengths the bound's
 //! term is then at most the point's term, up to the profile's own rounding (a few units in the
 //! last place). The bounds are summed from 0, the primitives centred near the block first: in
@@ -22,7 +22,8 @@
 //! The bound needs every strength of the list positive: the terms then only add, a partial sum
 //! is a bound too, and the loop stops once every pair is above the threshold.
 
-use super::{single, BlobField, BlockCoords, Precision};
+use super::block::BlockCoords;
+use super::{single, BlobField, Precision};
 #[cfg(target_arch = "x86_64")]
 use crate::field::blob::kernel::LaneProfile;
 use crate::field::blob::kernel::{with_profile, Profile};
@@ -176,7 +177,7 @@ impl BlobField {
     }
 
     /// Whether the potential at each of the block's eight corners is above the threshold, from
-    /// the primitives of `list` (in f64, the order of [`super::unit_t`]), with the vector path
+    /// the primitives of `list` (in f64, the order of [`super::point::unit_t`]), with the vector path
     /// of `isa` (which the CPU must have). When it is not, a point of the block is not inside
     /// and [`BlobField::block_inside`] cannot succeed: this costs one term per primitive and
     /// corner, where `block_inside` takes one per primitive and pair of points reached.
@@ -205,7 +206,7 @@ impl BlobField {
                     let (c, inv, a, _) = self.primitive(i);
                     for (k, f) in f.iter_mut().enumerate() {
                         let d = DVec3::new(cx[k], cy[k], cz[k]) - c;
-                        *f += a * K::value(super::unit_t(d, inv));
+                        *f += a * K::value(super::point::unit_t(d, inv));
                     }
                 }
             }

@@ -20,9 +20,9 @@
 //! Lists are kept for fields of up to [`KEEP_PRIMITIVES`] primitives; the first call on a
 //! lattice makes them as a one-off polygonization does (exact, a few layers at a time).
 
-use super::{
-    block_range, block_sides, blocks_reached, layer_candidates, margin, BlobField, Hints, Layer,
-};
+use super::hints::Hints;
+use super::lists::{block_range, block_sides, blocks_reached, layer_candidates, margin, Layer};
+use super::BlobField;
 use crate::lattice::Lattice;
 use glam::DVec3;
 use rayon::prelude::*;

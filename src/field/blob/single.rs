@@ -4,7 +4,7 @@
 //! stay f64.
 //!
 //! Every evaluation computes a term the same way: dx²/R² and k = 1 − (dy² + dz²)/R² in f64, in
-//! the order of [`super::unit_t`], each rounded to f32; then t = k − dx²/R², the profile
+//! the order of [`super::point::unit_t`], each rounded to f32; then t = k − dx²/R², the profile
 //! ([`Profile::value`] in f32) and A·w(t) in f32 (A rounded to f32). The terms are summed in
 //! f32 in index order from 0 and the value is threshold − F in f32 (the threshold rounded). So
 //! point, lattice-plane and block evaluations give the same bits, as in double precision; the
@@ -20,7 +20,9 @@
 //! bounds leave the threshold out by twice the sum of these ([`rounding`]), so that the f32
 //! values provably have the sign claimed.
 
-use super::{BlobField, BlockCoords, RowTerm};
+use super::block::BlockCoords;
+use super::plane::RowTerm;
+use super::BlobField;
 use crate::error::{Error, Result};
 #[cfg(target_arch = "x86_64")]
 use crate::field::blob::kernel::LaneProfile;
@@ -98,11 +100,11 @@ pub(super) fn inside_goal(threshold: f64, strengths: f64, n: usize, goal: f64) -
 
 /// A·w(k − dx²/R²) in f32 from k and dx²/R² in f64 (see the module docs).
 #[inline(always)]
-fn term<K: Profile>(k: f64, qx: f64, a: f32) -> f32 {
+pub(super) fn term<K: Profile>(k: f64, qx: f64, a: f32) -> f32 {
     a * K::value(k as f32 - qx as f32)
 }
 
-/// Adds the f32 terms of one primitive to a row of a lattice plane (as [`super::splat_row`]).
+/// Adds the f32 terms of one primitive to a row of a lattice plane (as [`splat_row`](super::plane::splat_row)).
 #[inline(always)]
 fn splat_row<K: Profile>(row: &mut [f32], xs: &[f64], q: &RowTerm) {
     let a = q.a as f32;
