@@ -308,6 +308,22 @@ impl PyBlobField {
         ))
     }
 
+    /// The blob field of the primitives whose radius × (1 + ``margin``) reaches the box
+    /// ``bounds`` ((2, 3) array_like), in their order (the same values and gradients in the box
+    /// as this field's), or None when none does (the field is positive there). What
+    /// :func:`implicitmesh.distributed.cut_blobs` sends a tile.
+    fn _cut(
+        &self,
+        py: Python<'_>,
+        bounds: &Bound<'_, PyAny>,
+        margin: f64,
+    ) -> PyResult<Option<Self>> {
+        let _call = super::interrupt::call("BlobField._cut");
+        let (lo, hi) = super::convert::finite_box(bounds, "bounds")?;
+        let inner = super::interrupt::detach(py, || self.inner.cut(lo, hi, margin))?;
+        Ok(inner.map(|inner| PyBlobField { inner }))
+    }
+
     /// The blob field of the primitives ``index`` ((K,) uint32, in that order) with this field's
     /// threshold and settings: the field ``BlobField(centers[index], radii[index],
     /// strengths[index], threshold, **settings)`` is.

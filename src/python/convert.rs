@@ -60,6 +60,19 @@ pub fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<DVec3>
         .collect())
 }
 
+/// A box `[[xmin, ymin, zmin], [xmax, ymax, zmax]]` of finite numbers ((2, 3) array_like),
+/// as its lowest and highest corner; an error names the argument `name`.
+pub fn finite_box(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<(DVec3, DVec3)> {
+    let b = points(obj, name)?;
+    if b.len() != 2 || !b.iter().all(|p| p.is_finite()) {
+        return Err(value_error(
+            name,
+            "expected finite [[xmin, ymin, zmin], [xmax, ymax, zmax]]",
+        ));
+    }
+    Ok((b[0], b[1]))
+}
+
 /// The (N, 3) points of a fit: read in place from a C-contiguous, aligned float64 numpy array
 /// (whose readonly borrow it holds), converted as [`points`] otherwise.
 pub enum PointsArg<'py> {

@@ -894,14 +894,8 @@ impl PyVariationalSurface {
     /// global fit as it is. What :func:`implicitmesh.distributed.polygonize` sends each tile.
     fn _cut(&self, py: Python<'_>, bounds: &Bound<'_, PyAny>) -> PyResult<Self> {
         let _call = super::interrupt::call("VariationalSurface._cut");
-        let b = super::convert::points(bounds, "bounds")?;
-        if b.len() != 2 || !b.iter().all(|p| p.is_finite()) {
-            return Err(value_error(
-                "bounds",
-                "expected finite [[xmin, ymin, zmin], [xmax, ymax, zmax]]",
-            ));
-        }
-        let inner = super::interrupt::detach(py, || Ok::<_, PyErr>(self.inner.cut(b[0], b[1])))?;
+        let (lo, hi) = super::convert::finite_box(bounds, "bounds")?;
+        let inner = super::interrupt::detach(py, || Ok::<_, PyErr>(self.inner.cut(lo, hi)))?;
         Ok(PyVariationalSurface {
             inner,
             reduction: self.reduction.clone(),

@@ -54,23 +54,12 @@ def tile_box(origin: np.ndarray, cell: np.ndarray, lo: Any, hi: Any) -> tuple[np
     return origin + np.asarray(lo, dtype=np.float64) * cell, origin + np.asarray(hi, dtype=np.float64) * cell
 
 
-def _reaches(centers: np.ndarray, reach: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Whether each sphere (``centers`` (N, 3), ``reach`` (N,)) meets the box ``[lo, hi]``, with
-    the core's arithmetic (``blob::tiles::sphere_meets_box``): the same answer, bit for bit.
-
-    Kept in Python because the core answers this only for the tiles of a lattice
-    (``BlobField._tile_primitives``), while :func:`cut_blobs` takes any box."""
-    near = np.maximum(np.maximum(lo - centers, centers - hi), 0.0)
-    return (near[:, 0] * near[:, 0] + near[:, 1] * near[:, 1]) + near[:, 2] * near[:, 2] <= reach * reach
-
-
 def cut_blobs(field: _core.BlobField, lo: np.ndarray, hi: np.ndarray) -> _core.BlobField | None:
     """The blob field of the primitives of ``field`` whose sphere of influence reaches the box
     ``[lo, hi]`` ((3,) float each), in their order (so values and gradients in the box are the
     same bits as the whole field's), or None when no primitive reaches it (the field is
     positive there)."""
-    keep = _reaches(field.centers, field.reaches * (1.0 + RADIUS_MARGIN), lo, hi)
-    return field._subset(np.flatnonzero(keep).astype(np.uint32)) if keep.any() else None
+    return field._cut(np.stack([lo, hi]), RADIUS_MARGIN)
 
 
 def blob_tiles(field: _core.BlobField, cells: Sequence[int], origin: np.ndarray, cell: np.ndarray, tile: Sequence[int]) -> list:

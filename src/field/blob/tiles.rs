@@ -138,6 +138,30 @@ impl BlobField {
         Ok((index, start))
     }
 
+    /// The primitives whose radius × (1 + `margin`) reaches the box `[lo, hi]`
+    /// ([`sphere_meets_box`], the test of [`BlobField::primitives_by_tile`]), in increasing
+    /// order.
+    pub fn reaching(&self, lo: DVec3, hi: DVec3, margin: f64) -> Vec<u32> {
+        let (centers, radii) = (self.centers(), self.radii());
+        (0..centers.len() as u32)
+            .filter(|&i| {
+                let i = i as usize;
+                sphere_meets_box(centers[i], radii[i] * (1.0 + margin), lo, hi)
+            })
+            .collect()
+    }
+
+    /// What the box `[lo, hi]` needs of the field: the [`BlobField::subset`] of the primitives
+    /// [`BlobField::reaching`] it, with the field's values and gradients in the box; `None` when
+    /// no primitive reaches it (the field is positive there).
+    pub fn cut(&self, lo: DVec3, hi: DVec3, margin: f64) -> Result<Option<BlobField>> {
+        let keep = self.reaching(lo, hi, margin);
+        if keep.is_empty() {
+            return Ok(None);
+        }
+        self.subset(&keep).map(Some)
+    }
+
     /// The blob field of the primitives `keep` (indices, in the order given) with this field's
     /// threshold and settings: the field the same primitives make when passed to
     /// [`BlobField::new`]. Errors naming `index` for an index that is no primitive.
@@ -178,8 +202,9 @@ mod tests {
     use crate::field::blob::BlobSettings;
     use crate::field::testing::random_points;
 
-    /// Every tile's primitives are those a test of every primitive against its box finds, for
-    /// uneven tiles and spheres from a tenth of a tile to several tiles.
+    /// Every tile's primitives are those a test of every primitive against its box finds (and
+    /// those a cut to its box keeps), for uneven tiles and spheres from a tenth of a tile to
+    /// several tiles.
     #[test]
     fn each_tile_gets_the_primitives_that_reach_it() {
         let centers: Vec<DVec3> = random_points(500, -1.3, 1.3, 4);
@@ -220,6 +245,9 @@ mod tests {
                         })
                         .collect();
                     assert_eq!(&index[start[t]..start[t + 1]], &expected[..]);
+                    assert_eq!(field.reaching(lo, hi, margin), expected);
+                    let cut = field.cut(lo, hi, margin).unwrap();
+                    assert_eq!(cut.map_or(0, |c| c.centers().len()), expected.len());
                     t += 1;
                 }
             }
