@@ -593,7 +593,7 @@ impl Bvh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::{fibonacci_sphere, random_points};
+    use crate::testing::{fibonacci_sphere, random_points};
 
     /// The unit cube [-1, 1]³ as 12 triangles, outward.
     fn cube() -> (Vec<DVec3>, Vec<[u32; 3]>) {

@@ -556,7 +556,7 @@ pub fn pca_normals(points: &[DVec3], k: usize) -> Result<Vec<DVec3>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::{fibonacci_sphere, random_points};
+    use crate::testing::{fibonacci_sphere, random_points};
 
     fn brute(points: &[DVec3], p: DVec3, k: usize) -> Vec<(f64, u32)> {
         let mut all: Vec<(f64, u32)> = points

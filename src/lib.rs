@@ -65,6 +65,8 @@ pub mod polygonize;
 pub(crate) mod simd;
 pub mod spatial;
 pub mod subdivision;
+#[cfg(test)]
+pub(crate) mod testing;
 
 #[cfg(feature = "python")]
 mod python;

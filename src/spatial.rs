@@ -426,7 +426,7 @@ pub fn check_far(name: &'static str, points: &[DVec3]) -> crate::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     #[test]
     fn far_points_are_named_and_left_out_of_the_bulk_box() {

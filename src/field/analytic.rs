@@ -56,8 +56,8 @@ impl Field for Torus {
 
 #[cfg(test)]
 mod tests {
-    use super::super::testing::*;
     use super::*;
+    use crate::testing::*;
 
     #[test]
     fn gradients_match_differences() {

@@ -101,7 +101,7 @@ mod tests {
             radius: 0.7,
         };
         let d = Differences::new(&sphere, 1e-6).unwrap();
-        let pts = crate::field::testing::random_points(50, -1.0, 1.0, 9);
+        let pts = crate::testing::random_points(50, -1.0, 1.0, 9);
         let (mut v, mut g, mut h) = (vec![0.0; 50], vec![DVec3::ZERO; 50], vec![DVec3::ZERO; 50]);
         d.values_gradients(&pts, &mut v, &mut g);
         d.gradients(&pts, &mut h);

@@ -294,18 +294,14 @@ mod avx2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::XorShift;
     use faer::Mat;
 
     /// A random symmetric positive definite matrix of order m, its lower triangle stored with
     /// column stride `ld` (and the strict upper triangle set to a marker).
     fn spd(m: usize, ld: usize, seed: u64) -> (Vec<f64>, Mat<f64>) {
-        let mut s = seed;
-        let mut r = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = XorShift::new(seed);
+        let mut r = || rng.uniform() - 0.5;
         let b = Mat::<f64>::from_fn(m, m, |_, _| r());
         let mut a = &b * b.transpose();
         for i in 0..m {

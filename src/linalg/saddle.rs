@@ -574,7 +574,7 @@ impl SaddleSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     fn check(points: &[DVec3], phi_r2: fn(f64) -> f64, smoothing: f64, sign: f64, expect: &str) {
         let s = SaddleSolver::new(points, phi_r2, smoothing, sign).unwrap();

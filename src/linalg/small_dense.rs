@@ -227,17 +227,11 @@ fn cholesky_solve_on(isa: Isa, l: &[f64], ld: usize, x: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::XorShift;
 
     fn numbers(len: usize, seed: u64) -> Vec<f64> {
-        let mut s = seed;
-        (0..len)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-            })
-            .collect()
+        let mut rng = XorShift::new(seed);
+        (0..len).map(|_| rng.uniform() - 0.5).collect()
     }
 
     #[test]

@@ -76,7 +76,7 @@ pub fn local_planes(tree: &PointTree, position: &[u32], k: usize) -> Result<Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::fibonacci_sphere;
+    use crate::testing::fibonacci_sphere;
 
     #[test]
     fn a_sphere_has_radial_normals_and_near_neighbours() {

@@ -283,7 +283,7 @@ pub(crate) mod testing {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::{fibonacci_sphere, random_points};
+    use crate::testing::{fibonacci_sphere, random_points};
 
     /// A torus of radii 1 and r, sampled on a twisted grid, with its outward normals.
     fn torus(r: f64, n: usize) -> (Vec<DVec3>, Vec<DVec3>) {

@@ -139,8 +139,8 @@ fn sampled_winding(points: &[DVec3], normals: &[DVec3], local: &[Local]) -> Resu
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::fibonacci_sphere;
     use crate::normals::local::local_planes;
+    use crate::testing::fibonacci_sphere;
 
     fn sphere_and_plane(inward: bool) -> (Vec<DVec3>, Vec<DVec3>, Vec<Local>, Vec<u32>) {
         let mut pts = fibonacci_sphere(4000);

@@ -506,13 +506,8 @@ mod tests {
     /// included, wherever they fall among the groups of four or eight.
     #[test]
     fn normalize_matches_the_scalar_loop() {
-        let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rng = crate::testing::Lcg::new(7);
+        let mut next = || rng.uniform() * 2.0 - 1.0;
         for special in [None, Some(0), Some(13), Some(37), Some(39)] {
             for kind in 0..3 {
                 let mut g: Vec<DVec3> = (0..41)

@@ -1029,10 +1029,10 @@ mod tests {
     use super::super::dense;
     use super::*;
     use crate::field::blob::BlobField;
-    use crate::field::testing::random_blobs as blobs;
-    use crate::field::testing::{canonical_triangles, vertex_normal_bits, Lying};
-    use crate::field::testing::{for_each_blob_case, BLOB_CASES};
     use crate::polygonize::Ambiguity;
+    use crate::testing::random_blobs as blobs;
+    use crate::testing::{canonical_triangles, vertex_normal_bits, Lying};
+    use crate::testing::{for_each_blob_case, BLOB_CASES};
 
     /// Triangles, order-free and bit-exact.
     fn canonical(m: &Mesh) -> Vec<[[u64; 3]; 3]> {
@@ -1100,7 +1100,7 @@ mod tests {
         use crate::field::blob::kernel::BlobKernel;
         use crate::field::blob::particles::{colour_field, ParticleSettings};
         use crate::field::blob::{BlobSettings, PerPrimitive};
-        let p = crate::field::testing::jittered_cube(14, 7);
+        let p = crate::testing::jittered_cube(14, 7);
         // Cells of 1/4 over the particles and their support (2) on every side, partial blocks.
         let l = Lattice::new(DVec3::splat(-2.3), DVec3::splat(15.2), [70, 69, 71]).unwrap();
         let mut fields = vec![colour_field(&p, 0.5, &ParticleSettings::default()).unwrap()];

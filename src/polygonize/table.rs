@@ -581,6 +581,7 @@ impl CaseTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::XorShift;
     use std::collections::{HashMap, HashSet};
 
     const BOTH: [Ambiguity; 2] = [Ambiguity::Separate, Ambiguity::Join];
@@ -948,20 +949,6 @@ mod tests {
         assert_eq!(Ambiguity::default(), Ambiguity::Separate);
     }
 
-    /// Small deterministic xorshift64 generator.
-    struct XorShift(u64);
-
-    impl XorShift {
-        fn next(&mut self) -> u64 {
-            let mut x = self.0;
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            self.0 = x;
-            x
-        }
-    }
-
     /// Assembles a 2x2x2 block of cells with random signs on the 27 lattice points and
     /// checks that the mesh is a consistently oriented manifold away from the block's
     /// outer boundary.
@@ -970,10 +957,10 @@ mod tests {
         let point = |x: usize, y: usize, z: usize| x + 3 * y + 9 * z;
         for amb in BOTH {
             let table = CaseTable::get(amb);
-            let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+            let mut rng = XorShift::new(0x9E37_79B9_7F4A_7C15);
             let mut total_triangles = 0;
             for _ in 0..4000 {
-                let bits = rng.next();
+                let bits = rng.next_u64();
                 let inside = |p: usize| (bits >> p) & 1 == 1;
                 // Global vertex: lattice edge (lower lattice point, axis).
                 let mut tris: Vec<[(usize, usize, usize, usize); 3]> = Vec::new();

@@ -364,8 +364,8 @@ impl BlobField {
 mod tests {
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
-    use crate::field::testing::{random_points, sized_blobs};
     use crate::field::Field;
+    use crate::testing::{random_points, sized_blobs};
 
     #[test]
     fn every_vector_path_gives_the_same_bits() {

@@ -240,8 +240,8 @@ impl BlobField {
 mod tests {
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
-    use crate::field::testing::{random_points, sized_blobs};
     use crate::lattice::Lattice;
+    use crate::testing::{random_points, sized_blobs};
 
     #[test]
     fn sparse_builds_neither_voxel_lists_nor_packed_primitives() {

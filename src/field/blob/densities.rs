@@ -179,7 +179,7 @@ fn sum_at<K: Profile>(list: &CellList, p: DVec3, inv: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     /// The sums against the direct double loop, for each kernel, with particles on the box's
     /// faces and a spread that makes the cells grow.

@@ -365,9 +365,9 @@ mod tests {
     use crate::field::blob::kernel::BlobKernel;
     use crate::field::blob::particles::{colour_field, ParticleSettings};
     use crate::field::blob::{BlobSettings, PerPrimitive};
-    use crate::field::testing::jittered_cube;
     use crate::field::{Block, BlockField, BlockSign};
     use crate::lattice::Lattice;
+    use crate::testing::jittered_cube;
     use glam::DVec3;
 
     /// `field` with the threshold `t`.

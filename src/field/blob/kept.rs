@@ -275,13 +275,8 @@ mod tests {
 
     /// Particles on a jittered lattice of spacing 0.1: a slab and a ball above it.
     fn particles() -> Vec<DVec3> {
-        let mut state = 12345u64;
-        let mut jitter = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02
-        };
+        let mut rng = crate::testing::Lcg::new(12345);
+        let mut jitter = move || (rng.uniform() - 0.5) * 0.02;
         let mut p = Vec::new();
         for i in 0..16 {
             for j in 0..16 {

@@ -240,9 +240,9 @@ pub(super) fn ceil(x: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
-    use crate::field::testing::sized_blobs;
     use crate::field::BlockField;
     use crate::lattice::Lattice;
+    use crate::testing::sized_blobs;
 
     #[test]
     fn inlined_floor_and_ceil_are_the_library_ones() {

@@ -124,7 +124,7 @@ fn compact_support(particle_radius: f64, settings: &ParticleSettings) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     /// The colour field against the formula summed directly with splashsurf's normalised kernel
     /// and mass.

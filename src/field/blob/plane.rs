@@ -233,8 +233,8 @@ pub(crate) fn index_range(c: f64, r: f64, o: f64, inv_h: f64, n: usize) -> Optio
 mod tests {
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
-    use crate::field::testing::sized_blobs;
     use crate::field::Field;
+    use crate::testing::sized_blobs;
 
     #[test]
     fn splatted_lattice_values_are_bit_identical() {

@@ -252,8 +252,8 @@ mod tests {
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
     use crate::field::blob::{BlobSettings, PerPrimitive};
-    use crate::field::testing::{gradient_error, random_points, sized_blobs};
     use crate::field::Field;
+    use crate::testing::{gradient_error, random_points, sized_blobs};
 
     #[test]
     fn voxel_evaluation_equals_brute_force() {

@@ -261,8 +261,8 @@ mod tests {
     use super::*;
     use crate::field::blob::kernel::BlobKernel;
     use crate::field::blob::{BlobSettings, PerPrimitive};
-    use crate::field::testing::jittered_cube;
     use crate::field::{Block, BlockField, BlockSign, BLOCK_POINTS};
+    use crate::testing::jittered_cube;
 
     #[test]
     fn names_parse() {

@@ -200,7 +200,7 @@ impl BlobField {
 mod tests {
     use super::*;
     use crate::field::blob::BlobSettings;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     /// Every tile's primitives are those a test of every primitive against its box finds (and
     /// those a cut to its box keeps), for uneven tiles and spheres from a tenth of a tile to

@@ -288,13 +288,8 @@ mod tests {
 
     #[test]
     fn lists_hold_exactly_the_voxels_each_sphere_touches() {
-        let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::testing::Lcg::new(7);
+        let mut next = || rng.uniform();
         let centers: Vec<DVec3> = (0..300)
             .map(|_| DVec3::new(next(), next(), next()) * 2.0 - 1.0)
             .collect();

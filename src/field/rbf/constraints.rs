@@ -643,7 +643,7 @@ mod tests {
 
     #[test]
     fn grid_search_gives_the_all_pairs_offsets_and_duplicates() {
-        use crate::field::testing::random_points;
+        use crate::testing::random_points;
         // Clustered points (a dense blob inside a sparse cloud), so that many offsets shrink.
         let mut pts = random_points(1500, -1.0, 1.0, 31);
         pts.extend(random_points(1500, -0.05, 0.05, 32));
@@ -754,7 +754,7 @@ mod tests {
 
     #[test]
     fn normal_constraints_of_one_point_per_cell() {
-        let p = crate::field::testing::fibonacci_sphere(20_000);
+        let p = crate::testing::fibonacci_sphere(20_000);
         let every = place(&p, &p, &ConstraintSettings::default()).unwrap();
         assert_eq!(every.normal_of, (0..20_000).collect::<Vec<u32>>());
         let thinned = ConstraintSettings {
@@ -794,7 +794,7 @@ mod tests {
         // A unit sphere and two far points: the largest side (40) puts 0.0075 × side far above
         // 6 spacings of the sphere's points.
         let spread = |n: usize| {
-            let mut p = crate::field::testing::fibonacci_sphere(n);
+            let mut p = crate::testing::fibonacci_sphere(n);
             p.push(DVec3::new(20.0, 0.0, 0.0));
             p.push(DVec3::new(-20.0, 0.0, 0.0));
             p

@@ -199,7 +199,7 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     #[test]
     fn spread_points_are_all_kept() {

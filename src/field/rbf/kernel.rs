@@ -757,7 +757,7 @@ mod tests {
 
     /// 203 random centres in [-1, 1]³ with weights sin(0.37 k).
     fn centres() -> Centres {
-        let pts = crate::field::testing::random_points(203, -1.0, 1.0, 9);
+        let pts = crate::testing::random_points(203, -1.0, 1.0, 9);
         let mut c = Centres::default();
         for (k, p) in pts.iter().enumerate() {
             c.x.push(p.x);
@@ -771,7 +771,7 @@ mod tests {
     #[test]
     fn vector_paths_agree_with_scalar_sums() {
         let c = centres();
-        let q = crate::field::testing::random_points(64, -1.2, 1.2, 4);
+        let q = crate::testing::random_points(64, -1.2, 1.2, 4);
         let mut blocks = vec![Block::default(); 8];
         for (i, p) in q.iter().enumerate() {
             blocks[i / LANES].x[i % LANES] = p.x;
@@ -845,7 +845,7 @@ mod tests {
     fn sums_by_point_agree_and_do_not_depend_on_the_batch() {
         use crate::linalg::saddle::Entries;
         let c = centres();
-        let mut q: Vec<[f64; 3]> = crate::field::testing::random_points(21, -1.2, 1.2, 4)
+        let mut q: Vec<[f64; 3]> = crate::testing::random_points(21, -1.2, 1.2, 4)
             .iter()
             .map(|p| p.to_array())
             .collect();

@@ -635,8 +635,8 @@ impl Field for VariationalSurface {
 
 #[cfg(test)]
 mod tests {
-    use super::super::testing::*;
     use super::*;
+    use crate::testing::*;
 
     /// A patch whose own constraints lie in one plane with value 0, completed by a few points
     /// off it (a near patch on a flat face): the fit is finite everywhere or refused, never a

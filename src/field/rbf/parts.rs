@@ -137,8 +137,8 @@ mod tests {
     use super::*;
     use crate::field::rbf::constraints::ConstraintSettings;
     use crate::field::rbf::FitSettings;
-    use crate::field::testing::fibonacci_sphere;
     use crate::field::Field;
+    use crate::testing::fibonacci_sphere;
 
     #[test]
     fn parts_give_back_the_same_surface() {

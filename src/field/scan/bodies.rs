@@ -99,10 +99,10 @@ fn spread(items: &[u32], k: usize) -> impl Iterator<Item = u32> + '_ {
 mod tests {
     use super::*;
     use crate::field::scan::{surface::guard_of, Guarded, ScanSettings};
-    use crate::field::testing::fibonacci_sphere;
     use crate::field::Field;
     use crate::lattice::Lattice;
     use crate::polygonize::octree;
+    use crate::testing::fibonacci_sphere;
     use glam::DVec3;
     use std::sync::Arc;
 

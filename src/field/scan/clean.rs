@@ -454,7 +454,7 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::{fibonacci_sphere, random_points};
+    use crate::testing::{fibonacci_sphere, random_points};
 
     #[test]
     fn outliers_are_found_noise_is_measured_and_flipped_normals_turn_back() {

@@ -61,9 +61,9 @@ mod tests {
     use super::*;
     use crate::field::rbf::constraints::ConstraintSettings;
     use crate::field::rbf::partition::{PartitionSettings, PartitionSurface};
-    use crate::field::testing::{fibonacci_sphere, random_points};
     use crate::lattice::Lattice;
     use crate::polygonize::octree;
+    use crate::testing::{fibonacci_sphere, random_points};
     use glam::DVec3;
 
     /// A sphere "scanned" without its bottom cap, with noise, flipped normals and outliers.

@@ -203,7 +203,7 @@ fn starts_empty(starts: &[u32], depth: u32, c: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::fibonacci_sphere;
+    use crate::testing::fibonacci_sphere;
 
     /// Points on a unit sphere with outward normals and equal areas summing to 4π.
     fn sphere(n: usize) -> (Vec<DVec3>, Vec<DVec3>, Vec<f64>) {
@@ -256,7 +256,7 @@ mod tests {
         let wn = WindingNumber::new(&tree, &p, &n, &a, eps).unwrap();
         // Queries a few spacings (about 0.065) or more from the points, where the guard reads
         // the winding number.
-        let queries = crate::field::testing::random_points(600, -2.0, 2.0, 5);
+        let queries = crate::testing::random_points(600, -2.0, 2.0, 5);
         for q in queries
             .into_iter()
             .filter(|q| (q.length() - 1.0).abs() > 0.2)

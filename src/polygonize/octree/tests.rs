@@ -14,6 +14,7 @@ use crate::mesh::Mesh;
 use crate::polygonize::cell::corner_offset;
 use crate::polygonize::table::EDGES;
 use crate::polygonize::{dense, Ambiguity, Settings, Stats};
+use crate::testing::Lcg;
 use glam::DVec3;
 
 /// Polygonizes `f` with the octree (`settings`) and checks the mesh is the dense mesh (`dense`,
@@ -489,15 +490,10 @@ fn ball_masks_are_the_balls() {
     assert_eq!(cubic[13].iter().filter(|r| r.reach.is_finite()).count(), 3);
 }
 
-/// Uniform numbers in [0, 1) from a seed (a linear congruential generator).
+/// Uniform numbers in [0, 1) from a seed ([`Lcg`]).
 fn uniform(seed: u64) -> impl FnMut() -> f64 {
-    let mut state = seed;
-    move || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    }
+    let mut rng = Lcg::new(seed);
+    move || rng.uniform()
 }
 
 /// The exact test for two opposite balls is sound (sampled) and proves at least what the

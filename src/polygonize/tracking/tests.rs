@@ -4,15 +4,15 @@ use super::blocks::BlockTracking;
 use super::*;
 use crate::error::Error;
 use crate::field::blob::{BlobField, BlobSettings, PerPrimitive};
-use crate::field::testing::random_blobs as blobs;
-use crate::field::testing::{
-    canonical_triangles as canonical, for_each_blob_case, random_points, vertex_normal_bits, Lying,
-    BLOB_CASES,
-};
 use crate::field::{BlockField, Counting, Field};
 use crate::lattice::Lattice;
 use crate::mesh::Mesh;
 use crate::polygonize::{dense, sparse, Ambiguity, Settings, Stats};
+use crate::testing::random_blobs as blobs;
+use crate::testing::{
+    canonical_triangles as canonical, for_each_blob_case, random_points, vertex_normal_bits, Lying,
+    BLOB_CASES,
+};
 use glam::DVec3;
 
 /// Walks from `starts`, at most `max_walk` cells each, to the components they reach.
@@ -108,7 +108,7 @@ fn every_component_needs_block_bounds() {
 /// A hollow shell: 150 blobs of radius 0.25 on a sphere of radius 0.6 (Fibonacci points).
 /// Its inner surface, around a cavity at the centre, is a component of its own.
 fn shell() -> BlobField {
-    let centers: Vec<DVec3> = crate::field::testing::fibonacci_sphere(150)
+    let centers: Vec<DVec3> = crate::testing::fibonacci_sphere(150)
         .into_iter()
         .map(|u| 0.6 * u)
         .collect();

@@ -217,7 +217,7 @@ mod tests {
     use super::*;
     use crate::field::rbf::constraints;
     use crate::field::rbf::partition::{PartitionSettings, PartitionSurface};
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     /// Every level, read from the fit's octree or from its own, finds exactly the constraints
     /// of its hash within a ball, and counts them (up to a limit) as many.

@@ -124,8 +124,8 @@ impl PartitionSurface {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
     use crate::field::Field;
+    use crate::testing::random_points;
 
     /// Values and gradients in the box are the whole surface's bits, with fewer patches.
     #[test]

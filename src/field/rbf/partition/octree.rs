@@ -769,7 +769,7 @@ impl Octree {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     /// The leaves meeting a box hold every point of it (its corners and faces included) and
     /// are fewer than those meeting the ball around it.

@@ -1,6 +1,6 @@
 use super::*;
 use crate::field::rbf::PatchCentres;
-use crate::field::testing::{gradient_error, random_points};
+use crate::testing::{gradient_error, random_points};
 
 /// `n` points on a torus (major radius 0.6, minor 0.25, axis z) with outward normals.
 fn torus_data(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
