@@ -15,6 +15,7 @@
 //! visited, and the eight corners of a cell are claimed with two word operations.
 
 use super::bits::for_each_set_bit;
+use super::cell::Corner;
 
 /// Lattice points per brick side.
 pub const SIDE: u32 = 8;
@@ -195,13 +196,13 @@ impl Bricks {
                 for_each_set_bit(new, |bit| {
                     let bit = bit as usize;
                     let (dx, dy) = ((bit - shift) & 1, (bit - shift) >> 3);
-                    let k = dx | dy << 1 | dz << 2;
-                    claimed(corner(o, k), Slot::new(b, l + CORNER_OFFSETS[k]));
+                    let k = Corner::new(dx | dy << 1 | dz << 2);
+                    claimed(k.of_cell(o), Slot::new(b, l + CORNER_OFFSETS[k.index()]));
                 });
             }
         } else {
-            for k in 0..8 {
-                let c = corner(o, k);
+            for k in Corner::ALL {
+                let c = k.of_cell(o);
                 let (b, l) = self.brick(c);
                 if mark(&mut self.pool[b].claimed, l) {
                     claimed(c, Slot::new(b, l));
@@ -234,7 +235,7 @@ impl Bricks {
             let values = &self.pool[b].values;
             CORNER_OFFSETS.map(|off| values[l + off])
         } else {
-            [0, 1, 2, 3, 4, 5, 6, 7].map(|k| self.known(corner(o, k)))
+            Corner::ALL.map(|k| self.known(k.of_cell(o)))
         }
     }
 
@@ -285,16 +286,6 @@ impl Slot {
     }
 }
 
-/// Lattice point of corner `k` of the cell with lower corner `o`.
-#[inline]
-fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
-    [
-        o[0] + (k & 1) as u32,
-        o[1] + ((k >> 1) & 1) as u32,
-        o[2] + ((k >> 2) & 1) as u32,
-    ]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -330,7 +321,7 @@ mod tests {
             // Every corner of every cell, exactly once.
             let want: std::collections::HashSet<[u32; 3]> = CELLS
                 .iter()
-                .flat_map(|&o| (0..8).map(move |k| corner(o, k)))
+                .flat_map(|&o| Corner::ALL.map(|k| k.of_cell(o)))
                 .collect();
             assert_eq!(seen, want, "call {call}");
             assert!(b.queue([7, 7, 7]) && !b.queue([7, 7, 7]));

@@ -1,8 +1,6 @@
 //! The lattice points of a block of 2 × 2 × 2 cells (the parent of eight leaves) as bits of a
 //! mask, and the corners of cells and blocks.
 
-use crate::polygonize::cell::corner_offset;
-
 /// The 3 × 3 × 3 lattice points of a block of 2 × 2 × 2 cells (a parent of leaves), numbered
 /// x fastest: point `x + 3y + 9z`.
 pub(super) const fn block_point(x: usize, y: usize, z: usize) -> usize {
@@ -49,20 +47,6 @@ pub(super) const LEAF_POINTS: [u32; 256] = {
     }
     t
 };
-
-/// Lattice point of corner `k` of the cell with lower corner `o`.
-#[inline]
-pub(super) fn corner(o: [u32; 3], k: usize) -> [u32; 3] {
-    let d = corner_offset(k);
-    [o[0] + d[0], o[1] + d[1], o[2] + d[2]]
-}
-
-/// Lattice point of corner `k` of the block of `s` cells per side with lower corner `o`.
-#[inline]
-pub(super) fn corner_scaled(o: [u32; 3], k: usize, s: u32) -> [u32; 3] {
-    let d = corner_offset(k);
-    [o[0] + d[0] * s, o[1] + d[1] * s, o[2] + d[2] * s]
-}
 
 /// Lattice point of block point `p` (see [`block_point`]) of the block with lower corner `o`.
 #[inline]

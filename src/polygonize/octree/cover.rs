@@ -1,7 +1,7 @@
 //! Whether the balls around a box's corners cover it: the corner test of the levels.
 
 use crate::polygonize::bits::set_bits;
-use crate::polygonize::cell::corner_offset;
+use crate::polygonize::cell::Corner;
 use glam::DVec3;
 
 /// Levels of octant splitting with which [`covered`] tries to prove a box free of the surface
@@ -25,9 +25,9 @@ pub(super) fn covered(radius: &[f64; 8], size: DVec3) -> bool {
     // The balls there are (NaN radius: none), as centres and squared radii.
     let mut balls = [(DVec3::ZERO, 0.0); 8];
     let mut n = 0;
-    for (k, &r) in radius.iter().enumerate() {
+    for (k, &r) in Corner::ALL.iter().zip(radius) {
         if r > 0.0 {
-            let d = corner_offset(k);
+            let d = k.offset();
             balls[n] = (
                 DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size,
                 r * r,
@@ -46,8 +46,8 @@ pub(super) fn covered(radius: &[f64; 8], size: DVec3) -> bool {
     }
     // Necessary: every corner of the box lies in a ball (the centre does, by the test above).
     let inside = |p: DVec3| balls.iter().any(|&(c, r2)| (p - c).length_squared() < r2);
-    if !(0..8).all(|k| {
-        let d = corner_offset(k);
+    if !Corner::ALL.iter().all(|k| {
+        let d = k.offset();
         inside(DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size)
     }) {
         return false;
@@ -116,8 +116,8 @@ pub(super) fn covered_piece(
     if depth == 0 || !mid_covered {
         return false;
     }
-    (0..8).all(|k| {
-        let d = corner_offset(k);
+    Corner::ALL.iter().all(|k| {
+        let d = k.offset();
         let pick = |a: usize| {
             if d[a] == 0 {
                 (lo[a], mid[a])

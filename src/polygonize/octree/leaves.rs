@@ -1,13 +1,13 @@
 //! The leaf cells below the blocks of 2 × 2 × 2 cells the levels kept: which of them the surface
 //! crosses, with their corners' value indices.
 
-use super::block::{cell_inside, corner, CENTRE, LEAF_CORNERS, LEAF_POINTS};
+use super::block::{cell_inside, CENTRE, LEAF_CORNERS, LEAF_POINTS};
 use super::run::Run;
 use super::store::{corner_value, Store, NONE};
 use crate::error::Result;
 use crate::field::Field;
 use crate::polygonize::bits::set_bits;
-use crate::polygonize::cell::case_index;
+use crate::polygonize::cell::{case_index, Corner};
 use rayon::prelude::*;
 
 /// A leaf cell the surface crosses: its lowest lattice point, the value indices of its corners
@@ -43,9 +43,10 @@ impl<F: Field + ?Sized> Run<'_, F> {
             .par_iter()
             .with_min_len(4096)
             .map(|o| {
-                (0..8)
-                    .filter(|&d| cell_inside(corner(*o, d), cells))
-                    .fold(0, |m, d| m | 1 << d)
+                Corner::ALL
+                    .into_iter()
+                    .filter(|d| cell_inside(d.of_cell(*o), cells))
+                    .fold(0, |m, d| m | 1 << d.index())
             })
             .collect();
         let tested: u64 = self.masks.iter().map(|m| m.count_ones() as u64).sum();
@@ -77,7 +78,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
                 let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
                 debug_assert_eq!(case, case_index(&corners.map(|i| corner_value(values, i))));
                 CrossedLeaf {
-                    origin: corner(o, d),
+                    origin: Corner::new(d).of_cell(o),
                     corners,
                     case,
                 }
@@ -116,7 +117,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
             let corners = LEAF_CORNERS[d].map(|p| idx[p as usize]);
             let case = case_index(&corners.map(|i| values[i as usize]));
             (case != 0 && case != 255).then_some(CrossedLeaf {
-                origin: corner(o, d),
+                origin: Corner::new(d).of_cell(o),
                 corners,
                 case,
             })

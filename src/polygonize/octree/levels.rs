@@ -2,7 +2,7 @@
 //! at their centres (and, with the corner test, by the balls of their known corners), the kept
 //! ones split into their children.
 
-use super::block::{block_point, cell_inside, corner_scaled, CENTRE};
+use super::block::{block_point, cell_inside, CENTRE};
 use super::cover::covered;
 use super::run::Run;
 use super::state::PointState;
@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::field::Field;
 use crate::lattice::Lattice;
 use crate::polygonize::bits::set_bits;
-use crate::polygonize::cell::corner_offset;
+use crate::polygonize::cell::Corner;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -70,7 +70,7 @@ impl KnownCorners {
     /// `values` at index `centre` (`NONE`: not evaluated).
     pub(super) fn block_points(&self, values: &[f64], centre: u32) -> [(usize, f64); 3] {
         let at = |k: usize| {
-            let d = corner_offset(k);
+            let d = Corner::new(k).offset();
             block_point(2 * d[0] as usize, 2 * d[1] as usize, 2 * d[2] as usize)
         };
         let [a, b] = self.get(values);
@@ -159,7 +159,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
             .with_min_len(1024)
             .map(|(o, k)| {
                 debug_assert!((0..8).all(|j| store
-                    .known(corner_scaled(*o, j, s), cells)
+                    .known(Corner::new(j).of_cube(*o, s), cells)
                     .is_none_or(|v| k.at(j) != NONE && v == store.values[k.at(j) as usize])));
                 let [a, b] = k.get(&store.values);
                 if a.is_nan() && b.is_nan() {
@@ -236,10 +236,7 @@ impl<F: Field + ?Sized> Run<'_, F> {
     /// block order, then octant order; the children know their parent's centre at a corner.
     fn split(&mut self, s: u32) {
         let (h, cells) = (s / 2, self.lattice.cells());
-        let child = |o: [u32; 3], d: usize| {
-            let off = corner_offset(d);
-            [o[0] + off[0] * h, o[1] + off[1] * h, o[2] + off[2] * h]
-        };
+        let child = |o: [u32; 3], d: usize| Corner::new(d).of_cube(o, h);
         self.centres.resize(self.blocks.len(), NONE);
         let children: Vec<u8> = self
             .blocks

@@ -18,7 +18,6 @@
 //! a contradiction touched. The leaves it visits replace those of the levels. When the premise
 //! holds, nothing is found and the only cost is the scan of the crossed leaves' faces.
 
-use super::block::corner;
 use super::decided::DecidedBlocks;
 use super::leaves::CrossedLeaf;
 use super::run::Run;
@@ -26,7 +25,7 @@ use super::state::PointState;
 use super::store::NONE;
 use crate::error::Result;
 use crate::field::Field;
-use crate::polygonize::cell::case_index;
+use crate::polygonize::cell::{case_index, Corner};
 use crate::polygonize::tracking::FACE_STEP;
 use crate::polygonize::CaseTable;
 use rayon::prelude::*;
@@ -123,8 +122,9 @@ impl<F: Field + ?Sized> Run<'_, F> {
         }
         for &o in &suspects.blocks {
             wave.extend(
-                (0..8)
-                    .map(|d| corner(o, d))
+                Corner::ALL
+                    .into_iter()
+                    .map(|d| d.of_cell(o))
                     .filter(|c| (0..3).all(|a| c[a] < cells[a])),
             );
         }
@@ -151,8 +151,8 @@ impl<F: Field + ?Sized> Run<'_, F> {
             points.clear();
             let mut inferred: Vec<(usize, bool, [u32; 3])> = Vec::new();
             for &o in &wave {
-                for k in 0..8 {
-                    let p = corner(o, k);
+                for k in Corner::ALL {
+                    let p = k.of_cell(o);
                     let s = store.slot_mut(p);
                     let state = store.state[s];
                     if state == PointState::UNKNOWN || state.is_inferred() {
@@ -175,8 +175,8 @@ impl<F: Field + ?Sized> Run<'_, F> {
                 }
             }
             for &o in &wave {
-                let corners: [u32; 8] = std::array::from_fn(|k| {
-                    let s = store.slot_mut(corner(o, k));
+                let corners: [u32; 8] = Corner::ALL.map(|k| {
+                    let s = store.slot_mut(k.of_cell(o));
                     debug_assert!(store.state[s].has_value());
                     store.slots[s]
                 });

@@ -11,7 +11,7 @@ use super::*;
 use crate::field::analytic::{Sphere, Torus};
 use crate::field::Counting;
 use crate::mesh::Mesh;
-use crate::polygonize::cell::corner_offset;
+use crate::polygonize::cell::Corner;
 use crate::polygonize::table::EDGES;
 use crate::polygonize::{dense, Ambiguity, Settings, Stats};
 use crate::testing::Lcg;
@@ -522,7 +522,7 @@ fn opposite_balls_are_decided_exactly() {
             }
             // The box's other corners, where the two balls are weakest.
             for k in 1..7 {
-                let d = corner_offset(k);
+                let d = Corner::new(k).offset();
                 let p = DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size;
                 assert!(p.length() < r0 || (p - size).length() < r1);
             }
@@ -537,8 +537,8 @@ fn opposite_balls_are_decided_exactly() {
 fn cover_test_is_sound() {
     let mut next = uniform(11);
     let size = DVec3::new(1.0, 0.8, 1.3);
-    let corners: [DVec3; 8] = std::array::from_fn(|k| {
-        let d = corner_offset(k);
+    let corners: [DVec3; 8] = Corner::ALL.map(|k| {
+        let d = k.offset();
         DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64) * size
     });
     let mut yes = 0;

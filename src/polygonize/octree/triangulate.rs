@@ -1,6 +1,5 @@
 //! The crossed leaves' triangles, made in parallel and numbered as a serial sweep would.
 
-use super::block::corner;
 use super::leaves::CrossedLeaf;
 use super::run::Run;
 use super::store::{atomic_u32s, NONE};
@@ -8,7 +7,7 @@ use crate::field::Field;
 use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use crate::polygonize::bits::set_bits;
-use crate::polygonize::table::{EDGES, EDGE_AXIS};
+use crate::polygonize::cell::Edge;
 use crate::polygonize::{CaseTable, Stats};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -58,9 +57,8 @@ fn triangulate(
             .flatten()
             .fold(0, |m, &e| m | 1 << e)
     });
-    let key = |l: &CrossedLeaf, e: usize| {
-        3 * l.corners[EDGES[e][0] as usize] as usize + EDGE_AXIS[e] as usize
-    };
+    let key =
+        |l: &CrossedLeaf, e: Edge| 3 * l.corners[e.lower().index()] as usize + e.axis().index();
     // Per edge: the first leaf that uses it, then (once the leaves have their vertices) its
     // vertex.
     let mut entries = vec![NONE; 3 * values.len()];
@@ -72,7 +70,7 @@ fn triangulate(
         .for_each(|(i, l)| {
             let i = i as u32;
             for e in set_bits(used[l.case as usize]) {
-                let a = &entry[key(l, e)];
+                let a = &entry[key(l, Edge::new(e))];
                 if a.load(Relaxed) > i {
                     a.fetch_min(i, Relaxed);
                 }
@@ -85,7 +83,7 @@ fn triangulate(
         .with_min_len(1024)
         .map(|(i, l)| {
             set_bits(used[l.case as usize])
-                .filter(|&e| entry[key(l, e)].load(Relaxed) == i as u32)
+                .filter(|&e| entry[key(l, Edge::new(e))].load(Relaxed) == i as u32)
                 .fold(0, |made, e| made | 1 << e)
         })
         .collect();
@@ -122,17 +120,17 @@ fn triangulate(
         let (l, first) = (&leaves[i], start[i]);
         let (order, k) = made_order(i);
         for (j, &e) in order[..k].iter().enumerate() {
-            entry[key(l, e as usize)].store(first + j as u32, Relaxed);
+            entry[key(l, Edge::new(e as usize))].store(first + j as u32, Relaxed);
         }
         (0..k).map(move |j| {
-            let [ka, kb] = EDGES[order[j] as usize].map(|k| k as usize);
+            let [ka, kb] = Edge::new(order[j] as usize).ends();
             let (fa, fb) = (
-                values[l.corners[ka] as usize],
-                values[l.corners[kb] as usize],
+                values[l.corners[ka.index()] as usize],
+                values[l.corners[kb.index()] as usize],
             );
             edge_crossing(
-                lattice.point(corner(l.origin, ka)),
-                lattice.point(corner(l.origin, kb)),
+                lattice.point(ka.of_cell(l.origin)),
+                lattice.point(kb.of_cell(l.origin)),
                 fa,
                 fb,
             )
@@ -143,15 +141,15 @@ fn triangulate(
         table
             .triangles(l.case)
             .iter()
-            .map(move |t| t.map(|e| entry[key(l, e as usize)].load(Relaxed)))
+            .map(move |t| t.map(|e| entry[key(l, Edge::new(e as usize))].load(Relaxed)))
     });
     let keys = if keyed {
         crate::memory::collect_counted(&made_count, |i| {
             let (order, k) = made_order(i);
             let o = leaves[i].origin;
             (0..k).map(move |j| {
-                let e = order[j] as usize;
-                lattice.whole_edge_key(corner(o, EDGES[e][0] as usize), EDGE_AXIS[e])
+                let e = Edge::new(order[j] as usize);
+                lattice.whole_edge_key(e.lower().of_cell(o), e.axis().into())
             })
         })
     } else {

@@ -25,9 +25,8 @@ use crate::lattice::{edge_crossing, Lattice};
 use crate::mesh::Mesh;
 use crate::polygonize::bits::{crossed_cells, ALL_CELLS};
 use crate::polygonize::bricks::{Bricks, Slot};
-use crate::polygonize::cell::{case_index, edge_origin, emit_triangles};
+use crate::polygonize::cell::{case_index, emit_triangles, Edge};
 use crate::polygonize::sparse::{self, BlockSigns};
-use crate::polygonize::table::EDGES;
 use crate::polygonize::{
     check_memory, estimate_triangles, evaluate, finish_mesh, CaseTable, Settings, Stats,
     BYTES_PER_TRIANGLE,
@@ -257,25 +256,25 @@ impl CellTracking {
                 stats.cells_crossed += 1;
                 // The vertex of every crossed edge of the cell, looked up (or made) once.
                 let mut idx = [0u32; 12];
-                for (e, ends) in EDGES.iter().enumerate() {
-                    let (fa, fb) = (v[ends[0] as usize], v[ends[1] as usize]);
+                for (i, e) in Edge::ALL.into_iter().enumerate() {
+                    let [lower, upper] = e.ends();
+                    let (fa, fb) = (v[lower.index()], v[upper.index()]);
                     if (fa < 0.0) == (fb < 0.0) {
                         continue;
                     }
-                    let (d, axis) = edge_origin(e);
-                    let a = [o[0] + d[0], o[1] + d[1], o[2] + d[2]];
+                    let (a, axis) = (lower.of_cell(o), e.axis());
                     let (keyed, keys) = (self.keyed, &mut self.edge_keys);
-                    idx[e] = self.cache.edge(a, axis, || {
+                    idx[i] = self.cache.edge(a, axis.into(), || {
                         let mut b = a;
-                        b[axis as usize] += 1;
+                        b[axis.index()] += 1;
                         if keyed {
-                            keys.push(lattice.whole_edge_key(a, axis));
+                            keys.push(lattice.whole_edge_key(a, axis.into()));
                         }
                         vertices.push(edge_crossing(lattice.point(a), lattice.point(b), fa, fb));
                         (vertices.len() - 1) as u32
                     });
                 }
-                emit_triangles(table, case, |e| idx[e], &mut triangles);
+                emit_triangles(table, case, |e| idx[e.index()], &mut triangles);
                 let faces = table.crossed_faces(case);
                 for (f, &(axis, step)) in FACE_STEP.iter().enumerate() {
                     if faces & (1 << f) == 0 {
