@@ -1,8 +1,8 @@
 //! What the crate's tests share: the pseudo-random numbers they draw ([`XorShift`], and
-//! [`Lcg`] where a test's cases were drawn with it), random points and blob fields, reference
-//! checks (gradients against differences, order-free mesh comparison) and a field whose block
-//! bounds lie. Every generator is deterministic, so each test sees the same cases on every
-//! run and machine.
+//! [`Lcg`] where a test's cases were drawn with it), point sets (random points, a sphere, a
+//! thin box with its normals) and random blob fields, reference checks (gradients against
+//! differences, order-free mesh comparison) and a field whose block bounds lie. Every generator
+//! is deterministic, so each test sees the same cases on every run and machine.
 
 use crate::field::{Block, BlockField, BlockSign, DynBlockField, Field};
 use crate::lattice::Lattice;
@@ -71,6 +71,37 @@ pub fn fibonacci_sphere(n: usize) -> Vec<DVec3> {
             DVec3::new(r * a.cos(), r * a.sin(), z)
         })
         .collect()
+}
+
+/// The box [0, 1]² × [0, t] sampled on grids of spacing about `h`, with outward normals.
+pub fn thin_box(h: f64, t: f64) -> (Vec<DVec3>, Vec<DVec3>) {
+    let m = (1.0 / h).round() as usize;
+    let layers = ((t / h).ceil() as usize).max(1);
+    let (mut p, mut n) = (Vec::new(), Vec::new());
+    for i in 0..=m {
+        for j in 0..=m {
+            let (x, y) = (i as f64 / m as f64, j as f64 / m as f64);
+            p.push(DVec3::new(x, y, 0.0));
+            n.push(-DVec3::Z);
+            p.push(DVec3::new(x, y, t));
+            n.push(DVec3::Z);
+        }
+    }
+    for i in 0..m {
+        for l in 1..layers {
+            let (u, z) = (i as f64 / m as f64, t * l as f64 / layers as f64);
+            for (q, d) in [
+                (DVec3::new(u, 0.0, z), -DVec3::Y),
+                (DVec3::new(1.0, u, z), DVec3::X),
+                (DVec3::new(1.0 - u, 1.0, z), DVec3::Y),
+                (DVec3::new(0.0, 1.0 - u, z), -DVec3::X),
+            ] {
+                p.push(q);
+                n.push(d);
+            }
+        }
+    }
+    (p, n)
 }
 
 /// Largest relative difference between a field's analytic gradient and central differences

@@ -243,47 +243,10 @@ pub fn estimate_normals(
     })
 }
 
-/// Point sets for the tests.
-#[cfg(test)]
-pub(crate) mod testing {
-    use glam::DVec3;
-
-    /// The box [0, 1]² × [0, t] sampled on grids of spacing about `h`, with outward normals.
-    pub fn thin_box(h: f64, t: f64) -> (Vec<DVec3>, Vec<DVec3>) {
-        let m = (1.0 / h).round() as usize;
-        let layers = ((t / h).ceil() as usize).max(1);
-        let (mut p, mut n) = (Vec::new(), Vec::new());
-        for i in 0..=m {
-            for j in 0..=m {
-                let (x, y) = (i as f64 / m as f64, j as f64 / m as f64);
-                p.push(DVec3::new(x, y, 0.0));
-                n.push(-DVec3::Z);
-                p.push(DVec3::new(x, y, t));
-                n.push(DVec3::Z);
-            }
-        }
-        for i in 0..m {
-            for l in 1..layers {
-                let (u, z) = (i as f64 / m as f64, t * l as f64 / layers as f64);
-                for (q, d) in [
-                    (DVec3::new(u, 0.0, z), -DVec3::Y),
-                    (DVec3::new(1.0, u, z), DVec3::X),
-                    (DVec3::new(1.0 - u, 1.0, z), DVec3::Y),
-                    (DVec3::new(0.0, 1.0 - u, z), -DVec3::X),
-                ] {
-                    p.push(q);
-                    n.push(d);
-                }
-            }
-        }
-        (p, n)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{fibonacci_sphere, random_points};
+    use crate::testing::{fibonacci_sphere, random_points, thin_box};
 
     /// A torus of radii 1 and r, sampled on a twisted grid, with its outward normals.
     fn torus(r: f64, n: usize) -> (Vec<DVec3>, Vec<DVec3>) {
@@ -327,7 +290,7 @@ mod tests {
     #[test]
     fn a_thin_plate_is_oriented_outward_on_both_sides() {
         let h = 0.01;
-        let (p, truth) = testing::thin_box(h, 1.5 * h);
+        let (p, truth) = thin_box(h, 1.5 * h);
         let e = estimate_normals(&p, Viewpoints::None, &NormalSettings::default()).unwrap();
         // Only at the box's edges may a normal point in.
         let inner = |p: &DVec3| {

@@ -153,7 +153,7 @@ mod tests {
     #[test]
     fn patches_do_not_cross_a_thin_plate() {
         let h = 0.02;
-        let (pts, truth) = crate::normals::testing::thin_box(h, 1.5 * h);
+        let (pts, truth) = crate::testing::thin_box(h, 1.5 * h);
         let tree = PointTree::new(&pts).unwrap();
         let local = local_planes(&tree, &tree.positions(), 16).unwrap();
         let (sorted, order, ..) = tree.layout();
