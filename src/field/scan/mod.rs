@@ -10,13 +10,16 @@
 //! 1. [`mod@clean`]: spacing and noise are estimated from the data, outliers found and left out,
 //!    normals made consistent with their neighbours, and every point projected onto the plane
 //!    of its neighbourhood — the points the fit interpolates lie on the data's mean surface.
-//! 2. The variational fit of the cleaned points (global or partition of unity).
+//! 2. The variational fit of the cleaned points about one spacing apart ([`centres`]; global
+//!    or partition of unity).
 //! 3. [`guard`] ([`ScanSurface`]): beyond a few spacings from the data the field is the data's
 //!    [`winding::WindingNumber`], which closes unseen regions and has no surface elsewhere.
 
 pub mod bodies;
+pub mod centres;
 pub mod clean;
 pub mod guard;
+pub mod occupancy;
 pub mod surface;
 pub mod winding;
 
@@ -41,6 +44,9 @@ pub struct ScanSettings {
     pub near: f64,
     /// Beyond this many spacings of the data, the field is the winding number's.
     pub far: f64,
+    /// The fit interpolates a subset of the cleaned points no two of which are nearer than
+    /// this many spacings ([`centres::separated`]); 0 fits them all.
+    pub centre_separation: f64,
 }
 
 impl Default for ScanSettings {
@@ -52,6 +58,7 @@ impl Default for ScanSettings {
             projection_width: 2.0,
             near: 6.0,
             far: 12.0,
+            centre_separation: 1.0,
         }
     }
 }
