@@ -40,16 +40,18 @@ pub struct PointTree {
 struct Nearest<'a> {
     found: &'a mut [(f64, u32)],
     len: usize,
+    /// The squared distance beyond which no point is offered.
+    limit: f64,
 }
 
 impl Nearest<'_> {
-    /// The squared distance a point must beat to enter (infinite until `k` are found).
+    /// The squared distance a point must beat to enter (the limit until `k` are found).
     #[inline]
     fn bound(&self) -> f64 {
         if self.len == self.found.len() {
             self.found[self.len - 1].0
         } else {
-            f64::INFINITY
+            self.limit
         }
     }
 
@@ -210,7 +212,16 @@ impl PointTree {
     /// (squared distance, the caller's index) into `out`, which must not be longer than the
     /// point set.
     pub fn k_nearest_into(&self, p: DVec3, out: &mut [(f64, u32)]) {
-        self.search(p, out, 0..0);
+        self.search(p, out, 0..0, f64::INFINITY);
+    }
+
+    /// The nearest point to `p` within `radius` of it, as (distance, the caller's index), or
+    /// `None` when there is none. Cheaper than [`PointTree::k_nearest_into`] far from the
+    /// points: no node farther than `radius` is opened.
+    pub fn nearest_within(&self, p: DVec3, radius: f64) -> Option<(f64, u32)> {
+        let mut found = [(0.0, 0u32)];
+        let n = self.search(p, &mut found, 0..0, radius * radius);
+        (n == 1).then(|| (found[0].0.sqrt(), found[0].1))
     }
 
     /// The leaves offered first to the query of the point at leaf position `s`: the subtree of
@@ -226,12 +237,23 @@ impl PointTree {
         first..first + (1 << levels)
     }
 
-    /// [`PointTree::k_nearest_into`], offering the points of the leaves `seed` first.
-    fn search(&self, p: DVec3, out: &mut [(f64, u32)], seed: std::ops::Range<usize>) {
+    /// [`PointTree::k_nearest_into`] among the points within squared distance `limit`,
+    /// offering the points of the leaves `seed` first; returns how many were found.
+    fn search(
+        &self,
+        p: DVec3,
+        out: &mut [(f64, u32)],
+        seed: std::ops::Range<usize>,
+        limit: f64,
+    ) -> usize {
         if out.is_empty() {
-            return;
+            return 0;
         }
-        let mut near = Nearest { found: out, len: 0 };
+        let mut near = Nearest {
+            found: out,
+            len: 0,
+            limit,
+        };
         if !seed.is_empty() {
             let (a, b) = (
                 self.starts[seed.start] as usize,
@@ -288,6 +310,7 @@ impl PointTree {
                 top += 1;
             }
         }
+        near.len
     }
 
     fn check_k(&self, k: usize) -> Result<()> {
@@ -373,7 +396,7 @@ impl PointTree {
             .try_for_each(|(c, (out, p))| {
                 let mut found = vec![(0.0, 0u32); k];
                 for (s, (o, p)) in (c * BATCH..).zip(out.iter_mut().zip(p)) {
-                    self.search(*p, &mut found, self.seed_leaves(s, k));
+                    self.search(*p, &mut found, self.seed_leaves(s, k), f64::INFINITY);
                     *o = per_point(s, &found);
                 }
                 match &token {
@@ -399,7 +422,7 @@ impl PointTree {
             .for_each(|(c, (idx, q))| {
                 let mut found = vec![(0.0, 0u32); k];
                 for (s, (p, i)) in (c * BATCH..).zip(q.iter().zip(idx.chunks_mut(k))) {
-                    self.search(*p, &mut found, self.seed_leaves(s, k));
+                    self.search(*p, &mut found, self.seed_leaves(s, k), f64::INFINITY);
                     for (f, i) in found.iter().zip(i) {
                         *i = f.1;
                     }
@@ -585,6 +608,23 @@ mod tests {
                         assert!((d - b.0.sqrt()).abs() < 1e-15);
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn nearest_within_a_radius_is_the_nearest_or_none() {
+        let pts = fibonacci_sphere(3_000);
+        let tree = PointTree::new(&pts).unwrap();
+        for (i, q) in random_points(2_000, -1.5, 1.5, 9).into_iter().enumerate() {
+            let radius = 0.02 + 0.3 * (i % 7) as f64 / 7.0;
+            let (d2, j) = brute(&pts, q, 1)[0];
+            match tree.nearest_within(q, radius) {
+                Some((d, k)) => {
+                    assert!(d <= radius);
+                    assert_eq!((d, k), (d2.sqrt(), j));
+                }
+                None => assert!(d2.sqrt() > radius),
             }
         }
     }

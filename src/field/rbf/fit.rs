@@ -232,9 +232,15 @@ impl Fit {
             }
         };
         let cleaned = scan::clean(points, normals, scan)?;
+        let centres =
+            scan::centres::separated(&cleaned.points, scan.centre_separation * cleaned.spacing);
+        let (p, n): (Vec<DVec3>, Vec<DVec3>) = centres
+            .iter()
+            .map(|&i| (cleaned.points[i as usize], cleaned.normals[i as usize]))
+            .unzip();
         let data = FitData::Normals {
-            points: &cleaned.points,
-            normals: &cleaned.normals,
+            points: &p,
+            normals: &n,
         };
         let (fitted, r) = match reduction {
             Some(settings) => {

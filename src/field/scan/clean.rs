@@ -16,6 +16,10 @@
 //!    farther from its plane than `3·spread + 6·median offset + 3·noise` is an outlier too, the
 //!    spread being 1.4826 times the median distance of the neighbours from their plane (robust
 //!    to a few stray points among them).
+//!    Where the noise exceeds [`ScanSettings::coarsening`] times the spacing, the neighbourhood
+//!    is a slab rather than a disc: the valid points are averaged in cells two spacings wide,
+//!    each side of a thin part apart ([`mod@super::coarsen`]), and the averages are cleaned in
+//!    their place (each point is kept when its average is).
 //! 3. **Normals.** Each point takes its neighbourhood's normal, with the sign of its own normal.
 //!    Then, for [`ScanSettings::voting_rounds`] rounds, a point whose neighbours mostly face the
 //!    other way (more than 1.5 times as many) turns around.
@@ -25,9 +29,11 @@
 //!    neighbourhood's plane, with Gaussian weights of width
 //!    `h = projection_width · max(spacing, 2 · noise)`, to itself and the neighbours that face
 //!    its way (normals within 60°, so that the two sides of a thin part stay apart); the
-//!    quadric's normal there is the point's new normal.
+//!    quadric's normal there is the point's new normal. Where the noise exceeds a tenth of the
+//!    spacing, the neighbourhood is [`ScanSettings::projection_neighbours`] points, so that
+//!    the quadric's six coefficients average the noise.
 
-use super::ScanSettings;
+use super::{coarsen, ScanSettings};
 use crate::error::{Error, Result};
 use crate::knn::{smallest_eigenvector, Neighbourhoods, PointTree};
 use glam::DVec3;
@@ -43,6 +49,15 @@ const LOCAL_NEIGHBOUR: usize = 3;
 pub const LOCAL_RATIO: f64 = 3.0;
 /// The neighbour whose distance gives a point's area, π r² / AREA_NEIGHBOUR.
 const AREA_NEIGHBOUR: usize = 8;
+/// The side of the cells points are averaged in, in spacings ([`mod@super::coarsen`]).
+const AVERAGING_CELL: f64 = 2.0;
+/// Noise above this fraction of the spacing is projected over
+/// [`ScanSettings::projection_neighbours`] neighbours.
+const NOISY: f64 = 0.1;
+/// Averagings at most, one after the other, while the noise stays large against the spacing.
+const MAX_AVERAGINGS: usize = 3;
+/// The points are averaged only when that leaves fewer than this fraction of them.
+const AVERAGING_GAIN: f64 = 0.7;
 
 /// Scan points made ready for a fit (see the module's documentation).
 #[derive(Clone, Debug)]
@@ -53,8 +68,11 @@ pub struct Cleaned {
     pub normals: Vec<DVec3>,
     /// The area each kept point stands for (for the winding number).
     pub areas: Vec<f64>,
-    /// The index among the caller's points of each kept point.
+    /// The indices of the caller's points that were kept (not outliers), increasing.
     pub kept: Vec<u32>,
+    /// For each of the caller's points, the kept point that stands for it (itself, projected,
+    /// or the average of its cell, see [`mod@super::coarsen`]); `u32::MAX` for an outlier.
+    pub representative: Vec<u32>,
     /// The indices of the points left out as outliers, increasing.
     pub outliers: Vec<u32>,
     /// The median distance from a point to its 6th nearest neighbour.
@@ -67,6 +85,38 @@ pub struct Cleaned {
     /// Whether the normals, made consistent, pointed into the body the points enclose (a
     /// negative flux Σ aᵢ (pᵢ − c)·nᵢ about the points' mean c) and all were turned.
     pub turned_outward: bool,
+}
+
+impl Cleaned {
+    /// This cleaning of points that stand for groups of the caller's points (`group_of`, one
+    /// per caller's point, `u32::MAX` for a point left out), as a cleaning of the caller's
+    /// points with their `normals`: a point is kept when its group is, and a normal counts as
+    /// corrected when its group's cleaned normal points against it.
+    fn standing_for(mut self, group_of: &[u32], normals: &[DVec3]) -> Cleaned {
+        let representative: Vec<u32> = group_of
+            .iter()
+            .map(|&g| match g {
+                u32::MAX => u32::MAX,
+                g => self.representative[g as usize],
+            })
+            .collect();
+        self.kept = (0..group_of.len() as u32)
+            .filter(|&i| representative[i as usize] != u32::MAX)
+            .collect();
+        self.outliers = (0..group_of.len() as u32)
+            .filter(|&i| representative[i as usize] == u32::MAX)
+            .collect();
+        self.normals_corrected = self
+            .kept
+            .iter()
+            .filter(|&&i| {
+                let r = representative[i as usize] as usize;
+                self.normals[r].dot(normals[i as usize]) < 0.0
+            })
+            .count();
+        self.representative = representative;
+        self
+    }
 }
 
 /// What principal component analysis tells about one point's neighbourhood.
@@ -191,6 +241,82 @@ fn project_on_quadric(
     (moved, n)
 }
 
+/// Valid points, one in this many, whose quadrics measure the scatter ([`quadric_scatter`]).
+const SCATTER_STRIDE: usize = 8;
+
+/// The median, over every [`SCATTER_STRIDE`]th valid point, of the root-mean-square residual of
+/// the least-squares quadric height field over its neighbourhood's plane (corrected for the
+/// quadric's six coefficients): the noise, without the curvature that the planes' residuals
+/// also hold.
+fn quadric_scatter(
+    points: &[DVec3],
+    near: &Neighbourhoods,
+    valid: &[bool],
+    local: &[Local],
+) -> f64 {
+    let sampled: Vec<usize> = (0..points.len())
+        .filter(|&i| valid[i])
+        .step_by(SCATTER_STRIDE)
+        .collect();
+    let mut rms: Vec<f64> = sampled
+        .par_iter()
+        .filter_map(|&i| {
+            let rows: Vec<DVec3> = near
+                .of(i)
+                .iter()
+                .filter(|&&j| valid[j as usize])
+                .map(|&j| points[j as usize])
+                .collect();
+            quadric_residual(&rows, points[i], local[i].normal)
+        })
+        .collect();
+    median(&mut rms)
+}
+
+/// The root-mean-square residual of the least-squares quadric height field `z(x, y)` of `rows`
+/// in the frame at `origin` with unit `normal`, times `sqrt(m / (m − 6))` for `m` rows; `None`
+/// for fewer than 10 rows or a degenerate layout.
+fn quadric_residual(rows: &[DVec3], origin: DVec3, normal: DVec3) -> Option<f64> {
+    let m = rows.len();
+    if m < 10 {
+        return None;
+    }
+    let (u, v) = normal.any_orthonormal_pair();
+    let scale = rows
+        .iter()
+        .map(|q| (*q - origin).length())
+        .fold(0.0, f64::max);
+    if scale <= 0.0 {
+        return None;
+    }
+    let frame = |q: &DVec3| {
+        let d = (*q - origin) / scale;
+        let (x, y) = (d.dot(u), d.dot(v));
+        ([1.0, x, y, x * x, x * y, y * y], d.dot(normal))
+    };
+    let mut ata = [[0.0; 6]; 6];
+    let mut atb = [0.0; 6];
+    for q in rows {
+        let (row, z) = frame(q);
+        for r in 0..6 {
+            for c in 0..6 {
+                ata[r][c] += row[r] * row[c];
+            }
+            atb[r] += row[r] * z;
+        }
+    }
+    let c = solve6(ata, atb)?;
+    let sum: f64 = rows
+        .iter()
+        .map(|q| {
+            let (row, z) = frame(q);
+            let fit: f64 = row.iter().zip(&c).map(|(a, b)| a * b).sum();
+            (z - fit) * (z - fit)
+        })
+        .sum();
+    Some(scale * (sum / (m - 6) as f64).sqrt())
+}
+
 /// For each point, whether its [`LOCAL_NEIGHBOUR`]th neighbour among the `valid` points (in its
 /// neighbourhood, itself first) lies within [`LOCAL_RATIO`] times the median of the same distance
 /// of its valid neighbours. A point with too few valid neighbours in its row passes.
@@ -242,6 +368,16 @@ fn median(values: &mut [f64]) -> f64 {
 /// Cleans `points` with `normals` (see the module's documentation). Errors name the argument:
 /// fewer points than `settings.neighbours + 1`, or a point or normal that is not finite.
 pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Result<Cleaned> {
+    clean_at(points, normals, settings, 0)
+}
+
+/// [`clean`], `depth` averagings ([`mod@super::coarsen`]) away from the caller's points.
+fn clean_at(
+    points: &[DVec3],
+    normals: &[DVec3],
+    settings: &ScanSettings,
+    depth: usize,
+) -> Result<Cleaned> {
     let k = settings.neighbours;
     if k < ISOLATION_NEIGHBOUR {
         return Err(Error::invalid(
@@ -265,7 +401,8 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         ));
     }
     crate::error::check_finite_points("normals", normals)?;
-    let near = PointTree::new(points)?.neighbourhoods(k + 1)?;
+    let tree = PointTree::new(points)?;
+    let near = tree.neighbourhoods(k + 1)?;
     let n = points.len();
 
     // 1. Spacing and isolation.
@@ -321,6 +458,23 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         let crowded = crowded(points, &near, &valid);
         for (v, c) in valid.iter_mut().zip(crowded) {
             *v &= c;
+        }
+    }
+
+    // Noise large against the spacing: the points averaged in cells, and those cleaned.
+    // The noise that curvature does not explain: what the neighbourhoods' quadrics leave.
+    let scatter = quadric_scatter(points, &near, &valid, &local);
+    if depth < MAX_AVERAGINGS && scatter > settings.coarsening * spacing {
+        let averaged = coarsen::average(points, normals, &valid, AVERAGING_CELL * spacing);
+        let used = valid.iter().filter(|&&v| v).count();
+        if averaged.points.len() > settings.neighbours
+            && (averaged.points.len() as f64) < AVERAGING_GAIN * used as f64
+        {
+            drop(near);
+            let inner = clean_at(&averaged.points, &averaged.normals, settings, depth + 1)?;
+            let mut cleaned = inner.standing_for(&averaged.group_of, normals);
+            cleaned.noise = noise;
+            return Ok(cleaned);
         }
     }
 
@@ -393,12 +547,21 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
     let h = settings.projection_width * spacing.max(2.0 * noise);
     let inv_h2 = if h > 0.0 { 1.0 / (h * h) } else { 0.0 };
     let kept: Vec<u32> = (0..n as u32).filter(|&i| valid[i as usize]).collect();
-    let projected: Vec<(DVec3, DVec3, f64)> = kept
+    // Noisy data: more neighbours, so that the quadric's six coefficients average the noise.
+    let wide;
+    let rows = if scatter > NOISY * spacing && settings.projection_neighbours > k {
+        drop(near);
+        wide = tree.neighbourhoods((settings.projection_neighbours + 1).min(n))?;
+        &wide
+    } else {
+        &near
+    };
+    let projected: Vec<(DVec3, DVec3)> = kept
         .par_iter()
         .map(|&i| {
             let i = i as usize;
             let own = oriented[i];
-            let items = near.of(i).iter().filter_map(|&j| {
+            let items = rows.of(i).iter().filter_map(|&j| {
                 let dj = distance(points, i, j);
                 let j = j as usize;
                 (j == i || (valid[j] && own.dot(oriented[j]) > 0.5)).then(|| {
@@ -416,13 +579,15 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
             if normal.dot(own) < 0.0 {
                 normal = -normal;
             }
-            let (p, normal) = project_on_quadric(points[i], mean, normal, items, h);
-            let r = areas[i];
-            (
-                p,
-                normal,
-                std::f64::consts::PI * r * r / AREA_NEIGHBOUR as f64,
-            )
+            project_on_quadric(points[i], mean, normal, items, h)
+        })
+        .collect();
+    let projected: Vec<(DVec3, DVec3, f64)> = kept
+        .iter()
+        .zip(projected)
+        .map(|(&i, (p, m))| {
+            let r = areas[i as usize];
+            (p, m, std::f64::consts::PI * r * r / AREA_NEIGHBOUR as f64)
         })
         .collect();
     crate::cancel::check()?;
@@ -432,7 +597,12 @@ pub fn clean(points: &[DVec3], normals: &[DVec3], settings: &ScanSettings) -> Re
         .filter(|(&i, (_, m, _))| m.dot(normals[i as usize]) < 0.0)
         .count();
     let outliers: Vec<u32> = (0..n as u32).filter(|&i| !valid[i as usize]).collect();
+    let mut representative = vec![u32::MAX; n];
+    for (k, &i) in kept.iter().enumerate() {
+        representative[i as usize] = k as u32;
+    }
     let mut out = Cleaned {
+        representative,
         points: Vec::with_capacity(kept.len()),
         normals: Vec::with_capacity(kept.len()),
         areas: Vec::with_capacity(kept.len()),
@@ -503,6 +673,57 @@ mod tests {
             .sum::<f64>();
         assert!(after < 0.6 * before, "{after} against {before}");
         assert!(c.noise > 0.0 && c.noise < 0.004, "noise {}", c.noise);
+    }
+
+    #[test]
+    fn noise_as_large_as_the_spacing_is_averaged_in_cells() {
+        // 40,000 points on the unit sphere (spacing about 0.02) with noise ±0.03 along the
+        // normal, and a few far points.
+        let n = 40_000;
+        let mut p = fibonacci_sphere(n);
+        let normals = p.clone();
+        let jitter = random_points(n, -1.0, 1.0, 8);
+        for (q, j) in p.iter_mut().zip(&jitter) {
+            *q *= 1.0 + 0.03 * j.x;
+        }
+        for k in 0..10 {
+            p[k * 3_001] *= 1.6;
+        }
+        let c = clean(&p, &normals, &ScanSettings::default()).unwrap();
+        // Averaged: fewer cleaned points than kept ones, each kept point standing by one.
+        assert!(
+            c.points.len() < c.kept.len() / 2,
+            "{} of {}",
+            c.points.len(),
+            c.kept.len()
+        );
+        assert_eq!(c.kept.len() + c.outliers.len(), n);
+        for k in 0..10 {
+            assert!(
+                c.outliers.contains(&(k as u32 * 3_001)),
+                "far point {k} kept"
+            );
+        }
+        for (i, &r) in c.representative.iter().enumerate() {
+            assert_eq!(r == u32::MAX, c.outliers.binary_search(&(i as u32)).is_ok());
+            if r != u32::MAX {
+                assert!(c.points[r as usize].distance(p[i]) < 0.2);
+            }
+        }
+        // The averages lie much closer to the sphere than the noise, normals outward.
+        let mean_error = c
+            .points
+            .iter()
+            .map(|q| (q.length() - 1.0).abs())
+            .sum::<f64>()
+            / c.points.len() as f64;
+        assert!(mean_error < 0.004, "{mean_error}");
+        assert!(c
+            .points
+            .iter()
+            .zip(&c.normals)
+            .all(|(q, m)| q.dot(*m) > 0.9));
+        assert_eq!(c.normals_corrected, 0);
     }
 
     #[test]

@@ -12,6 +12,7 @@
 //! are gone. Both terms are negative inside, and `far · |1 − 2w| ≤ far` stays below the distance
 //! to the data beyond `far`, as the octree's rejection test needs.
 
+use super::occupancy::OccupiedCells;
 use super::winding::WindingNumber;
 use crate::field::{Field, Starts};
 use crate::knn::PointTree;
@@ -32,6 +33,8 @@ pub struct Guard {
     spacing: f64,
     near: f64,
     far: f64,
+    /// Cells of side `near/√3` holding a data point: a query in one is within `near`.
+    near_cells: Option<OccupiedCells>,
 }
 
 impl Guard {
@@ -46,7 +49,10 @@ impl Guard {
         (near, far): (f64, f64),
     ) -> Self {
         debug_assert!(0.0 <= near && near < far && spacing > 0.0);
+        // The side, rounded down, keeps the cell's diagonal within `near`.
+        let near_cells = OccupiedCells::new(&points, near / 3f64.sqrt() * (1.0 - 1e-9));
         Guard {
+            near_cells,
             winding,
             tree,
             points,
@@ -102,7 +108,16 @@ impl Guard {
     }
 
     fn blend(&self, x: DVec3) -> Blend {
-        let (d, p) = self.nearest(x);
+        if self.near_cells.as_ref().is_some_and(|c| c.contains(x)) {
+            return Blend {
+                s: 1.0,
+                ds: DVec3::ZERO,
+            };
+        }
+        let Some((d, j)) = self.tree.nearest_within(x, self.far) else {
+            return Blend::default();
+        };
+        let p = self.points[j as usize];
         if d <= self.near {
             return Blend {
                 s: 1.0,

@@ -10,13 +10,17 @@
 //! 1. [`mod@clean`]: spacing and noise are estimated from the data, outliers found and left out,
 //!    normals made consistent with their neighbours, and every point projected onto the plane
 //!    of its neighbourhood — the points the fit interpolates lie on the data's mean surface.
-//! 2. The variational fit of the cleaned points (global or partition of unity).
+//! 2. The variational fit of the cleaned points about one spacing apart ([`centres`]; global
+//!    or partition of unity).
 //! 3. [`guard`] ([`ScanSurface`]): beyond a few spacings from the data the field is the data's
 //!    [`winding::WindingNumber`], which closes unseen regions and has no surface elsewhere.
 
 pub mod bodies;
+pub mod centres;
 pub mod clean;
+pub mod coarsen;
 pub mod guard;
+pub mod occupancy;
 pub mod surface;
 pub mod winding;
 
@@ -33,6 +37,8 @@ pub struct ScanSettings {
     /// A point whose 10th neighbour is farther than this multiple of the median such distance
     /// is an outlier.
     pub isolation: f64,
+    /// Neighbours of the projection where the noise exceeds a tenth of the spacing.
+    pub projection_neighbours: usize,
     /// Rounds of the normals' vote.
     pub voting_rounds: usize,
     /// The projection's Gaussian width, in multiples of max(spacing, 2 · noise).
@@ -41,17 +47,26 @@ pub struct ScanSettings {
     pub near: f64,
     /// Beyond this many spacings of the data, the field is the winding number's.
     pub far: f64,
+    /// Where the estimated noise exceeds this fraction of the spacing, the points are averaged
+    /// in cells two spacings wide and those are cleaned ([`coarsen`]).
+    pub coarsening: f64,
+    /// The fit interpolates a subset of the cleaned points no two of which are nearer than
+    /// this many spacings ([`centres::separated`]); 0 fits them all.
+    pub centre_separation: f64,
 }
 
 impl Default for ScanSettings {
     fn default() -> Self {
         ScanSettings {
             neighbours: 20,
+            projection_neighbours: 40,
             isolation: 5.0,
             voting_rounds: 3,
             projection_width: 2.0,
             near: 6.0,
             far: 12.0,
+            coarsening: 0.25,
+            centre_separation: 1.0,
         }
     }
 }
