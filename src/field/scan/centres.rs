@@ -36,7 +36,7 @@ pub fn separated(points: &[DVec3], separation: f64) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     #[test]
     fn kept_points_are_apart_and_cover_the_rest() {

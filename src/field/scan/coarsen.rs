@@ -88,7 +88,7 @@ pub fn average(points: &[DVec3], normals: &[DVec3], used: &[bool], side: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::fibonacci_sphere;
+    use crate::testing::fibonacci_sphere;
 
     #[test]
     fn averages_stay_on_their_side_and_cover_every_used_point() {

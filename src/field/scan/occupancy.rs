@@ -98,7 +98,7 @@ fn pack(c: [i64; 3]) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::testing::random_points;
+    use crate::testing::random_points;
 
     #[test]
     fn a_query_in_an_occupied_cell_is_near_a_point_and_every_point_is_found() {
