@@ -736,8 +736,9 @@ impl PyVariationalSurface {
     }
 
     /// dict or None: what a scan fit found in its data. ``"points"`` given, ``"outliers"``
-    /// (the number left out), ``"spacing"`` (median distance from a point to its 6th nearest
-    /// neighbour), ``"noise"`` (the estimated noise: the median root-mean-square distance of a
+    /// (the number left out), ``"spacing"`` (median distance from a cleaned point to its 6th
+    /// nearest neighbour; where very noisy points were averaged in cells, of the averages),
+    /// ``"noise"`` (the estimated noise: the median root-mean-square distance of a
     /// neighbourhood from its plane, in the points' units), ``"normals_corrected"`` (kept points
     /// whose normal was turned to agree with its neighbours'), ``"turned_outward"`` (True when
     /// the normals pointed inward and all were turned), ``"normals_estimated"`` (True when the

@@ -75,7 +75,8 @@ pub struct Cleaned {
     pub representative: Vec<u32>,
     /// The indices of the points left out as outliers, increasing.
     pub outliers: Vec<u32>,
-    /// The median distance from a point to its 6th nearest neighbour.
+    /// The median distance from a cleaned point to its 6th nearest neighbour (from an average
+    /// to its 6th, where the points were averaged).
     pub spacing: f64,
     /// The estimated noise: the median root-mean-square distance of a neighbourhood from its
     /// plane.

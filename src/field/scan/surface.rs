@@ -18,7 +18,8 @@ pub struct ScanReport {
     pub points: usize,
     /// Indices of the points left out as outliers, increasing.
     pub outliers: Vec<u32>,
-    /// The median distance from a point to its 6th nearest neighbour.
+    /// The median distance from a cleaned point to its 6th nearest neighbour (where very noisy
+    /// points were averaged in cells, [`super::coarsen`], from an average to its 6th).
     pub spacing: f64,
     /// The estimated noise (see [`mod@super::clean`]).
     pub noise: f64,
