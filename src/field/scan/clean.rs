@@ -191,6 +191,58 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
     Some(x)
 }
 
+/// The frame of a quadric height field: an origin, the plane's unit vectors `u`, `v`, its unit
+/// `normal`, and the inverse of the length unit.
+struct QuadricFrame {
+    origin: DVec3,
+    u: DVec3,
+    v: DVec3,
+    normal: DVec3,
+    inv: f64,
+}
+
+impl QuadricFrame {
+    fn new(origin: DVec3, normal: DVec3, unit: f64) -> Self {
+        let (u, v) = normal.any_orthonormal_pair();
+        QuadricFrame {
+            origin,
+            u,
+            v,
+            normal,
+            inv: 1.0 / unit,
+        }
+    }
+
+    /// The quadric's terms `[1, x, y, x², xy, y²]` at `q` and its height `z`, in the frame.
+    fn terms(&self, q: DVec3) -> ([f64; 6], f64) {
+        let d = (q - self.origin) * self.inv;
+        let (x, y) = (d.dot(self.u), d.dot(self.v));
+        ([1.0, x, y, x * x, x * y, y * y], d.dot(self.normal))
+    }
+
+    /// The weighted least-squares coefficients of the heights of `items` (point, weight); `None`
+    /// for fewer than six points of weight above 10⁻³, or a degenerate layout.
+    fn fit(&self, items: impl Iterator<Item = (DVec3, f64)>) -> Option<[f64; 6]> {
+        let mut ata = [[0.0; 6]; 6];
+        let mut atb = [0.0; 6];
+        let mut count = 0;
+        for (q, w) in items {
+            let (row, z) = self.terms(q);
+            for r in 0..6 {
+                for c in 0..6 {
+                    ata[r][c] += w * row[r] * row[c];
+                }
+                atb[r] += w * row[r] * z;
+            }
+            count += (w > 1e-3) as usize;
+        }
+        if count < 6 {
+            return None;
+        }
+        solve6(ata, atb)
+    }
+}
+
 /// Moves `p` onto the weighted least-squares quadric height field over the plane through `mean`
 /// with unit `normal` (heights z = c₀ + c₁x + c₂y + c₃x² + c₄xy + c₅y² in the plane's frame,
 /// lengths in units of `h`), and returns the point and the quadric's unit normal there; the
@@ -207,30 +259,12 @@ fn project_on_quadric(
     if h.is_nan() || h <= 0.0 {
         return on_plane;
     }
-    let (u, v) = normal.any_orthonormal_pair();
-    let inv = 1.0 / h;
-    let mut ata = [[0.0; 6]; 6];
-    let mut atb = [0.0; 6];
-    let mut count = 0;
-    for (q, w) in items {
-        let d = (q - mean) * inv;
-        let (x, y, z) = (d.dot(u), d.dot(v), d.dot(normal));
-        let row = [1.0, x, y, x * x, x * y, y * y];
-        for r in 0..6 {
-            for c in 0..6 {
-                ata[r][c] += w * row[r] * row[c];
-            }
-            atb[r] += w * row[r] * z;
-        }
-        count += (w > 1e-3) as usize;
-    }
-    if count < 6 {
-        return on_plane;
-    }
-    let Some(c) = solve6(ata, atb) else {
+    let frame = QuadricFrame::new(mean, normal, h);
+    let Some(c) = frame.fit(items) else {
         return on_plane;
     };
-    let d = (p - mean) * inv;
+    let (u, v) = (frame.u, frame.v);
+    let d = (p - mean) * frame.inv;
     let (x, y) = (d.dot(u), d.dot(v));
     let z = c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y;
     let (zx, zy) = (
@@ -282,7 +316,6 @@ fn quadric_residual(rows: &[DVec3], origin: DVec3, normal: DVec3) -> Option<f64>
     if m < 10 {
         return None;
     }
-    let (u, v) = normal.any_orthonormal_pair();
     let scale = rows
         .iter()
         .map(|q| (*q - origin).length())
@@ -290,27 +323,12 @@ fn quadric_residual(rows: &[DVec3], origin: DVec3, normal: DVec3) -> Option<f64>
     if scale <= 0.0 {
         return None;
     }
-    let frame = |q: &DVec3| {
-        let d = (*q - origin) / scale;
-        let (x, y) = (d.dot(u), d.dot(v));
-        ([1.0, x, y, x * x, x * y, y * y], d.dot(normal))
-    };
-    let mut ata = [[0.0; 6]; 6];
-    let mut atb = [0.0; 6];
-    for q in rows {
-        let (row, z) = frame(q);
-        for r in 0..6 {
-            for c in 0..6 {
-                ata[r][c] += row[r] * row[c];
-            }
-            atb[r] += row[r] * z;
-        }
-    }
-    let c = solve6(ata, atb)?;
+    let frame = QuadricFrame::new(origin, normal, scale);
+    let c = frame.fit(rows.iter().map(|q| (*q, 1.0)))?;
     let sum: f64 = rows
         .iter()
         .map(|q| {
-            let (row, z) = frame(q);
+            let (row, z) = frame.terms(*q);
             let fit: f64 = row.iter().zip(&c).map(|(a, b)| a * b).sum();
             (z - fit) * (z - fit)
         })
